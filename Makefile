@@ -1,0 +1,39 @@
+# drillcosim: `make run` and `make test` work on a fresh machine (Python >= 3.10, pip, a C compiler).
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+FMUS := build/fmus/DrillstringPlant.fmu build/fmus/StrainController.fmu
+SRC := $(shell find plant controller fmu_src -name '*.py' 2>/dev/null)
+
+.PHONY: all install fmus run test lint bench clean
+
+all: install fmus
+
+$(BIN)/python:
+	$(PY) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+
+$(STAMP): $(BIN)/python pyproject.toml
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+install: $(STAMP)
+
+$(FMUS) &: $(STAMP) $(SRC)
+	@if [ -f fmu_src/build.py ]; then $(BIN)/python -m fmu_src.build --out build/fmus; fi
+
+fmus: $(FMUS)
+
+run: install fmus
+	$(BIN)/drillcosim run
+
+test: install fmus
+	$(BIN)/ruff check .
+	$(BIN)/python -m pytest -q
+
+bench: install fmus
+	$(BIN)/drillcosim bench
+
+clean:
+	rm -rf build out .pytest_cache

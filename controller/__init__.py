@@ -1,0 +1,1 @@
+"""drillcosim: controller package."""

@@ -1,0 +1,1 @@
+"""drillcosim: fmu_src package."""

@@ -1,0 +1,1 @@
+"""drillcosim: plant package."""
