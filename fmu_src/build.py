@@ -1,0 +1,418 @@
+"""Build the project's FMUs with pythonfmu: ``python -m fmu_src.build --out DIR``.
+
+Every FMU is described by one :class:`FmuSpec` in :data:`REGISTRY`. ``build_all``
+builds each registered FMU whose adapter script exists (an entry whose script is
+missing is skipped with a printed note) and returns the written paths.
+
+Vendoring without shadowing
+---------------------------
+An FMU must run in a Python that has only numpy, so the packages its adapter
+needs are shipped inside it. pythonfmu puts every instance's ``resources/``
+first on ``sys.path``; a package shipped as ``resources/controller/`` would
+therefore shadow (or be shadowed by) a ``controller`` package the host process
+imports. Each package is instead copied to ``resources/<vendored name>/`` with a
+unique, versioned name (``controller/`` -> ``resources/_dcs_controller_0_1_0/``)
+and the adapter imports it by that name. This needs all intra-package imports
+to be relative (tested). At build time the copies are staged in a temporary
+folder that is put first on ``sys.path`` so pythonfmu can import the adapter.
+
+Each FMU is built in a fresh Python subprocess (pythonfmu imports and
+instantiates the adapter and leaves entries on ``sys.path``; the calling process
+stays clean) inside a temporary folder next to the target, and moved into place
+with ``os.replace`` (atomic: readers see the old or the new FMU, never half).
+
+After pythonfmu, ``modelDescription.xml`` is completed (pythonfmu 0.7.0 writes
+no units and no output dependencies): units of Real variables from the adapter
+class attribute ``VARIABLE_UNITS`` (name -> unit) with matching
+``<UnitDefinitions>``, ``ModelStructure/Outputs`` dependencies from the optional
+class attribute ``DIRECT_FEEDTHROUGH`` (output name -> input names; an output not
+listed gets no ``dependencies`` attribute, meaning "depends on all"), and
+``<InitialUnknowns>`` for outputs whose ``initial`` is not ``exact``.
+
+Registering the plant FMU
+-------------------------
+Add (or edit) one entry in :data:`REGISTRY`, e.g.::
+
+    FmuSpec(name="DrillstringPlant", script="fmu_src/drillstring_plant_fmu.py",
+            vendored=(("plant", "_dcs_plant_0_1_0"),), extra_files=("scenes/x.toml",))
+
+``name`` must equal the adapter class name (= modelIdentifier = file stem of
+the ``.fmu``); the adapter imports ``_dcs_plant_0_1_0``; ``extra_files`` (paths
+relative to the repository root, files or folders) land in ``resources/`` under
+their own base name.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import zipfile
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+__all__ = [
+    "DEFAULT_OUT",
+    "REGISTRY",
+    "ROOT",
+    "UNIT_DEFINITIONS",
+    "FmuSpec",
+    "build_all",
+    "build_one",
+    "finalize_model_description",
+    "main",
+]
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_OUT = ROOT / "build" / "fmus"
+
+#: SI base-unit exponents of the units the FMUs may declare (FMI 2.0 BaseUnit).
+UNIT_DEFINITIONS: dict[str, dict[str, int]] = {
+    "1": {},
+    "s": {"s": 1},
+    "1/s": {"s": -1},
+    "m": {"m": 1},
+    "m/s": {"m": 1, "s": -1},
+    "m/s2": {"m": 1, "s": -2},
+    "kg": {"kg": 1},
+    "kg.m2": {"kg": 1, "m": 2},
+    "rad": {"rad": 1},
+    "rad/s": {"rad": 1, "s": -1},
+    "rad/s2": {"rad": 1, "s": -2},
+    "N": {"kg": 1, "m": 1, "s": -2},
+    "N/m": {"kg": 1, "s": -2},
+    "N.s/m": {"kg": 1, "s": -1},
+    "N.m": {"kg": 1, "m": 2, "s": -2},
+    "N.m/rad": {"kg": 1, "m": 2, "s": -2, "rad": -1},
+    "Pa": {"kg": 1, "m": -1, "s": -2},
+    "W": {"kg": 1, "m": 2, "s": -3},
+    "J": {"kg": 1, "m": 2, "s": -2},
+}
+
+_DEFAULT_OPTIONS: tuple[tuple[str, bool], ...] = (
+    ("canGetAndSetFMUstate", True),
+    ("canSerializeFMUstate", True),
+)
+
+
+@dataclass(frozen=True)
+class FmuSpec:
+    """One FMU to build.
+
+    Parameters
+    ----------
+    name : str
+        Adapter class name = FMI modelIdentifier = ``<name>.fmu``.
+    script : str
+        Adapter script, relative to the repository root (unique file name).
+    vendored : tuple of (str, str)
+        ``(package folder relative to the root, vendored import name)``; each
+        package is shipped as ``resources/<vendored import name>/``. The name must
+        start with ``_dcs_`` and carry a version (e.g. ``_dcs_plant_0_1_0``).
+    extra_files : tuple of str
+        Further files or folders (relative to the root) copied into ``resources/``.
+    options : tuple of (str, bool)
+        pythonfmu model options (``<CoSimulation>`` capability flags).
+    """
+
+    name: str
+    script: str
+    vendored: tuple[tuple[str, str], ...] = ()
+    extra_files: tuple[str, ...] = ()
+    options: tuple[tuple[str, bool], ...] = field(default=_DEFAULT_OPTIONS)
+
+    def __post_init__(self) -> None:
+        if not self.name.isidentifier():
+            raise ValueError(f"FMU name {self.name!r} is not a Python identifier")
+        for _package, vname in self.vendored:
+            if not (vname.isidentifier() and vname.startswith("_dcs_")):
+                raise ValueError(f"vendored name {vname!r} must be an identifier starting "
+                                 f"with '_dcs_' (e.g. '_dcs_plant_0_1_0')")
+
+    @property
+    def script_path(self) -> Path:
+        """Path: absolute path of the adapter script."""
+        return ROOT / self.script
+
+
+#: The FMUs of the project. The plant entry is skipped until its adapter exists.
+REGISTRY: tuple[FmuSpec, ...] = (
+    FmuSpec(
+        name="StrainController",
+        script="fmu_src/strain_controller_fmu.py",
+        vendored=(("controller", "_dcs_controller_0_1_0"),),
+    ),
+    FmuSpec(
+        name="DrillstringPlant",
+        script="fmu_src/drillstring_plant_fmu.py",
+        vendored=(("plant", "_dcs_plant_0_1_0"),),
+    ),
+)
+
+
+# ------------------------------------------------------------------ modelDescription
+def finalize_model_description(
+    xml: bytes,
+    units: Mapping[str, str],
+    direct_feedthrough: Mapping[str, Sequence[str]] | None = None,
+) -> bytes:
+    """Add units, unit definitions and output dependencies to a modelDescription.
+
+    Parameters
+    ----------
+    xml : bytes
+        modelDescription.xml as written by pythonfmu.
+    units : mapping of str to str
+        Variable name -> unit (keys of :data:`UNIT_DEFINITIONS`); Real variables only.
+    direct_feedthrough : mapping of str to sequence of str, optional
+        Output name -> names of the inputs it depends on directly. Outputs not
+        in the mapping (or all, if None) get no ``dependencies`` attribute.
+
+    Returns
+    -------
+    bytes
+        The completed modelDescription.xml (UTF-8).
+
+    Raises
+    ------
+    ValueError
+        Unknown variable or unit names, or a dependency that is not an input.
+    """
+    root = ET.fromstring(xml)
+    variables = root.find("ModelVariables")
+    if variables is None:
+        raise ValueError("modelDescription.xml has no <ModelVariables>")
+    svs = list(variables.findall("ScalarVariable"))
+    index = {sv.get("name"): i + 1 for i, sv in enumerate(svs)}
+    by_name = {sv.get("name"): sv for sv in svs}
+
+    used_units: list[str] = []
+    for name, unit in units.items():
+        if name not in by_name:
+            raise ValueError(f"VARIABLE_UNITS names unknown variable {name!r}")
+        if unit not in UNIT_DEFINITIONS:
+            raise ValueError(f"unit {unit!r} of {name!r} is not in UNIT_DEFINITIONS; add it")
+        real = by_name[name].find("Real")
+        if real is None:
+            raise ValueError(f"variable {name!r} has a unit but is not a Real")
+        real.set("unit", unit)
+        if unit not in used_units:
+            used_units.append(unit)
+
+    for old in root.findall("UnitDefinitions"):
+        root.remove(old)
+    if used_units:
+        unit_defs = ET.Element("UnitDefinitions")
+        for unit in sorted(used_units):
+            node = ET.SubElement(unit_defs, "Unit", name=unit)
+            ET.SubElement(node, "BaseUnit",
+                          {k: str(v) for k, v in UNIT_DEFINITIONS[unit].items()})
+        position = 0
+        for i, child in enumerate(list(root)):
+            if child.tag in ("ModelExchange", "CoSimulation"):
+                position = i + 1
+        root.insert(position, unit_defs)
+
+    structure = root.find("ModelStructure")
+    if structure is None:
+        structure = ET.SubElement(root, "ModelStructure")
+    for tag in ("Outputs", "Derivatives", "InitialUnknowns"):
+        for old in structure.findall(tag):
+            structure.remove(old)
+    outputs = [sv for sv in svs if sv.get("causality") == "output"]
+    inputs = {sv.get("name") for sv in svs if sv.get("causality") == "input"}
+    feed = dict(direct_feedthrough or {})
+    unknown_outputs = set(feed) - {sv.get("name") for sv in outputs}
+    if unknown_outputs:
+        raise ValueError(f"DIRECT_FEEDTHROUGH names non-outputs {sorted(unknown_outputs)}")
+    if outputs:
+        node = ET.SubElement(structure, "Outputs")
+        for sv in outputs:
+            attrib = {"index": str(index[sv.get("name")])}
+            if direct_feedthrough is not None and sv.get("name") in feed:
+                deps = list(feed[sv.get("name")])
+                bad = [d for d in deps if d not in inputs]
+                if bad:
+                    raise ValueError(f"{sv.get('name')!r} depends on non-inputs {bad}")
+                attrib["dependencies"] = " ".join(str(index[d]) for d in deps)
+            ET.SubElement(node, "Unknown", attrib)
+    initial_unknowns = [
+        sv for sv in svs
+        if (sv.get("causality") == "output" and sv.get("initial") != "exact")
+        or sv.get("causality") == "calculatedParameter"
+    ]
+    if initial_unknowns:
+        node = ET.SubElement(structure, "InitialUnknowns")
+        for sv in initial_unknowns:
+            ET.SubElement(node, "Unknown", index=str(index[sv.get("name")]))
+
+    ET.indent(root, space="  ")
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def _rewrite_zip_member(fmu: Path, member: str, data: bytes) -> None:
+    """Replace one member of a zip file (rewrites the archive)."""
+    tmp = fmu.with_suffix(".tmp")
+    with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as dst:
+        for info in src.infolist():
+            payload = data if info.filename == member else src.read(info.filename)
+            dst.writestr(info.filename, payload, compress_type=zipfile.ZIP_DEFLATED)
+    os.replace(tmp, fmu)
+
+
+# -------------------------------------------------------------------------- worker
+def _build_in_this_process(spec: FmuSpec, workdir: Path) -> Path:
+    """Build one FMU into ``workdir/out`` (run in a dedicated subprocess)."""
+    from pythonfmu import FmuBuilder
+
+    staging = workdir / "vendor"
+    staging.mkdir(parents=True)
+    project_files: list[Path] = []
+    for package, vname in spec.vendored:
+        src = ROOT / package
+        if not (src / "__init__.py").is_file():
+            raise FileNotFoundError(f"vendored package {src} has no __init__.py")
+        dst = staging / vname
+        shutil.copytree(src, dst, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        project_files.append(dst)
+    for extra in spec.extra_files:
+        path = ROOT / extra
+        if not path.exists():
+            raise FileNotFoundError(f"extra file {path} of {spec.name} does not exist")
+        project_files.append(path)
+
+    sys.path.insert(0, str(staging))  # so pythonfmu can import the adapter at build time
+    fmu = FmuBuilder.build_FMU(spec.script_path, dest=workdir / "out",
+                               project_files=project_files, **dict(spec.options))
+    fmu = Path(fmu)
+    if fmu.name != f"{spec.name}.fmu":
+        raise RuntimeError(f"pythonfmu built {fmu.name}, expected {spec.name}.fmu: the "
+                           f"adapter class must be named {spec.name}")
+
+    cls = getattr(sys.modules[spec.script_path.stem], spec.name)
+    with zipfile.ZipFile(fmu) as zf:
+        names = set(zf.namelist())
+        xml = zf.read("modelDescription.xml")
+    xml = finalize_model_description(xml, getattr(cls, "VARIABLE_UNITS", {}),
+                                     getattr(cls, "DIRECT_FEEDTHROUGH", None))
+    _rewrite_zip_member(fmu, "modelDescription.xml", xml)
+
+    for package, vname in spec.vendored:
+        if f"resources/{vname}/__init__.py" not in names:
+            raise RuntimeError(f"{fmu.name}: resources/{vname}/ missing")
+        if any(n.startswith(f"resources/{package}/") for n in names):
+            raise RuntimeError(f"{fmu.name}: unversioned resources/{package}/ would shadow")
+    return fmu
+
+
+# ------------------------------------------------------------------------- public
+def build_one(spec: FmuSpec, out_dir: Path | str = DEFAULT_OUT) -> Path:
+    """Build one FMU atomically into ``out_dir``.
+
+    Parameters
+    ----------
+    spec : FmuSpec
+        What to build.
+    out_dir : path-like
+        Target folder (created if missing).
+
+    Returns
+    -------
+    pathlib.Path
+        ``out_dir / f"{spec.name}.fmu"``.
+
+    Raises
+    ------
+    RuntimeError
+        If the build subprocess fails (its output is included).
+    """
+    out_dir = Path(out_dir).resolve()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    target = out_dir / f"{spec.name}.fmu"
+    workdir = Path(tempfile.mkdtemp(prefix=f".{spec.name}-", dir=out_dir))
+    try:
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(
+            [str(ROOT)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
+        env["PYTHONDONTWRITEBYTECODE"] = "1"
+        cmd = [sys.executable, "-m", "fmu_src.build", "--worker-spec",
+               json.dumps(asdict(spec)), "--workdir", str(workdir)]
+        proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise RuntimeError(f"building {spec.name} failed (exit {proc.returncode}):\n"
+                               f"{proc.stdout}\n{proc.stderr}")
+        os.replace(workdir / "out" / f"{spec.name}.fmu", target)
+    finally:
+        shutil.rmtree(workdir, ignore_errors=True)
+    return target
+
+
+def build_all(out_dir: Path | str = DEFAULT_OUT,
+              specs: Sequence[FmuSpec] = REGISTRY) -> list[Path]:
+    """Build every FMU of ``specs`` whose adapter script exists.
+
+    Parameters
+    ----------
+    out_dir : path-like
+        Target folder, default ``build/fmus/`` in the repository.
+    specs : sequence of FmuSpec
+        Default :data:`REGISTRY`.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The FMUs written (skipped entries are not listed).
+    """
+    built = []
+    for spec in specs:
+        if not spec.script_path.is_file():
+            print(f"note: skipping {spec.name}: adapter {spec.script} does not exist yet")
+            continue
+        built.append(build_one(spec, out_dir))
+        print(f"built {built[-1]}")
+    return built
+
+
+def _spec_from_json(text: str) -> FmuSpec:
+    raw = json.loads(text)
+    return FmuSpec(
+        name=raw["name"], script=raw["script"],
+        vendored=tuple(tuple(v) for v in raw["vendored"]),
+        extra_files=tuple(raw["extra_files"]),
+        options=tuple(tuple(o) for o in raw["options"]),
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Command-line entry point; returns the exit status."""
+    parser = argparse.ArgumentParser(prog="python -m fmu_src.build", description=__doc__
+                                     .split("\n")[0])
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
+                        help=f"output folder (default {DEFAULT_OUT})")
+    parser.add_argument("--only", action="append", default=None, metavar="NAME",
+                        help="build only this FMU (repeatable)")
+    parser.add_argument("--worker-spec", help=argparse.SUPPRESS)
+    parser.add_argument("--workdir", type=Path, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.worker_spec is not None:
+        _build_in_this_process(_spec_from_json(args.worker_spec), args.workdir)
+        return 0
+    specs = REGISTRY
+    if args.only:
+        unknown = set(args.only) - {s.name for s in REGISTRY}
+        if unknown:
+            parser.error(f"unknown FMU(s) {sorted(unknown)}; registered: "
+                         f"{[s.name for s in REGISTRY]}")
+        specs = tuple(s for s in REGISTRY if s.name in args.only)
+    build_all(args.out, specs)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
