@@ -1,0 +1,245 @@
+"""The execution: owns simulated time, the FMU instances and the observers.
+
+Time is an integer number of ticks of the base step H. A float time exists
+only at the FMI boundary and is computed from the integer,
+``t_k = start + k * H``, with ``k * H`` evaluated as an exact rational
+(H is stored as the fraction nearest to it) and rounded once, so 30000 steps
+of 1 ms end at exactly 30.0 s and a run split in two equals the continuous
+run bit for bit.
+
+Observers only read (``on_step(execution)``, called after every step, and
+``on_start`` / ``on_stop`` if they define them); manipulators only write
+(``before_step(execution)``, called before every step).
+"""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+from typing import Protocol
+
+from fmpy import extract
+
+from .algorithms import GaussSeidelAlgorithm, JacobiAlgorithm, _Algorithm, make_algorithm
+from .errors import CosimError
+from .slave import Slave
+from .system import SystemSpec, split_variable
+
+
+class Observer(Protocol):
+    """Read-only hook called after every step."""
+
+    def on_step(self, execution: Execution) -> None: ...
+
+
+class Manipulator(Protocol):
+    """Write-only hook called before every step."""
+
+    def before_step(self, execution: Execution) -> None: ...
+
+
+@dataclass(frozen=True)
+class ExecutionState:
+    """A saved execution state (FMU state handles, exchange buffers, tick)."""
+
+    tick: int
+    fmu_states: tuple
+    exchange: dict
+
+
+class Execution:
+    """A running co-simulation of a :class:`SystemSpec`.
+
+    Parameters
+    ----------
+    system : SystemSpec
+    read_outputs : sequence of str, optional
+        Extra outputs ``'fmu.var'`` read at every communication point (e.g.
+        recorded ones); all values read are checked for finiteness.
+    algorithm : JacobiAlgorithm or GaussSeidelAlgorithm, optional
+        Defaults to ``system.algorithm``.
+
+    Notes
+    -----
+    Use as a context manager, or call :meth:`close` to free the FMUs.
+    """
+
+    def __init__(self, system: SystemSpec, read_outputs=(), algorithm: _Algorithm | None = None):
+        self.system = system
+        self.base_step = system.base_step
+        self.start_time = system.start_time
+        frac = Fraction(system.base_step).limit_denominator(10**12)
+        if float(frac) != system.base_step:
+            frac = Fraction(system.base_step)
+        self._num, self._den = frac.numerator, frac.denominator
+        self.tick = 0
+        self.observers: list = []
+        self.manipulators: list = []
+        self.slaves: dict[str, Slave] = {}
+        self._states: list[ExecutionState] = []
+        self.algorithm = algorithm or make_algorithm(system.algorithm)
+        self._read_outputs = tuple(read_outputs)
+        self.initialized = False
+        self.closed = False
+        dirs: dict[Path, str] = {}
+        try:
+            for spec in system.fmus:
+                path = Path(spec.path).resolve()
+                if path not in dirs and path.is_file():
+                    dirs[path] = extract(str(path))
+                self.slaves[spec.name] = Slave(spec, dirs.get(path))
+        except BaseException:
+            self.close()
+            raise
+        self._dirs = list(dirs.values())
+
+    # -- time -----------------------------------------------------------------
+    def time_of(self, tick: int) -> float:
+        """Time of tick ``tick`` [s]: ``start + tick * H`` rounded once."""
+        return self.start_time + tick * self._num / self._den
+
+    @property
+    def time(self) -> float:
+        """Current simulated time [s]."""
+        return self.start_time + self.tick * self._num / self._den
+
+    def ticks_until(self, stop_time: float) -> int:
+        """Tick of ``stop_time``; ``ValueError`` unless it is on the base-step grid."""
+        exact = (Fraction(stop_time) - Fraction(self.start_time)) / Fraction(self._num,
+                                                                              self._den)
+        k = round(exact)
+        if abs(exact - k) > Fraction(1, 10**6):
+            raise ValueError(f"stop_time: a multiple of base_step = {self.base_step} s after "
+                             f"start_time, got {stop_time} s")
+        return int(k)
+
+    # -- hooks ----------------------------------------------------------------
+    def add_observer(self, observer: Observer) -> None:
+        """Register a read-only observer (``on_step(execution)``)."""
+        self.observers.append(observer)
+
+    def add_manipulator(self, manipulator: Manipulator) -> None:
+        """Register a write-only manipulator (``before_step(execution)``)."""
+        self.manipulators.append(manipulator)
+
+    # -- running ----------------------------------------------------------------
+    def initialize(self) -> None:
+        """Instantiate and initialise the FMUs, read initial outputs, set inputs."""
+        if self.initialized:
+            return
+        system = self.system
+        stop = system.stop_time
+        for slave in self.slaves.values():
+            slave.instantiate(system.start_time, stop)
+        read = list(self._read_outputs)
+        for ref in read:
+            fmu, _ = split_variable(ref, "read_outputs")
+            if fmu not in self.slaves:
+                raise ValueError(f"read_outputs: unknown FMU in {ref!r}")
+        self.algorithm.setup(system, self.slaves, self.time_of, read)
+        self.algorithm.initialize()
+        self.initialized = True
+        for obs in self.observers:
+            if hasattr(obs, "on_start"):
+                obs.on_start(self)
+
+    def simulate_until(self, stop_time: float) -> None:
+        """Advance to ``stop_time`` [s] (a multiple of the base step).
+
+        Can be called repeatedly; splitting a run gives the same result as
+        one call, bit for bit.
+
+        Raises
+        ------
+        CosimError
+            An FMU call failed (status Discard, Error or Fatal).
+        DivergenceError
+            A non-finite output was read.
+        """
+        if self.closed:
+            raise CosimError("", "simulate_until", self.time, "the execution is closed")
+        self.initialize()
+        k_stop = self.ticks_until(stop_time)
+        if k_stop < self.tick:
+            raise ValueError(f"stop_time: >= current time {self.time} s, got {stop_time} s")
+        do_step = self.algorithm.do_step
+        observers = tuple(o.on_step for o in self.observers)
+        manipulators = tuple(m.before_step for m in self.manipulators)
+        tick = self.tick
+        if not observers and not manipulators:
+            while tick < k_stop:
+                do_step(tick)
+                tick += 1
+                self.tick = tick
+            return
+        while tick < k_stop:
+            for m in manipulators:
+                m(self)
+            do_step(tick)
+            tick += 1
+            self.tick = tick
+            for o in observers:
+                o(self)
+
+    # -- access ----------------------------------------------------------------
+    def get_real(self, ref: str) -> float:
+        """Current value of Real variable ``'fmu.var'`` [its unit]."""
+        fmu, var = split_variable(ref, "ref")
+        y_index = getattr(self.algorithm, "y_index", {})
+        if ref in y_index:
+            return self.algorithm.y[y_index[ref]]
+        slave = self.slaves[fmu]
+        return slave.get_reals(slave.real_vrs([var]), self.time)[0]
+
+    def set_value(self, ref: str, value) -> None:
+        """Set variable ``'fmu.var'`` now (for manipulators; typed by the FMU).
+
+        A connected input is overwritten at the FMU's next exchange.
+        """
+        fmu, var = split_variable(ref, "ref")
+        self.slaves[fmu].set_values({var: value}, self.time)
+
+    def get_state(self) -> ExecutionState:
+        """Save the full state: FMU states, exchange buffers, delay lines, tick."""
+        self.initialize()
+        t = self.time
+        fmu_states = tuple(s.get_state(t) for s in self.slaves.values())
+        state = ExecutionState(self.tick, fmu_states, self.algorithm.get_state())
+        self._states.append(state)
+        return state
+
+    def set_state(self, state: ExecutionState) -> None:
+        """Restore a state saved by :meth:`get_state` of this execution."""
+        for slave, fs in zip(self.slaves.values(), state.fmu_states):
+            slave.set_state(fs, self.time_of(state.tick))
+        self.algorithm.set_state(state.exchange)
+        self.tick = state.tick
+
+    def close(self) -> None:
+        """Free saved states, terminate and free all FMUs, delete extracted files."""
+        if self.closed:
+            return
+        self.closed = True
+        for obs in self.observers:
+            if hasattr(obs, "on_stop"):
+                obs.on_stop(self)
+        for state in self._states:
+            for slave, fs in zip(self.slaves.values(), state.fmu_states):
+                slave.free_state(fs)
+        self._states.clear()
+        for slave in self.slaves.values():
+            slave.close()
+        for d in getattr(self, "_dirs", []):
+            shutil.rmtree(d, ignore_errors=True)
+
+    def __enter__(self) -> Execution:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+__all__ = ["Execution", "ExecutionState", "JacobiAlgorithm", "GaussSeidelAlgorithm",
+           "Observer", "Manipulator"]

@@ -1,0 +1,1 @@
+"""Tiny pythonfmu FMUs used by the co-simulation master tests."""
