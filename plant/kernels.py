@@ -1,0 +1,479 @@
+"""Compiled right-hand sides of the drillstring models (numba, no allocation per call).
+
+Two models share one signature ``rhs(model, t, y, dy, p, ip, fp, u, wR, wF, wM)``:
+
+``MODEL_FULL3D``
+    n rigid bodies in 3D (paper section 3). State ``y`` (length 12 n), blocks of 3 n:
+    positions of the mass centres G in the inertial frame [m], Cardan angles (psi, theta, phi)
+    [rad] with ``R = Rz(psi) Ry(theta) Rx(phi)`` (body -> inertial, eq. 9-11), inertial velocities
+    [m/s], body-frame angular velocities [rad/s]. Inertial Z points down the well; body z lies
+    along the pipe axis, pointing down.
+``MODEL_AXIAL_TORSIONAL``
+    The same chain restricted to axial and torsional motion. State (length 4 n), blocks of n:
+    Z [m], twist psi [rad], Z-velocity [m/s], spin rate [rad/s]. For a straight string it is
+    exactly the 3D model with every lateral DOF at zero.
+
+Joints (between point B of body i and point A of body i+1): a diagonal spring-damper in body
+i+1's frame. Translational: potential 1/2 d^T K d with d = R_{i+1}^T (A_{i+1} - B_i); the moment
+d x (-f) keeps it exactly conservative and angular-momentum preserving. Rotational: potential
+1/2 tr(G (I - R_rel)), R_rel = R_i^T R_{i+1}, G = diag(g1, g1, g3) chosen so that the small-angle
+stiffness is diag(k_bend, k_bend, k_tors) (g1 = k_tors, g3 = 2 k_bend - k_tors); this is exactly
+conservative at any angle, and needs no extra states. Dampers act on the relative velocities.
+
+``ip`` (int64): header [n, n_stab, n_contact, n_act, unbalance_body (0-based, -1 none), n_loads]
+followed by stabilizer bodies, contact bodies, actuator joints (0-based). ``fp`` (float64):
+stabilizer local z offsets [m], then the load table (``layout.NLD`` columns a row).
+``u`` (float64, 2 per actuator site): actuator forces [N] at C and E, > 0 opposing positive strain.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .layout import (
+    ACT_ARM,
+    ALPHA_LAT,
+    BIT_AMP,
+    BIT_EPS,
+    BIT_LOBES,
+    BIT_TORQUE,
+    C_AX,
+    C_BE,
+    C_CONT,
+    C_SH,
+    C_STAB,
+    C_TO,
+    CB_AX,
+    CLEAR,
+    CT_AX,
+    CT_LAT,
+    CT_TO,
+    G1,
+    G3,
+    GRAV,
+    HALF,
+    JP,
+    JT,
+    K_AX,
+    K_CONT,
+    K_SH,
+    K_STAB,
+    KB_AX,
+    KT_AX,
+    KT_LAT,
+    KT_TO,
+    LD_BODY,
+    LD_DIR,
+    LD_KIND,
+    LD_MAG,
+    LD_T0,
+    LD_T1,
+    MASS,
+    NLD,
+    OMEGA0,
+    T_RAMP,
+    UNB,
+    ZBIT0,
+)
+
+MODEL_FULL3D = 0
+MODEL_AXIAL_TORSIONAL = 1
+
+IP_N = 0
+IP_NS = 1
+IP_NC = 2
+IP_NA = 3
+IP_UNB = 4
+IP_NL = 5
+IP_HDR = 6
+
+_CACHE = True
+
+
+@njit(cache=_CACHE)
+def top_drive(t: float, omega0: float, t_ramp: float) -> tuple[float, float]:
+    """Top-drive angle [rad] and speed [rad/s]: linear ramp 0 -> omega0 over t_ramp."""
+    if t <= 0.0:
+        return 0.0, 0.0
+    if t_ramp <= 0.0:
+        return omega0 * t, omega0
+    if t < t_ramp:
+        return 0.5 * omega0 * t * t / t_ramp, omega0 * t / t_ramp
+    return omega0 * (t - 0.5 * t_ramp), omega0
+
+
+@njit(cache=_CACHE)
+def bit_rock(t: float, p: np.ndarray) -> tuple[float, float]:
+    """Prescribed rock position Z_bit [m] and its rate [m/s] at time t."""
+    ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
+    lob = p[BIT_LOBES]
+    a = p[BIT_AMP]
+    return p[ZBIT0] + a * math.sin(lob * ang), a * lob * om * math.cos(lob * ang)
+
+
+@njit(cache=_CACHE)
+def cardan(psi: float, th: float, ph: float, R: np.ndarray) -> None:
+    """Fill R (3, 3) with Rz(psi) Ry(th) Rx(ph) (body -> inertial)."""
+    cps = math.cos(psi)
+    sps = math.sin(psi)
+    cth = math.cos(th)
+    sth = math.sin(th)
+    cph = math.cos(ph)
+    sph = math.sin(ph)
+    R[0, 0] = cps * cth
+    R[0, 1] = cps * sth * sph - sps * cph
+    R[0, 2] = cps * sth * cph + sps * sph
+    R[1, 0] = sps * cth
+    R[1, 1] = sps * sth * sph + cps * cph
+    R[1, 2] = sps * sth * cph - cps * sph
+    R[2, 0] = -sth
+    R[2, 1] = cth * sph
+    R[2, 2] = cth * cph
+
+
+@njit(cache=_CACHE, inline="always")
+def _mv(R, a, b, c):
+    return (
+        R[0, 0] * a + R[0, 1] * b + R[0, 2] * c,
+        R[1, 0] * a + R[1, 1] * b + R[1, 2] * c,
+        R[2, 0] * a + R[2, 1] * b + R[2, 2] * c,
+    )
+
+
+@njit(cache=_CACHE, inline="always")
+def _mtv(R, a, b, c):
+    return (
+        R[0, 0] * a + R[1, 0] * b + R[2, 0] * c,
+        R[0, 1] * a + R[1, 1] * b + R[2, 1] * c,
+        R[0, 2] * a + R[1, 2] * b + R[2, 2] * c,
+    )
+
+
+@njit(cache=_CACHE, inline="always")
+def _cross(a0, a1, a2, b0, b1, b2):
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=_CACHE)
+def relative_rotation(Ra: np.ndarray, Rb: np.ndarray, Rrel: np.ndarray) -> None:
+    """Rrel = Ra^T Rb: orientation of body b relative to body a."""
+    for i in range(3):
+        for j in range(3):
+            Rrel[i, j] = Ra[0, i] * Rb[0, j] + Ra[1, i] * Rb[1, j] + Ra[2, i] * Rb[2, j]
+
+
+@njit(cache=_CACHE)
+def _load_active(fp, row, t):
+    return fp[row + LD_T0] <= t < fp[row + LD_T1]
+
+
+@njit(cache=_CACHE)
+def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
+    """Full 3D right-hand side; writes dy (12 n). wR (n+1,3,3), wF (n,3), wM (n,3) are scratch."""
+    n = ip[IP_N]
+    ns = ip[IP_NS]
+    nc = ip[IP_NC]
+    na = ip[IP_NA]
+    unb = ip[IP_UNB]
+    nl = ip[IP_NL]
+    h = p[HALF]
+    m = p[MASS]
+    jt = p[JT]
+    jp = p[JP]
+    oA = 3 * n
+    oV = 6 * n
+    oW = 9 * n
+    Rrel = wR[n]  # scratch slot: wR has n + 1 matrices
+    g = p[GRAV]
+    alpha = p[ALPHA_LAT] * m
+    # kinematics, gravity, lateral drag
+    for k in range(n):
+        R = wR[k]
+        psi = y[oA + 3 * k]
+        th = y[oA + 3 * k + 1]
+        ph = y[oA + 3 * k + 2]
+        cardan(psi, th, ph, R)
+        wx = y[oW + 3 * k]
+        wy = y[oW + 3 * k + 1]
+        wz = y[oW + 3 * k + 2]
+        cth = math.cos(th)
+        sph = math.sin(ph)
+        cph = math.cos(ph)
+        a = wy * sph + wz * cph
+        dy[oA + 3 * k] = a / cth
+        dy[oA + 3 * k + 1] = wy * cph - wz * sph
+        dy[oA + 3 * k + 2] = wx + math.tan(th) * a
+        for i in range(3):
+            dy[3 * k + i] = y[oV + 3 * k + i]
+            wM[k, i] = 0.0
+        wF[k, 0] = -alpha * y[oV + 3 * k]
+        wF[k, 1] = -alpha * y[oV + 3 * k + 1]
+        wF[k, 2] = m * g
+
+    ksh = p[K_SH]
+    kax = p[K_AX]
+    csh = p[C_SH]
+    cax = p[C_AX]
+    g1 = p[G1]
+    g3 = p[G3]
+    cbe = p[C_BE]
+    cto = p[C_TO]
+    # joints between body a (point B) and body b = a + 1 (point A)
+    for a in range(n - 1):
+        b = a + 1
+        Ra = wR[a]
+        Rb = wR[b]
+        wxa = y[oW + 3 * a]
+        wya = y[oW + 3 * a + 1]
+        wza = y[oW + 3 * a + 2]
+        wxb = y[oW + 3 * b]
+        wyb = y[oW + 3 * b + 1]
+        wzb = y[oW + 3 * b + 2]
+        dI0 = (y[3 * b] - h * Rb[0, 2]) - (y[3 * a] + h * Ra[0, 2])
+        dI1 = (y[3 * b + 1] - h * Rb[1, 2]) - (y[3 * a + 1] + h * Ra[1, 2])
+        dI2 = (y[3 * b + 2] - h * Rb[2, 2]) - (y[3 * a + 2] + h * Ra[2, 2])
+        vA = _mv(Rb, -h * wyb, h * wxb, 0.0)
+        vB = _mv(Ra, h * wya, -h * wxa, 0.0)
+        dv0 = y[oV + 3 * b] + vA[0] - y[oV + 3 * a] - vB[0]
+        dv1 = y[oV + 3 * b + 1] + vA[1] - y[oV + 3 * a + 1] - vB[1]
+        dv2 = y[oV + 3 * b + 2] + vA[2] - y[oV + 3 * a + 2] - vB[2]
+        d0, d1, d2 = _mtv(Rb, dI0, dI1, dI2)
+        r0, r1, r2 = _mtv(Rb, dv0, dv1, dv2)
+        c0, c1, c2 = _cross(wxb, wyb, wzb, d0, d1, d2)
+        f0 = -(ksh * d0 + csh * (r0 - c0))
+        f1 = -(ksh * d1 + csh * (r1 - c1))
+        f2 = -(kax * d2 + cax * (r2 - c2))
+        F0, F1, F2 = _mv(Rb, f0, f1, f2)
+        wF[b, 0] += F0
+        wF[b, 1] += F1
+        wF[b, 2] += F2
+        wF[a, 0] -= F0
+        wF[a, 1] -= F1
+        wF[a, 2] -= F2
+        # moment on b: r_A x f with r_A = (0, 0, -h), plus -d x f
+        e0, e1, e2 = _cross(d0, d1, d2, f0, f1, f2)
+        wM[b, 0] += h * f1 - e0
+        wM[b, 1] += -h * f0 - e1
+        wM[b, 2] += -e2
+        fa0, fa1, fa2 = _mtv(Ra, -F0, -F1, -F2)
+        wM[a, 0] += -h * fa1
+        wM[a, 1] += h * fa0
+        # rotational spring-damper
+        relative_rotation(Ra, Rb, Rrel)
+        tb0 = -0.5 * (g3 * Rrel[2, 1] - g1 * Rrel[1, 2])
+        tb1 = -0.5 * (g1 * Rrel[0, 2] - g3 * Rrel[2, 0])
+        tb2 = -0.5 * g1 * (Rrel[1, 0] - Rrel[0, 1])
+        ta0 = 0.5 * (g1 * Rrel[2, 1] - g3 * Rrel[1, 2])
+        ta1 = 0.5 * (g3 * Rrel[0, 2] - g1 * Rrel[2, 0])
+        ta2 = 0.5 * g1 * (Rrel[1, 0] - Rrel[0, 1])
+        q0, q1, q2 = _mtv(Rrel, wxa, wya, wza)
+        td0 = -cbe * (wxb - q0)
+        td1 = -cbe * (wyb - q1)
+        td2 = -cto * (wzb - q2)
+        wM[b, 0] += tb0 + td0
+        wM[b, 1] += tb1 + td1
+        wM[b, 2] += tb2 + td2
+        s0, s1, s2 = _mv(Rrel, td0, td1, td2)
+        wM[a, 0] += ta0 - s0
+        wM[a, 1] += ta1 - s1
+        wM[a, 2] += ta2 - s2
+
+    # actuator couples (site s at the joint below body ip[...]): moment on b, reaction on a
+    arm = p[ACT_ARM]
+    o_act = IP_HDR + ns + nc
+    for s in range(na):
+        a = ip[o_act + s]
+        b = a + 1
+        t0 = -arm * u[2 * s + 1]
+        t1 = arm * u[2 * s]
+        relative_rotation(wR[a], wR[b], Rrel)
+        wM[b, 0] += t0
+        wM[b, 1] += t1
+        s0, s1, s2 = _mv(Rrel, t0, t1, 0.0)
+        wM[a, 0] -= s0
+        wM[a, 1] -= s1
+        wM[a, 2] -= s2
+
+    # top drive joint on body 0 (top drive at the origin, rotating about Z)
+    R0 = wR[0]
+    wx0 = y[oW]
+    wy0 = y[oW + 1]
+    wz0 = y[oW + 2]
+    ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
+    A0 = y[0] - h * R0[0, 2]
+    A1 = y[1] - h * R0[1, 2]
+    A2 = y[2] - h * R0[2, 2]
+    vA = _mv(R0, -h * wy0, h * wx0, 0.0)
+    d0, d1, d2 = _mtv(R0, A0, A1, A2)
+    r0, r1, r2 = _mtv(R0, y[oV] + vA[0], y[oV + 1] + vA[1], y[oV + 2] + vA[2])
+    c0, c1, c2 = _cross(wx0, wy0, wz0, d0, d1, d2)
+    klat = p[KT_LAT]
+    clat = p[CT_LAT]
+    f0 = -(klat * d0 + clat * (r0 - c0))
+    f1 = -(klat * d1 + clat * (r1 - c1))
+    f2 = -(p[KT_AX] * d2 + p[CT_AX] * (r2 - c2))
+    F0, F1, F2 = _mv(R0, f0, f1, f2)
+    wF[0, 0] += F0
+    wF[0, 1] += F1
+    wF[0, 2] += F2
+    e0, e1, e2 = _cross(d0, d1, d2, f0, f1, f2)
+    wM[0, 0] += h * f1 - e0
+    wM[0, 1] += -h * f0 - e1
+    wM[0, 2] += -e2
+    ktt = p[KT_TO]
+    if ktt > 0.0:
+        ca = math.cos(ang)
+        sa = math.sin(ang)
+        # Rrel = Rz(ang)^T R0
+        for j in range(3):
+            Rrel[0, j] = ca * R0[0, j] + sa * R0[1, j]
+            Rrel[1, j] = -sa * R0[0, j] + ca * R0[1, j]
+            Rrel[2, j] = R0[2, j]
+        wM[0, 0] += 0.5 * ktt * (Rrel[2, 1] + Rrel[1, 2])
+        wM[0, 1] += -0.5 * ktt * (Rrel[0, 2] + Rrel[2, 0])
+        wM[0, 2] += -0.5 * ktt * (Rrel[1, 0] - Rrel[0, 1]) - p[CT_TO] * (wz0 - om * R0[2, 2])
+
+    # bit: axial spring to the prescribed rock position, resisting torque
+    e = n - 1
+    Re = wR[e]
+    kb = p[KB_AX]
+    if kb > 0.0:
+        zr, vr = bit_rock(t, p)
+        vB = _mv(Re, h * y[oW + 3 * e + 1], -h * y[oW + 3 * e], 0.0)
+        Bz = y[3 * e + 2] + h * Re[2, 2]
+        Fz = -kb * (Bz - zr) - p[CB_AX] * (y[oV + 3 * e + 2] + vB[2] - vr)
+        wF[e, 2] += Fz
+        fb0, fb1, fb2 = _mtv(Re, 0.0, 0.0, Fz)
+        wM[e, 0] += -h * fb1
+        wM[e, 1] += h * fb0
+    if p[BIT_TORQUE] > 0.0:
+        wM[e, 2] -= p[BIT_TORQUE] * math.tanh(y[oW + 3 * e + 2] / p[BIT_EPS])
+
+    # stabilizers: lateral springs at material points
+    ks = p[K_STAB]
+    cs = p[C_STAB]
+    for s in range(ns):
+        k = ip[IP_HDR + s]
+        zl = fp[s]
+        R = wR[k]
+        vP = _mv(R, zl * y[oW + 3 * k + 1], -zl * y[oW + 3 * k], 0.0)
+        P0 = y[3 * k] + zl * R[0, 2]
+        P1 = y[3 * k + 1] + zl * R[1, 2]
+        Fx = -ks * P0 - cs * (y[oV + 3 * k] + vP[0])
+        Fy = -ks * P1 - cs * (y[oV + 3 * k + 1] + vP[1])
+        wF[k, 0] += Fx
+        wF[k, 1] += Fy
+        fb0, fb1, fb2 = _mtv(R, Fx, Fy, 0.0)
+        wM[k, 0] += -zl * fb1
+        wM[k, 1] += zl * fb0
+
+    # wellbore contact (eq. 14-17), frictionless; normal force never pulls
+    kc = p[K_CONT]
+    cc = p[C_CONT]
+    clr = p[CLEAR]
+    for s in range(nc):
+        k = ip[IP_HDR + ns + s]
+        X = y[3 * k]
+        Y = y[3 * k + 1]
+        dlt = math.sqrt(X * X + Y * Y)
+        if dlt > clr:
+            nx = X / dlt
+            ny = Y / dlt
+            vn = nx * y[oV + 3 * k] + ny * y[oV + 3 * k + 1]
+            fn = kc * (dlt - clr) + cc * vn
+            if fn > 0.0:
+                wF[k, 0] -= fn * nx
+                wF[k, 1] -= fn * ny
+
+    # mass unbalance: centrifugal force along body x
+    if unb >= 0:
+        R = wR[unb]
+        wz = y[oW + 3 * unb + 2]
+        fu = p[UNB] * wz * wz
+        wF[unb, 0] += fu * R[0, 0]
+        wF[unb, 1] += fu * R[1, 0]
+        wF[unb, 2] += fu * R[2, 0]
+
+    # external loads
+    o_ld = ns
+    for s in range(nl):
+        row = o_ld + NLD * s
+        if _load_active(fp, row, t):
+            k = int(fp[row + LD_BODY])
+            d = int(fp[row + LD_DIR])
+            if fp[row + LD_KIND] == 0.0:
+                wF[k, d] += fp[row + LD_MAG]
+            else:
+                wM[k, d] += fp[row + LD_MAG]
+
+    # Newton (inertial frame), Euler with the gyroscopic term (body frame)
+    for k in range(n):
+        for i in range(3):
+            dy[oV + 3 * k + i] = wF[k, i] / m
+        wx = y[oW + 3 * k]
+        wy = y[oW + 3 * k + 1]
+        wz = y[oW + 3 * k + 2]
+        dy[oW + 3 * k] = (wM[k, 0] - (jp - jt) * wy * wz) / jt
+        dy[oW + 3 * k + 1] = (wM[k, 1] - (jt - jp) * wz * wx) / jt
+        dy[oW + 3 * k + 2] = wM[k, 2] / jp
+
+
+@njit(cache=_CACHE)
+def rhs_at(t, y, dy, p, ip, fp, u, wR, wF, wM):
+    """Axial-torsional right-hand side; writes dy (4 n). wF (n,3) is scratch."""
+    n = ip[IP_N]
+    ns = ip[IP_NS]
+    nl = ip[IP_NL]
+    h = p[HALF]
+    dx = p[HALF] * 2.0
+    m = p[MASS]
+    jp = p[JP]
+    kax = p[K_AX]
+    cax = p[C_AX]
+    kt = p[G1]
+    cto = p[C_TO]
+    g = p[GRAV]
+    for k in range(n):
+        dy[k] = y[2 * n + k]
+        dy[n + k] = y[3 * n + k]
+        wF[k, 0] = m * g  # axial force
+        wF[k, 1] = 0.0  # torque
+    for a in range(n - 1):
+        b = a + 1
+        d = y[b] - y[a] - dx
+        f = -(kax * d + cax * (y[2 * n + b] - y[2 * n + a]))
+        wF[b, 0] += f
+        wF[a, 0] -= f
+        tq = -(kt * math.sin(y[n + b] - y[n + a]) + cto * (y[3 * n + b] - y[3 * n + a]))
+        wF[b, 1] += tq
+        wF[a, 1] -= tq
+    ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
+    wF[0, 0] += -(p[KT_AX] * (y[0] - h) + p[CT_AX] * y[2 * n])
+    if p[KT_TO] > 0.0:
+        wF[0, 1] += -(p[KT_TO] * math.sin(y[n] - ang) + p[CT_TO] * (y[3 * n] - om))
+    e = n - 1
+    if p[KB_AX] > 0.0:
+        zr, vr = bit_rock(t, p)
+        wF[e, 0] += -p[KB_AX] * (y[e] + h - zr) - p[CB_AX] * (y[2 * n + e] - vr)
+    if p[BIT_TORQUE] > 0.0:
+        wF[e, 1] -= p[BIT_TORQUE] * math.tanh(y[3 * n + e] / p[BIT_EPS])
+    for s in range(nl):
+        row = ns + NLD * s
+        if _load_active(fp, row, t) and int(fp[row + LD_DIR]) == 2:
+            k = int(fp[row + LD_BODY])
+            wF[k, int(fp[row + LD_KIND])] += fp[row + LD_MAG]
+    for k in range(n):
+        dy[2 * n + k] = wF[k, 0] / m
+        dy[3 * n + k] = wF[k, 1] / jp
+
+
+@njit(cache=_CACHE)
+def rhs(model, t, y, dy, p, ip, fp, u, wR, wF, wM):
+    """Dispatch to the model's right-hand side (one compiled entry point for the integrators)."""
+    if model == MODEL_FULL3D:
+        rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM)
+    else:
+        rhs_at(t, y, dy, p, ip, fp, u, wR, wF, wM)

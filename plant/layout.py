@@ -1,0 +1,61 @@
+"""Index constants of the flat float parameter vector ``p`` shared by the compiled kernels.
+
+The kernels take plain arrays (numba compiles them once); ``plant/model.py`` fills ``p`` from a
+:class:`~plant.params.PlantParams`. Units are SI throughout.
+"""
+
+# geometry and inertia of one segment
+DX = 0  # segment length [m]
+HALF = 1  # dx / 2 [m]
+MASS = 2  # segment mass [kg]
+JT = 3  # transverse moment of inertia about G [kg m^2]
+JP = 4  # polar moment of inertia [kg m^2]
+GRAV = 5  # gravity along +Z (down the well) [m/s^2]
+# joint springs (body i+1 frame) and dampers
+K_AX = 6  # axial [N/m]
+K_SH = 7  # shear [N/m]
+K_BE = 8  # bending [N m/rad]
+K_TO = 9  # torsion [N m/rad]
+C_AX = 10  # [N s/m]
+C_SH = 11
+C_BE = 12  # [N m s/rad]
+C_TO = 13
+G1 = 14  # rotational potential V = 1/2 tr(G (I - R_rel)), G = diag(G1, G1, G3) [N m]
+G3 = 15
+# top drive joint (effective, half segment in series)
+KT_AX = 16
+KT_LAT = 17
+KT_TO = 18
+CT_AX = 19
+CT_LAT = 20
+CT_TO = 21
+OMEGA0 = 22  # final rotary speed [rad/s]
+T_RAMP = 23  # ramp time [s]
+# bit
+KB_AX = 24  # [N/m] (effective, 0 = free)
+CB_AX = 25
+ZBIT0 = 26  # static rock position [m]
+BIT_AMP = 27  # [m]
+BIT_LOBES = 28
+BIT_TORQUE = 29  # [N m]
+BIT_EPS = 30  # speed scale of the smoothed sign [rad/s]
+# stabilizers, contact, unbalance, lateral drag, actuators
+K_STAB = 31
+C_STAB = 32
+K_CONT = 33
+C_CONT = 34
+CLEAR = 35
+UNB = 36  # m e [kg m]
+ALPHA_LAT = 37  # lateral drag rate [1/s] (force = -alpha m v_lateral)
+ACT_ARM = 38  # moment arm of an actuator pair: 2 r [m]
+GAUGE_R = 39  # strain gauge radius [m]
+NP = 40
+
+# columns of the load table (one row a load)
+LD_KIND = 0  # 0 force (inertial axis), 1 torque (body axis)
+LD_BODY = 1  # 0-based body index
+LD_DIR = 2  # 0 x, 1 y, 2 z
+LD_MAG = 3
+LD_T0 = 4
+LD_T1 = 5
+NLD = 6

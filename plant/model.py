@@ -1,0 +1,409 @@
+"""The drillstring model: parameters -> kernel arrays, state layout, initial state, outputs.
+
+:class:`DrillstringModel` is the pure-physics object every other layer uses (the FMU adapter, the
+modal analysis, the benchmarks). It builds the cheapest model a scene needs
+(``"full3d"`` or ``"axial_torsional"``), fills the flat arrays of the compiled kernels once, and
+owns preallocated scratch space so that stepping allocates nothing.
+
+Frames: inertial Z points down the well from the top drive (at the origin); body z lies along
+the pipe. Body k (1-based) spans depth [(k-1) dx, k dx] in the undeformed state.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from . import kernels as K
+from . import layout as L
+from .beam_fe import pinned_beam_frequencies
+from .integrators import advance_rk4, stable_step
+from .observables import outputs3d, outputs_at, output_names
+from .params import PlantParams
+
+__all__ = ["DrillstringModel", "ModelKind", "needs_lateral", "series"]
+
+ModelKind = str  # "full3d" | "axial_torsional"
+MODEL_KINDS = ("full3d", "axial_torsional")
+
+
+def series(k_boundary: float, k_half: float) -> float:
+    """Stiffness [N/m or N m/rad] of a boundary spring in series with a half segment.
+
+    ``inf`` means a rigid boundary (only the half segment remains), 0 a free end.
+    """
+    if k_boundary <= 0.0:
+        return 0.0
+    if math.isinf(k_boundary):
+        return k_half
+    return 1.0 / (1.0 / k_boundary + 1.0 / k_half)
+
+
+def needs_lateral(params: PlantParams) -> list[str]:
+    """Reasons why a parameter set needs the lateral DOFs (empty list: axial-torsional suffices)."""
+    why = []
+    if params.unbalance.enabled and params.unbalance.moment > 0.0:
+        why.append("unbalance")
+    if any(ld.is_lateral for ld in params.loads):
+        why.append("lateral loads")
+    return why
+
+
+@dataclass(frozen=True)
+class Derived:
+    """Derived per-segment quantities (SI)."""
+
+    dx: float  # [m]
+    mass: float  # [kg]
+    j_transverse: float  # [kg m^2]
+    j_polar: float  # [kg m^2]
+    k_axial: float  # [N/m]
+    k_shear: float  # [N/m]
+    k_bend: float  # [N m/rad]
+    k_tors: float  # [N m/rad]
+    beta_axial: float  # [s]
+    beta_tors: float  # [s]
+    alpha_lateral: float  # [1/s]
+    w_axial_ref: float  # [rad/s] first fixed-free axial rod frequency
+    w_tors_ref: float  # [rad/s]
+    w_lateral_ref: float  # [rad/s]
+
+
+def derive(params: PlantParams) -> Derived:
+    """Compute segment masses, inertias, joint stiffnesses and damping factors."""
+    pipe = params.pipe
+    n = pipe.n_segments
+    dx = pipe.segment_length
+    A = pipe.area
+    I = pipe.second_moment
+    rho = pipe.density
+    ro = pipe.outer_diameter / 2.0
+    ri = pipe.inner_diameter / 2.0
+    mass = rho * A * dx
+    j_polar = 0.5 * mass * (ro**2 + ri**2)
+    j_trans = mass * (3.0 * (ro**2 + ri**2) + dx**2) / 12.0
+    E = pipe.youngs_modulus
+    G = pipe.shear_modulus
+    w_ax = math.pi * pipe.axial_wave_speed / (2.0 * pipe.length)
+    w_to = math.pi * pipe.torsional_wave_speed / (2.0 * pipe.length)
+    d = params.damping
+    if d.lateral_reference_frequency > 0.0:
+        w_lat = d.lateral_reference_frequency
+    else:
+        w_lat = lateral_reference_frequency(params)
+    return Derived(
+        dx=dx,
+        mass=mass,
+        j_transverse=j_trans,
+        j_polar=j_polar,
+        k_axial=E * A / dx,
+        k_shear=pipe.kappa * G * A / dx,
+        k_bend=E * I / dx,
+        k_tors=G * pipe.polar_moment / dx,
+        beta_axial=2.0 * d.axial_ratio / w_ax,
+        beta_tors=2.0 * d.torsional_ratio / w_to,
+        alpha_lateral=2.0 * d.lateral_ratio * w_lat,
+        w_axial_ref=w_ax,
+        w_tors_ref=w_to,
+        w_lateral_ref=w_lat,
+    )
+
+
+def lateral_reference_frequency(params: PlantParams) -> float:
+    """First bending frequency [rad/s] of the pinned multi-span Euler-Bernoulli beam.
+
+    Supports: the top (when its lateral spring is > 0) and every stabilizer. With fewer than two
+    supports the string has no pinned span; the first fixed-free axial frequency is returned as a
+    harmless placeholder (the lateral damping then acts at that rate).
+    """
+    pipe = params.pipe
+    Lp = pipe.length
+    sup = sorted({Lp - h for h in params.stabilizers.heights})
+    if params.top_drive.lateral_stiffness > 0.0:
+        sup = sorted({0.0, *sup})
+    if len(sup) < 2 or params.stabilizers.stiffness == 0.0:
+        return math.pi * pipe.axial_wave_speed / (2.0 * Lp)
+    ei = pipe.youngs_modulus * pipe.second_moment
+    rho_a = pipe.density * pipe.area
+    return float(pinned_beam_frequencies(Lp, sup, ei, rho_a, n_elements=160, count=1)[0])
+
+
+class DrillstringModel:
+    """A drillstring ready to integrate: kernel arrays, state layout, initial state, outputs.
+
+    Parameters
+    ----------
+    params : PlantParams
+        The validated parameter tree.
+    kind : {"full3d", "axial_torsional"}
+        Which model to build. ``axial_torsional`` is refused when the parameters need lateral
+        DOFs (see :func:`needs_lateral`).
+    """
+
+    def __init__(self, params: PlantParams, kind: ModelKind = "full3d") -> None:
+        if kind not in MODEL_KINDS:
+            raise ValueError(f"model = {kind!r} is not allowed: one of {', '.join(MODEL_KINDS)}")
+        if kind == "axial_torsional":
+            why = needs_lateral(params)
+            if why:
+                raise ValueError(
+                    "model = 'axial_torsional' cannot represent " + " and ".join(why)
+                    + ": use 'full3d' (or 'auto')"
+                )
+        self.params = params
+        self.kind = kind
+        self.model_id = K.MODEL_FULL3D if kind == "full3d" else K.MODEL_AXIAL_TORSIONAL
+        self.derived = derive(params)
+        self.n = params.pipe.n_segments
+        self.n_state = (12 if kind == "full3d" else 4) * self.n
+        self._build_arrays()
+        n = self.n
+        self.wR = np.zeros((n + 1, 3, 3))
+        self.wF = np.zeros((n, 3))
+        self.wM = np.zeros((n, 3))
+        self._scratch = [np.zeros(self.n_state) for _ in range(5)]
+        names = output_names(kind == "full3d", list(self.contact_bodies), self.n_sites)
+        self.output_names = [r[0] for r in names]
+        self.output_units = {r[0]: r[1] for r in names}
+        self.output_docs = {r[0]: r[2] for r in names}
+        self._out = np.zeros(len(names))
+        self._zbit_ref = 0.0
+        y0 = self.initial_state()
+        self._zbit_ref = self._bit_end_z(y0)
+
+    # ------------------------------------------------------------------ arrays for kernels
+    def _build_arrays(self) -> None:
+        prm = self.params
+        d = self.derived
+        n = self.n
+        pipe = prm.pipe
+        p = np.zeros(L.NP)
+        p[L.DX] = d.dx
+        p[L.HALF] = 0.5 * d.dx
+        p[L.MASS] = d.mass
+        p[L.JT] = d.j_transverse
+        p[L.JP] = d.j_polar
+        p[L.GRAV] = prm.gravity
+        p[L.K_AX] = d.k_axial
+        p[L.K_SH] = d.k_shear
+        p[L.K_BE] = d.k_bend
+        p[L.K_TO] = d.k_tors
+        p[L.C_AX] = d.beta_axial * d.k_axial
+        p[L.C_SH] = d.beta_axial * d.k_shear
+        p[L.C_BE] = d.beta_axial * d.k_bend
+        p[L.C_TO] = d.beta_tors * d.k_tors
+        p[L.G1] = d.k_tors
+        p[L.G3] = 2.0 * d.k_bend - d.k_tors
+        td = prm.top_drive
+        p[L.KT_AX] = series(td.axial_stiffness, 2.0 * d.k_axial)
+        p[L.KT_LAT] = series(td.lateral_stiffness, 2.0 * d.k_shear)
+        p[L.KT_TO] = series(td.torsional_stiffness, 2.0 * d.k_tors)
+        p[L.CT_AX] = d.beta_axial * p[L.KT_AX]
+        p[L.CT_LAT] = d.beta_axial * p[L.KT_LAT]
+        p[L.CT_TO] = d.beta_tors * p[L.KT_TO]
+        p[L.OMEGA0] = td.rotary_speed
+        p[L.T_RAMP] = td.ramp_time
+        bit = prm.bit
+        p[L.KB_AX] = series(bit.axial_stiffness, 2.0 * d.k_axial)
+        p[L.CB_AX] = d.beta_axial * p[L.KB_AX]
+        p[L.BIT_AMP] = bit.displacement_amplitude if bit.axial_stiffness > 0.0 else 0.0
+        p[L.BIT_LOBES] = bit.lobes
+        p[L.BIT_TORQUE] = bit.torque
+        p[L.BIT_EPS] = 0.1
+        st = prm.stabilizers
+        p[L.K_STAB] = st.stiffness
+        p[L.C_STAB] = d.beta_axial * st.stiffness if st.damping < 0.0 else st.damping
+        ct = prm.contact
+        p[L.K_CONT] = ct.stiffness if ct.enabled else 0.0
+        p[L.C_CONT] = ct.damping if ct.enabled else 0.0
+        p[L.CLEAR] = ct.clearance
+        ub = prm.unbalance
+        p[L.UNB] = ub.moment if ub.enabled else 0.0
+        p[L.ALPHA_LAT] = d.alpha_lateral
+        ro = pipe.outer_diameter / 2.0
+        act = prm.actuators
+        p[L.ACT_ARM] = 2.0 * (act.radius or ro)
+        p[L.GAUGE_R] = act.gauge_radius or ro
+        self.p = p
+
+        # stabilizers at material points: arc length s from the top
+        stab_body, stab_z = [], []
+        for hgt in st.heights:
+            s = pipe.length - hgt
+            k = min(int(math.floor(s / d.dx + 1e-9)), n - 1)
+            stab_body.append(k)
+            stab_z.append(s - (k + 0.5) * d.dx)
+        if st.stiffness == 0.0:
+            stab_body, stab_z = [], []
+        self.contact_bodies = tuple(ct.bodies) if ct.enabled else ()
+        self.sites = tuple(act.joints)
+        self.n_sites = len(self.sites)
+        unb = prm.unbalance_body - 1 if (ub.enabled and ub.moment > 0.0) else -1
+        ip = [n, len(stab_body), len(self.contact_bodies), self.n_sites, unb, len(prm.loads)]
+        ip += stab_body + [b - 1 for b in self.contact_bodies] + [j - 1 for j in self.sites]
+        self.ip = np.array(ip, dtype=np.int64)
+        rows = []
+        for ld in prm.loads:
+            rows.append(
+                [0.0 if ld.kind == "force" else 1.0, ld.body - 1, "xyz".index(ld.direction),
+                 ld.magnitude, ld.start, ld.start + ld.duration]
+            )
+        self.fp = np.concatenate([np.array(stab_z, dtype=float),
+                                  np.array(rows, dtype=float).ravel()])
+        self.u = np.zeros(2 * self.n_sites)
+
+    # ------------------------------------------------------------------ state layout
+    def slices(self) -> dict[str, slice]:
+        """Blocks of the state vector (each ``3 n`` long in 3D, ``n`` long axial-torsional)."""
+        n = self.n
+        if self.kind == "full3d":
+            return {
+                "position": slice(0, 3 * n),
+                "angles": slice(3 * n, 6 * n),
+                "velocity": slice(6 * n, 9 * n),
+                "omega": slice(9 * n, 12 * n),
+            }
+        return {"z": slice(0, n), "psi": slice(n, 2 * n), "vz": slice(2 * n, 3 * n),
+                "spin": slice(3 * n, 4 * n)}
+
+    def _bit_end_z(self, y: np.ndarray) -> float:
+        h = 0.5 * self.derived.dx
+        if self.kind == "full3d":
+            n = self.n
+            ang = y[3 * n + 3 * (n - 1): 3 * n + 3 * n]
+            R = np.empty((3, 3))
+            K.cardan(ang[0], ang[1], ang[2], R)
+            return float(y[3 * (n - 1) + 2] + h * R[2, 2])
+        return float(y[self.n - 1] + h)
+
+    def static_axial_displacement(self) -> np.ndarray:
+        """Static axial displacements [m] of the bodies under gravity and weight on bit.
+
+        Solves the linear axial chain (top spring, joints; the bit force is the prescribed weight
+        on bit). Returns shape (n,).
+        """
+        n = self.n
+        p = self.p
+        m = self.derived.mass
+        f = np.full(n, m * self.params.gravity)
+        f[-1] -= self.params.bit.weight_on_bit
+        if not np.any(f):
+            return np.zeros(n)
+        kt = p[L.KT_AX]
+        ka = p[L.K_AX]
+        if kt == 0.0:
+            if abs(f.sum()) > 1e-9 * max(1.0, np.abs(f).max()):
+                raise ValueError(
+                    "top_drive.axial_stiffness = 0 with a net axial load: the weight "
+                    f"{m * n * self.params.gravity:.6g} N must equal bit.weight_on_bit"
+                )
+        Kd = np.zeros((n, n))
+        for a in range(n - 1):
+            Kd[a, a] += ka
+            Kd[a + 1, a + 1] += ka
+            Kd[a, a + 1] -= ka
+            Kd[a + 1, a] -= ka
+        Kd[0, 0] += kt
+        if kt == 0.0:
+            Kd[0, 0] += ka * 1e-12  # fix the floating chain's mean; the shape is what matters
+        return np.linalg.solve(Kd, f)
+
+    def initial_state(self) -> np.ndarray:
+        """Straight string at rest in static axial equilibrium; shape (n_state,)."""
+        n = self.n
+        dx = self.derived.dx
+        z = (np.arange(n) + 0.5) * dx + self.static_axial_displacement()
+        y = np.zeros(self.n_state)
+        if self.kind == "full3d":
+            y[2:3 * n:3] = z
+        else:
+            y[:n] = z
+        if self.params.bit.axial_stiffness > 0.0:
+            zb = z[-1] + 0.5 * dx
+            kb = self.p[L.KB_AX]
+            self.p[L.ZBIT0] = zb - self.params.bit.weight_on_bit / kb
+        return y
+
+    # ------------------------------------------------------------------ evaluation
+    def rhs(self, t: float, y: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """Time derivative of the state (allocates the result; for scipy and tests).
+
+        Parameters
+        ----------
+        t : float
+            Time [s].
+        y : numpy.ndarray, shape (n_state,)
+        u : numpy.ndarray, shape (2 * n_sites,), optional
+            Actuator forces [N] (C, E per site); defaults to the model's held inputs.
+        """
+        dy = np.empty(self.n_state)
+        K.rhs(self.model_id, float(t), np.ascontiguousarray(y, dtype=float), dy, self.p, self.ip,
+              self.fp, self.u if u is None else np.asarray(u, dtype=float), self.wR, self.wF,
+              self.wM)
+        return dy
+
+    def outputs(self, t: float, y: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """Output vector in the order of :attr:`output_names` (a view reused between calls)."""
+        fn = outputs3d if self.kind == "full3d" else outputs_at
+        fn(float(t), y, self.p, self.ip, self.fp, self.u if u is None else u, self.wR,
+           self._zbit_ref, self._out)
+        return self._out
+
+    def output_dict(self, t: float, y: np.ndarray) -> dict[str, float]:
+        """Outputs as a name -> value dict (convenience; allocates)."""
+        return dict(zip(self.output_names, self.outputs(t, y).tolist()))
+
+    def energy(self, t: float, y: np.ndarray) -> float:
+        """Total mechanical energy [J] (kinetic + elastic + gravity potential)."""
+        return float(self.outputs(t, y)[-1])
+
+    # ------------------------------------------------------------------ integration
+    def jacobian(self, t: float, y: np.ndarray, rel_step: float = 1e-7) -> np.ndarray:
+        """Central finite-difference Jacobian of :meth:`rhs`; shape (n_state, n_state)."""
+        N = self.n_state
+        J = np.empty((N, N))
+        yp = y.copy()
+        for i in range(N):
+            h = rel_step * max(1.0, abs(y[i]))
+            yp[i] = y[i] + h
+            fp = self.rhs(t, yp)
+            yp[i] = y[i] - h
+            fm = self.rhs(t, yp)
+            yp[i] = y[i]
+            J[:, i] = (fp - fm) / (2.0 * h)
+        return J
+
+    @cached_property
+    def max_eigenvalue(self) -> float:
+        """Spectral radius [1/s] of the Jacobian at the initial state, plus active-contact margin.
+
+        Contact adds at most k_w/m to the squared frequency of one body; that margin is added so
+        that the step stays stable when the pipe touches the wellbore.
+        """
+        y0 = self.initial_state()
+        J = self.jacobian(0.0, y0)
+        lam = float(np.max(np.abs(np.linalg.eigvals(J))))
+        kc = self.p[L.K_CONT] if self.contact_bodies and self.kind == "full3d" else 0.0
+        cc = self.p[L.C_CONT] if self.contact_bodies and self.kind == "full3d" else 0.0
+        m = self.derived.mass
+        return math.sqrt(lam**2 + kc / m) + cc / m
+
+    def stable_step(self) -> float:
+        """Largest stable RK4 step [s] for this model (from :attr:`max_eigenvalue`)."""
+        return stable_step(self.max_eigenvalue)
+
+    def advance(self, t0: float, y: np.ndarray, n_steps: int, dt: float,
+                u: np.ndarray | None = None) -> int:
+        """Integrate ``y`` in place over ``n_steps`` RK4 steps of ``dt`` [s] from ``t0`` [s].
+
+        Returns the number of completed steps before a non-finite state (``n_steps`` if none).
+        """
+        k1, k2, k3, k4, yt = self._scratch
+        return int(
+            advance_rk4(self.model_id, float(t0), y, int(n_steps), float(dt), self.p, self.ip,
+                        self.fp, self.u if u is None else u, self.wR, self.wF, self.wM, k1, k2,
+                        k3, k4, yt)
+        )

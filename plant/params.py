@@ -1,0 +1,422 @@
+"""The plant's parameter tree: frozen dataclasses in SI units, validated on construction.
+
+Every field carries its unit and a one-line description in ``metadata`` so that the scene schema
+(``docs/scenes.md``) and the FMU's variable table are generated from one place. A bad value raises
+``ValueError`` naming the parameter, the value and the allowed range.
+
+Conventions (see ``plant/model.py``): inertial Z points down the well from the top drive, body 1
+is the top segment and body ``n`` the bit segment (1-based in every user-facing parameter).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+__all__ = [
+    "PipeParams",
+    "DampingParams",
+    "TopDriveParams",
+    "BitParams",
+    "StabilizerParams",
+    "ContactParams",
+    "UnbalanceParams",
+    "ActuatorParams",
+    "LoadParams",
+    "PlantParams",
+    "describe",
+]
+
+
+def _f(default: Any, unit: str, doc: str, **kw: Any) -> Any:
+    return field(default=default, metadata={"unit": unit, "doc": doc, **kw})
+
+
+def _check_finite(owner: str, name: str, value: Any, *, allow_inf: bool = False) -> None:
+    if isinstance(value, bool):
+        return
+    if isinstance(value, (int, float)):
+        if math.isnan(value) or (math.isinf(value) and not allow_inf):
+            raise ValueError(f"{owner}.{name} = {value!r} is not allowed: must be a finite number")
+
+
+def _check_range(
+    owner: str,
+    name: str,
+    value: float,
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    unit: str = "",
+) -> None:
+    _check_finite(owner, name, value, allow_inf=hi is None and not hi_open)
+    bad = (lo is not None and (value < lo or (lo_open and value == lo))) or (
+        hi is not None and (value > hi or (hi_open and value == hi))
+    )
+    if bad:
+        left = "(" if lo_open else "["
+        right = ")" if hi_open else "]"
+        lo_s = "-inf" if lo is None else f"{lo:g}"
+        hi_s = "inf" if hi is None else f"{hi:g}"
+        u = f" {unit}" if unit else ""
+        raise ValueError(
+            f"{owner}.{name} = {value!r} is out of range: allowed {left}{lo_s}, {hi_s}{right}{u}"
+        )
+
+
+def _validate_types(obj: Any) -> None:
+    """Reject values whose type does not match the field's default (bool vs number vs tuple)."""
+    owner = type(obj).OWNER
+    for f in fields(obj):
+        v = getattr(obj, f.name)
+        d = f.default
+        if isinstance(d, bool):
+            if not isinstance(v, bool):
+                raise ValueError(f"{owner}.{f.name} = {v!r} is not allowed: must be true or false")
+        elif isinstance(d, (int, float)) and not isinstance(d, bool):
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise ValueError(f"{owner}.{f.name} = {v!r} is not allowed: must be a number")
+            if isinstance(d, int) and not isinstance(d, bool) and f.metadata.get("integer"):
+                if not float(v).is_integer():
+                    raise ValueError(
+                        f"{owner}.{f.name} = {v!r} is not allowed: must be an integer"
+                    )
+                object.__setattr__(obj, f.name, int(v))
+        elif isinstance(d, tuple):
+            if isinstance(v, list):
+                v = tuple(v)
+                object.__setattr__(obj, f.name, v)
+            if not isinstance(v, tuple):
+                raise ValueError(f"{owner}.{f.name} = {v!r} is not allowed: must be a list")
+
+
+@dataclass(frozen=True)
+class PipeParams:
+    """Geometry and material of the collar section (hollow circular steel pipe)."""
+
+    OWNER = "pipe"
+    length: float = _f(80.0, "m", "length of the modelled collar section")
+    n_segments: int = _f(30, "1", "number of rigid segments (bodies)", integer=True)
+    outer_diameter: float = _f(0.110, "m", "outer diameter")
+    inner_diameter: float = _f(0.045, "m", "inner diameter (0 for a solid bar)")
+    youngs_modulus: float = _f(208e9, "Pa", "Young's modulus E")
+    shear_modulus: float = _f(81e9, "Pa", "shear modulus G")
+    density: float = _f(7850.0, "kg/m^3", "density rho")
+    shear_coefficient: float = _f(
+        0.0, "1", "Timoshenko shear coefficient kappa; 0 = Cowper's value for a hollow circle"
+    )
+
+    def __post_init__(self) -> None:
+        _validate_types(self)
+        o = self.OWNER
+        _check_range(o, "length", self.length, 0.0, None, lo_open=True, unit="m")
+        _check_range(o, "n_segments", self.n_segments, 2, 2000)
+        _check_range(o, "outer_diameter", self.outer_diameter, 0.0, 5.0, lo_open=True, unit="m")
+        _check_range(
+            o, "inner_diameter", self.inner_diameter, 0.0, self.outer_diameter, hi_open=True,
+            unit="m",
+        )
+        _check_range(o, "youngs_modulus", self.youngs_modulus, 0.0, 1e13, lo_open=True, unit="Pa")
+        _check_range(o, "shear_modulus", self.shear_modulus, 0.0, 1e13, lo_open=True, unit="Pa")
+        _check_range(o, "density", self.density, 0.0, 1e5, lo_open=True, unit="kg/m^3")
+        _check_range(o, "shear_coefficient", self.shear_coefficient, 0.0, 1.0)
+
+    # --- derived section properties -------------------------------------------------------
+    @property
+    def area(self) -> float:
+        """Cross-section area A [m^2]."""
+        return math.pi / 4.0 * (self.outer_diameter**2 - self.inner_diameter**2)
+
+    @property
+    def second_moment(self) -> float:
+        """Area moment of inertia I [m^4] (about a diameter)."""
+        return math.pi / 64.0 * (self.outer_diameter**4 - self.inner_diameter**4)
+
+    @property
+    def polar_moment(self) -> float:
+        """Polar moment of area J = 2 I [m^4]."""
+        return 2.0 * self.second_moment
+
+    @property
+    def poisson_ratio(self) -> float:
+        """nu = E / (2 G) - 1 [1]."""
+        return self.youngs_modulus / (2.0 * self.shear_modulus) - 1.0
+
+    @property
+    def kappa(self) -> float:
+        """Shear coefficient: the given one, or Cowper's (1966) for a hollow circle [1]."""
+        if self.shear_coefficient > 0.0:
+            return self.shear_coefficient
+        nu = self.poisson_ratio
+        m2 = (self.inner_diameter / self.outer_diameter) ** 2
+        a = (1.0 + m2) ** 2
+        return 6.0 * (1.0 + nu) * a / ((7.0 + 6.0 * nu) * a + (20.0 + 12.0 * nu) * m2)
+
+    @property
+    def segment_length(self) -> float:
+        """dx = L / n [m]."""
+        return self.length / self.n_segments
+
+    @property
+    def axial_wave_speed(self) -> float:
+        """c = sqrt(E / rho) [m/s]."""
+        return math.sqrt(self.youngs_modulus / self.density)
+
+    @property
+    def torsional_wave_speed(self) -> float:
+        """c_t = sqrt(G / rho) [m/s]."""
+        return math.sqrt(self.shear_modulus / self.density)
+
+
+@dataclass(frozen=True)
+class DampingParams:
+    """Material and lateral damping, set from target damping ratios.
+
+    Joint dampers are stiffness-proportional (c = beta k): ``beta_axial = 2 zeta_a / w_a`` with
+    ``w_a`` the first fixed-free axial rod frequency, likewise torsion; shear and bending joints use
+    ``beta_axial`` (one material loss factor). Lateral damping is viscous drag on the lateral
+    velocity of each body (mass proportional, c = alpha m), ``alpha = 2 zeta_l w_l`` with ``w_l``
+    the first lateral frequency of the pinned multi-span Euler-Bernoulli beam given by the top pin
+    and the stabilizers (or ``lateral_reference_frequency`` if > 0).
+    """
+
+    OWNER = "damping"
+    axial_ratio: float = _f(0.015, "1", "damping ratio of the first axial mode (Table 1: 1.5 %)")
+    torsional_ratio: float = _f(
+        0.034, "1", "damping ratio of the first torsional mode (Table 1: 3.4 %)"
+    )
+    lateral_ratio: float = _f(0.40, "1", "damping ratio of the first lateral mode (Table 1: 40 %)")
+    lateral_reference_frequency: float = _f(
+        0.0, "rad/s", "frequency at which lateral_ratio is met; 0 = first pinned multi-span beam mode"
+    )
+
+    def __post_init__(self) -> None:
+        _validate_types(self)
+        o = self.OWNER
+        _check_range(o, "axial_ratio", self.axial_ratio, 0.0, 1.0)
+        _check_range(o, "torsional_ratio", self.torsional_ratio, 0.0, 1.0)
+        _check_range(o, "lateral_ratio", self.lateral_ratio, 0.0, 2.0)
+        _check_range(
+            o, "lateral_reference_frequency", self.lateral_reference_frequency, 0.0, 1e4,
+            unit="rad/s",
+        )
+
+
+@dataclass(frozen=True)
+class TopDriveParams:
+    """Top boundary: stiff springs to a top drive that ramps its rotary speed."""
+
+    OWNER = "top_drive"
+    axial_stiffness: float = _f(1e9, "N/m", "axial spring to the top drive (inf = rigid, 0 = free)")
+    lateral_stiffness: float = _f(1e9, "N/m", "lateral spring to the top drive (inf = rigid)")
+    torsional_stiffness: float = _f(
+        math.inf, "N m/rad", "torsional spring to the top drive (inf = rigid drive)"
+    )
+    rotary_speed: float = _f(20.0, "rad/s", "final rotary speed of the top drive")
+    ramp_time: float = _f(1.0, "s", "duration of the linear speed ramp from 0")
+
+    def __post_init__(self) -> None:
+        _validate_types(self)
+        o = self.OWNER
+        for name in ("axial_stiffness", "lateral_stiffness", "torsional_stiffness"):
+            _check_range(o, name, getattr(self, name), 0.0, None)
+        _check_range(o, "rotary_speed", self.rotary_speed, -1e3, 1e3, unit="rad/s")
+        _check_range(o, "ramp_time", self.ramp_time, 0.0, 1e6, unit="s")
+
+
+@dataclass(frozen=True)
+class BitParams:
+    """Bit boundary: axial spring to a prescribed sinusoidal bit-rock displacement."""
+
+    OWNER = "bit"
+    axial_stiffness: float = _f(
+        1e9, "N/m", "axial spring between the bit and the rock (0 = axially free bit)"
+    )
+    displacement_amplitude: float = _f(0.003, "m", "amplitude of the sinusoidal bit displacement")
+    lobes: float = _f(1.0, "1", "bit displacement frequency / rotary speed")
+    weight_on_bit: float = _f(0.0, "N", "static compressive bit force (sets the rock position)")
+    torque: float = _f(0.0, "N m", "resisting bit torque (smoothed sign of the bit speed)")
+
+    def __post_init__(self) -> None:
+        _validate_types(self)
+        o = self.OWNER
+        _check_range(o, "axial_stiffness", self.axial_stiffness, 0.0, 1e13, unit="N/m")
+        _check_range(o, "displacement_amplitude", self.displacement_amplitude, 0.0, 1.0, unit="m")
+        _check_range(o, "lobes", self.lobes, 0.0, 100.0)
+        _check_range(o, "weight_on_bit", self.weight_on_bit, -1e8, 1e8, unit="N")
+        _check_range(o, "torque", self.torque, 0.0, 1e7, unit="N m")
+
+
+@dataclass(frozen=True)
+class StabilizerParams:
+    """Stabilizers: stiff lateral springs at given heights above the bit."""
+
+    OWNER = "stabilizers"
+    heights: tuple = _f((0.0, 26.67), "m", "heights of the stabilizers above the bit")
+    stiffness: float = _f(1e9, "N/m", "lateral stiffness of each stabilizer")
+    damping: float = _f(
+        -1.0, "N s/m", "lateral damping of each stabilizer; -1 = material (beta_axial * stiffness)"
+    )
+
+    def __post_init__(self) -> None:
+        _validate_types(self)
+        o = self.OWNER
+        for h in self.heights:
+            if isinstance(h, bool) or not isinstance(h, (int, float)):
+                raise ValueError(f"{o}.heights: {h!r} is not allowed: must be numbers (m)")
+            _check_range(o, "heights", float(h), 0.0, None, unit="m")
+        _check_range(o, "stiffness", self.stiffness, 0.0, 1e13, unit="N/m")
+        if self.damping != -1.0:
+            _check_range(o, "damping", self.damping, 0.0, 1e12, unit="N s/m")
+
+
+@dataclass(frozen=True)
+class ContactParams:
+    """Wellbore contact (eq. 14-17): radial spring beyond the clearance at given bodies."""
+
+    OWNER = "contact"
+    enabled: bool = _f(True, "-", "wellbore contact on/off")
+    bodies: tuple = _f((11, 26), "1", "bodies (1 = top) checked for contact")
+    clearance: float = _f(0.02, "m", "radial clearance between collar and wellbore")
+    stiffness: float = _f(1e7, "N/m", "wellbore contact stiffness k_w")
+    damping: float = _f(0.0, "N s/m", "contact damping (acts only while in contact)")
+
+    def __post_init__(self) -> None:
+        _validate_types(self)
+        o = self.OWNER
+        for b in self.bodies:
+            if isinstance(b, bool) or not isinstance(b, int):
+                raise ValueError(f"{o}.bodies: {b!r} is not allowed: must be integers >= 1")
+        _check_range(o, "clearance", self.clearance, 0.0, 10.0, lo_open=True, unit="m")
+        _check_range(o, "stiffness", self.stiffness, 0.0, 1e13, unit="N/m")
+        _check_range(o, "damping", self.damping, 0.0, 1e12, unit="N s/m")
+
+
+@dataclass(frozen=True)
+class UnbalanceParams:
+    """Mass unbalance: a rotating centrifugal force m e w^2 fixed in the body frame."""
+
+    OWNER = "unbalance"
+    enabled: bool = _f(True, "-", "unbalance on/off")
+    body: int = _f(0, "1", "body carrying the unbalance (1 = top); 0 = the bit body", integer=True)
+    moment: float = _f(0.1, "kg m", "unbalance m e")
+
+    def __post_init__(self) -> None:
+        _validate_types(self)
+        _check_range(self.OWNER, "body", self.body, 0, None)
+        _check_range(self.OWNER, "moment", self.moment, 0.0, 1e4, unit="kg m")
+
+
+@dataclass(frozen=True)
+class ActuatorParams:
+    """Strain gauges and bending actuators at joints (Fig. 6-8)."""
+
+    OWNER = "actuators"
+    joints: tuple = _f(
+        (11, 26), "1", "site k sits at the joint below body joints[k] (site 1: long span)"
+    )
+    radius: float = _f(0.0, "m", "radius of the actuator points C, D, E, F; 0 = outer radius")
+    gauge_radius: float = _f(0.0, "m", "radius of the strain gauges; 0 = outer radius")
+
+    def __post_init__(self) -> None:
+        _validate_types(self)
+        o = self.OWNER
+        for j in self.joints:
+            if isinstance(j, bool) or not isinstance(j, int):
+                raise ValueError(f"{o}.joints: {j!r} is not allowed: must be integers >= 1")
+        _check_range(o, "radius", self.radius, 0.0, 5.0, unit="m")
+        _check_range(o, "gauge_radius", self.gauge_radius, 0.0, 5.0, unit="m")
+
+
+@dataclass(frozen=True)
+class LoadParams:
+    """An external load on one body: a rectangular pulse (or a step when duration is inf)."""
+
+    OWNER = "loads"
+    kind: str = _f("force", "-", "'force' (inertial axis, at the mass centre) or 'torque' (body axis)")
+    body: int = _f(1, "1", "loaded body (1 = top)", integer=True)
+    direction: str = _f("z", "-", "axis: 'x', 'y' or 'z'")
+    magnitude: float = _f(0.0, "N or N m", "load value")
+    start: float = _f(0.0, "s", "start time")
+    duration: float = _f(math.inf, "s", "duration (inf = step)")
+
+    def __post_init__(self) -> None:
+        _validate_types(self)
+        o = self.OWNER
+        if self.kind not in ("force", "torque"):
+            raise ValueError(f"{o}.kind = {self.kind!r} is not allowed: 'force' or 'torque'")
+        if self.direction not in ("x", "y", "z"):
+            raise ValueError(f"{o}.direction = {self.direction!r} is not allowed: 'x', 'y' or 'z'")
+        _check_range(o, "body", self.body, 1, None)
+        _check_range(o, "magnitude", self.magnitude, -1e9, 1e9)
+        _check_range(o, "start", self.start, 0.0, 1e9, unit="s")
+        _check_range(o, "duration", self.duration, 0.0, None, lo_open=True, unit="s")
+
+    @property
+    def is_lateral(self) -> bool:
+        """True when the load excites lateral motion (x/y force or x/y torque)."""
+        return self.direction in ("x", "y") and self.magnitude != 0.0
+
+
+@dataclass(frozen=True)
+class PlantParams:
+    """The whole plant: one frozen tree in SI units, validated as a whole on construction."""
+
+    OWNER = "plant"
+    pipe: PipeParams = field(default_factory=PipeParams)
+    damping: DampingParams = field(default_factory=DampingParams)
+    top_drive: TopDriveParams = field(default_factory=TopDriveParams)
+    bit: BitParams = field(default_factory=BitParams)
+    stabilizers: StabilizerParams = field(default_factory=StabilizerParams)
+    contact: ContactParams = field(default_factory=ContactParams)
+    unbalance: UnbalanceParams = field(default_factory=UnbalanceParams)
+    actuators: ActuatorParams = field(default_factory=ActuatorParams)
+    loads: tuple = field(default_factory=tuple)
+    gravity: float = _f(0.0, "m/s^2", "gravity along the well axis (0 = off; 9.81 = on)")
+
+    def __post_init__(self) -> None:
+        n = self.pipe.n_segments
+        L = self.pipe.length
+        _check_range("plant", "gravity", self.gravity, -100.0, 100.0, unit="m/s^2")
+        for h in self.stabilizers.heights:
+            if h > L:
+                raise ValueError(
+                    f"stabilizers.heights: {h!r} m is beyond the string: allowed [0, {L:g}] m"
+                )
+        if self.contact.enabled:
+            for b in self.contact.bodies:
+                if not 1 <= b <= n:
+                    raise ValueError(f"contact.bodies: {b} is out of range: allowed [1, {n}]")
+        for j in self.actuators.joints:
+            if not 1 <= j <= n - 1:
+                raise ValueError(f"actuators.joints: {j} is out of range: allowed [1, {n - 1}]")
+        if self.unbalance.body > n:
+            raise ValueError(f"unbalance.body = {self.unbalance.body} is out of range: [0, {n}]")
+        loads = tuple(self.loads)
+        for ld in loads:
+            if not isinstance(ld, LoadParams):
+                raise ValueError(f"loads: {ld!r} is not allowed: must be LoadParams")
+            if ld.body > n:
+                raise ValueError(f"loads.body = {ld.body} is out of range: allowed [1, {n}]")
+        object.__setattr__(self, "loads", loads)
+        if self.bit.axial_stiffness == 0.0 and self.bit.weight_on_bit != 0.0:
+            raise ValueError(
+                "bit.weight_on_bit must be 0 when bit.axial_stiffness = 0 (an axially free bit)"
+            )
+
+    @property
+    def unbalance_body(self) -> int:
+        """1-based body index of the unbalance (0 in the parameters means the bit body)."""
+        return self.unbalance.body or self.pipe.n_segments
+
+
+def describe(cls: type) -> list[tuple[str, Any, str, str]]:
+    """Rows (name, default, unit, description) of a parameter dataclass, for docs and FMUs."""
+    rows = []
+    for f in fields(cls):
+        if "unit" in f.metadata:
+            rows.append((f.name, f.default, f.metadata["unit"], f.metadata["doc"]))
+    return rows
