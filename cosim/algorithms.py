@@ -17,9 +17,9 @@ between its communication points.
   ``t_k+1`` for the FMUs before it), steps, and publishes at once. Relative to
   Jacobi, a connection from an earlier to a later FMU has one step less delay.
 
-Initialisation: all outputs are read at the start time, then one sweep in
-stepping order sets each FMU's inputs and re-reads its outputs (propagating
-direct feedthrough along the order).
+Initialisation: all outputs are read at the start time, then as many sweeps as
+there are FMUs, in stepping order, set each FMU's inputs and re-read its
+outputs (propagating direct feedthrough along any chain of FMUs).
 
 The hot loop works on ctypes buffers with precomputed index pairs: per step and
 FMU one ``fmi2SetReal``, one ``fmi2DoStep`` and one ``fmi2GetReal`` on the raw
@@ -164,16 +164,25 @@ class _Algorithm:
                 plan.slave.fail(st, "fmi2SetReal", self.time_of(tick))
 
     def initialize(self) -> None:
-        """Read initial outputs, one feedthrough sweep in order, reset delay lines."""
+        """Read initial outputs, then feedthrough sweeps in stepping order.
+
+        One sweep per FMU (each: set inputs, re-read outputs, restart its
+        delay lines from the new outputs) propagates direct feedthrough along
+        any chain of FMUs; the signals are taken constant before the start.
+        """
         for plan in self.plans:
             self._read(plan, 0)
-        for plan in self.plans:
-            self._gather_set(plan, 0)
-            self._read(plan, 0)
+            self._reset_lines(plan)
+        for _ in self.plans:
+            for plan in self.plans:
+                self._gather_set(plan, 0)
+                self._read(plan, 0)
+                self._reset_lines(plan)
         self.check_finite()
-        for plan in self.plans:
-            for y_idx, line in plan.pushes:
-                line.reset(self.y[y_idx])
+
+    def _reset_lines(self, plan: _FmuPlan) -> None:
+        for y_idx, line in plan.pushes:
+            line.reset(self.y[y_idx])
 
     def check_finite(self) -> None:
         """Raise :class:`DivergenceError` naming the first non-finite output."""

@@ -1,0 +1,147 @@
+"""Facade: run a :class:`~cosim.system.SystemSpec` and return a :class:`Result`."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import CosimError, DivergenceError
+from .execution import Execution
+from .progress import ProgressObserver
+from .recorder import Recorder
+from .system import SystemSpec
+
+
+@dataclass(frozen=True)
+class Divergence:
+    """Where a run stopped on a non-finite output."""
+
+    time: float          #: simulated time of the read [s]
+    quantity: str        #: 'fmu.var'
+    value: float         #: nan or +-inf
+
+
+@dataclass(frozen=True)
+class Result:
+    """Outcome of :meth:`CoSimulation.run`.
+
+    Attributes
+    ----------
+    data : numpy.ndarray
+        Structured array, shape (n_rows,), fields ``time`` [s] then each output.
+    wall_time : float
+        Wall-clock time of the stepping loop [s].
+    real_time_factor : float
+        Simulated time / wall time (> 1: faster than real time).
+    end_time : float
+        Simulated time reached [s].
+    diverged : Divergence or None
+        Set if the run stopped on a non-finite output.
+    csv_path : Path or None
+        The result file, if one was written.
+    """
+
+    data: np.ndarray
+    wall_time: float
+    real_time_factor: float
+    end_time: float
+    diverged: Divergence | None = None
+    csv_path: Path | None = None
+
+
+class CoSimulation:
+    """Run a co-simulation system.
+
+    Parameters
+    ----------
+    system : SystemSpec
+    """
+
+    def __init__(self, system: SystemSpec):
+        self.system = system
+
+    def run(self, stop_time: float | None = None, outputs: Sequence[str] = (),
+            output_interval: float | None = None, progress: bool | None = False,
+            csv_path: str | Path | None = None, flush_every: int = 1000) -> Result:
+        """Simulate from the start time to ``stop_time``.
+
+        Parameters
+        ----------
+        stop_time : float, optional
+            [s]; defaults to ``system.stop_time``.
+        outputs : sequence of str
+            ``'fmu.var'`` variables to record.
+        output_interval : float, optional
+            Recording interval [s], an integer multiple of the base step
+            (default: every base step).
+        progress : bool or None
+            Show a progress bar (None: only on a TTY).
+        csv_path : str or Path, optional
+            Also stream the recorded rows to this CSV (atomic, see
+            :mod:`cosim.recorder`).
+        flush_every : int
+            Rows per CSV write.
+
+        Returns
+        -------
+        Result
+            With ``diverged`` set if a non-finite output stopped the run.
+
+        Raises
+        ------
+        CosimError
+            If an FMU call fails; ``error.result`` holds the partial
+            :class:`Result` (and the CSV is finalised).
+        """
+        system = self.system
+        stop = system.stop_time if stop_time is None else stop_time
+        if stop is None:
+            raise ValueError("stop_time: required (the system has no stop_time)")
+        H = system.base_step
+        interval = 1
+        if output_interval is not None:
+            interval = round(output_interval / H)
+            if interval < 1 or abs(interval * H - output_interval) > 1e-9 * output_interval:
+                raise ValueError(f"output_interval: a positive integer multiple of "
+                                 f"base_step = {H} s, got {output_interval} s")
+        recorder = Recorder(outputs, interval, csv_path, flush_every)
+        execution = None
+        wall0 = time.perf_counter()
+        diverged = None
+        try:
+            execution = Execution(system, read_outputs=outputs)
+            execution.add_observer(recorder)
+            if progress is not False:
+                execution.add_observer(ProgressObserver(stop, disable=None if progress
+                                                        is None else not progress))
+            execution.initialize()
+            wall0 = time.perf_counter()
+            execution.simulate_until(stop)
+        except DivergenceError as err:
+            diverged = Divergence(err.time, err.quantity, err.value)
+        except CosimError as err:
+            err.result = self._finish(recorder, execution, wall0, None)
+            raise
+        except BaseException:
+            self._finish(recorder, execution, wall0, None)
+            raise
+        return self._finish(recorder, execution, wall0, diverged)
+
+    @staticmethod
+    def _finish(recorder: Recorder, execution: Execution | None, wall0: float,
+                diverged: Divergence | None) -> Result:
+        wall = time.perf_counter() - wall0
+        end = execution.time if execution is not None else float("nan")
+        sim = (execution.time - execution.start_time) if execution is not None else 0.0
+        if execution is not None:
+            execution.close()
+        if recorder.n_rows:
+            recorder.close()
+        else:  # failed before the first row: leave any earlier file untouched
+            recorder.abort()
+        return Result(recorder.data, wall, sim / wall if wall > 0 else float("inf"), end,
+                      diverged, recorder.csv_path)

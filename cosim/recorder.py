@@ -1,0 +1,162 @@
+"""Recording observer: requested variables at a fixed output interval.
+
+Rows are kept as a structured numpy array with ``'time'`` first (so
+``fmpy.util.plot_result`` accepts it) and can be streamed to a CSV file.
+
+The CSV is written atomically: rows go to a temporary file in the target's
+directory, flushed every ``flush_every`` rows (memory stays flat when
+``keep_in_memory=False``), and :meth:`Recorder.close` renames it onto the
+target with ``os.replace``. An earlier file under the target name is thus
+never truncated before the new one is complete; if the run fails, closing
+(which the facade does in a ``finally``) still finalises the partial,
+readable file under the target name.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from .system import split_variable
+
+
+class Recorder:
+    """Observer recording variables every ``interval_ticks`` base steps.
+
+    Parameters
+    ----------
+    variables : sequence of str
+        ``'fmu.var'`` Real variables to record.
+    interval_ticks : int
+        Output interval in base steps (>= 1).
+    csv_path : str or Path, optional
+        Stream rows to this CSV file (comma separated, header line, values
+        with 17 significant digits).
+    flush_every : int
+        Rows buffered before they are written to the CSV.
+    keep_in_memory : bool
+        Keep all rows for :attr:`data`; if False only the CSV holds them.
+
+    Raises
+    ------
+    OSError
+        If the CSV's directory is not writable (raised here, before any
+        simulation), with the path in the message.
+    """
+
+    def __init__(self, variables: Sequence[str], interval_ticks: int = 1,
+                 csv_path: str | Path | None = None, flush_every: int = 1000,
+                 keep_in_memory: bool = True):
+        if isinstance(interval_ticks, bool) or not isinstance(interval_ticks, int) \
+                or interval_ticks < 1:
+            raise ValueError(f"interval_ticks: integer >= 1, got {interval_ticks!r}")
+        if flush_every < 1:
+            raise ValueError(f"flush_every: integer >= 1, got {flush_every!r}")
+        self.variables = list(variables)
+        for v in self.variables:
+            split_variable(v, "Recorder.variables")
+        self.names = ["time", *self.variables]
+        self.dtype = np.dtype([(n, np.float64) for n in self.names])
+        self.interval_ticks = interval_ticks
+        self.flush_every = flush_every
+        self.keep_in_memory = keep_in_memory
+        self._rows: list[tuple[float, ...]] = []     # rows not yet flushed
+        self._chunks: list[np.ndarray] = []           # flushed rows kept in memory
+        self.n_rows = 0
+        self.csv_path = Path(csv_path) if csv_path is not None else None
+        self._tmp_path: Path | None = None
+        self._file = None
+        self.closed = False
+        if self.csv_path is not None:
+            self._open_csv()
+
+    def _open_csv(self) -> None:
+        target = self.csv_path
+        directory = target.parent if str(target.parent) else Path(".")
+        try:
+            fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{target.name}.",
+                                       suffix=".part")
+        except OSError as exc:
+            raise OSError(exc.errno, f"cannot write results to '{target}': directory "
+                          f"'{directory}' is not writable ({exc.strerror})") from exc
+        self._tmp_path = Path(tmp)
+        self._file = os.fdopen(fd, "w", newline="")
+        self._file.write(",".join(self.names) + "\n")
+
+    # -- observer hooks --------------------------------------------------------
+    def on_start(self, execution) -> None:
+        """Resolve variables to fast indices; record the initial row."""
+        index = getattr(execution.algorithm, "y_index", {})
+        self._y = execution.algorithm.y
+        self._fast = [index.get(v, -1) for v in self.variables]
+        self._slow = {i: v for i, v in enumerate(self.variables) if self._fast[i] < 0}
+        if execution.tick % self.interval_ticks == 0:
+            self.on_step(execution)
+
+    def on_step(self, execution) -> None:
+        """Record a row when the tick is a multiple of the interval."""
+        if execution.tick % self.interval_ticks:
+            return
+        y = self._y
+        row = [execution.time]
+        for i, j in enumerate(self._fast):
+            row.append(y[j] if j >= 0 else execution.get_real(self._slow[i]))
+        self._rows.append(tuple(row))
+        self.n_rows += 1
+        if len(self._rows) >= self.flush_every:
+            self.flush()
+
+    def on_stop(self, execution) -> None:
+        """Flush buffered rows (the file is finalised by :meth:`close`)."""
+        self.flush()
+
+    # -- storage -----------------------------------------------------------------
+    def flush(self) -> None:
+        """Move buffered rows to the in-memory array and/or the CSV file."""
+        if not self._rows:
+            return
+        chunk = np.array(self._rows, dtype=self.dtype)
+        self._rows = []
+        if self.keep_in_memory:
+            self._chunks.append(chunk)
+        if self._file is not None:
+            flat = chunk.view(np.float64).reshape(len(chunk), len(self.names))
+            np.savetxt(self._file, flat, delimiter=",", fmt="%.17g")
+            self._file.flush()
+
+    @property
+    def data(self) -> np.ndarray:
+        """Recorded rows, shape (n_rows,), structured dtype ``time`` first [s]."""
+        parts = list(self._chunks)
+        if self._rows:
+            parts.append(np.array(self._rows, dtype=self.dtype))
+        if not parts:
+            return np.zeros(0, dtype=self.dtype)
+        return np.concatenate(parts)
+
+    def abort(self) -> None:
+        """Drop the temporary CSV without touching the target (nothing was run)."""
+        if self.closed:
+            return
+        self.closed = True
+        if self._file is not None:
+            self._file.close()
+            self._tmp_path.unlink(missing_ok=True)
+            self._file = None
+
+    def close(self) -> None:
+        """Flush and atomically move the CSV onto its target name (idempotent)."""
+        if self.closed:
+            return
+        self.closed = True
+        self.flush()
+        if self._file is not None:
+            self._file.flush()
+            os.fsync(self._file.fileno())
+            self._file.close()
+            os.replace(self._tmp_path, self.csv_path)
+            self._file = None
