@@ -27,17 +27,31 @@ parameters:
 Integer parameters (and SSP parameter sets), String parameters are often
 unsupported, and pythonfmu cannot declare an Enumeration.
 
-Status mapping (pythonfmu 0.7.0 turns any Python exception into fmi2Fatal, and a
-``do_step`` returning False into fmi2Discard; it cannot return fmi2Error):
+Error handling
+--------------
+pythonfmu 0.7.0 can return only two non-OK statuses: fmi2Discard (``do_step``
+returns False) and fmi2Fatal (any Python exception escaping a callback). It cannot
+return fmi2Error. Worse, after an exception its C++ wrapper releases the Python
+objects of the instance once in the error handler and again in
+``fmi2FreeInstance`` (``cleanPyObject`` does not null its pointers): freeing an
+instance that went fatal corrupts the interpreter's heap and segfaults the host
+later (reproduced with fmpy). Therefore no *anticipated* error escapes as an
+exception here; each is logged with status fmi2Error (category logStatusError,
+message naming the cause) and reported through fmi2Discard:
 
-* invalid parameter at ``fmi2ExitInitializationMode`` -> exception -> fmi2Fatal,
-  message (naming the parameter, value and range) passed to the logger;
-* invalid tunable parameter set between steps, a fixed parameter changed after
-  initialization, a non-finite input, ``fmi2DoStep`` before initialization ->
-  fmi2Discard with an error-status log message; the state is left unchanged, so
-  the importer may correct the input/parameter (or restore a saved state) and
-  retry;
-* unknown value reference / wrong type -> exception -> fmi2Fatal.
+* parameter out of range at ``fmi2ExitInitializationMode``: logged there (the call
+  itself returns fmi2OK, pythonfmu offers nothing else that is safe); the instance
+  stays uninitialised and every ``fmi2DoStep`` returns fmi2Discard repeating the
+  message. Use ``fmi2Reset`` or a new instance with valid parameters;
+* non-finite input, invalid tunable parameter set between steps, fixed parameter
+  changed after initialization, ``fmi2DoStep`` before initialization, negative
+  step: ``fmi2DoStep`` returns fmi2Discard and leaves the state unchanged, so the
+  importer may correct the cause (or restore a saved state) and retry;
+* unknown value reference, wrong type, setting an output: logged; a get returns
+  NaN / 0 / false for that reference, a set ignores it, and the next
+  ``fmi2DoStep`` returns fmi2Discard naming the failed call (then the flag clears).
+
+Genuine bugs still raise, i.e. fmi2Fatal.
 
 FMU state (``fmi2Get/SetFMUstate``, serialisable): pythonfmu's default saves the
 registered variables only; ``_get_fmu_state`` / ``_set_fmu_state`` are overridden
@@ -47,6 +61,7 @@ Python floats, so serialisation round-trips bit for bit).
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar
 
 import numpy as np
@@ -75,6 +90,11 @@ FIXED: tuple[str, ...] = ("mode", "lag_time_constant", "enabled")
 
 _STATE_KEY = "__dcs_controller_state__"
 _INIT_KEY = "__dcs_initialized__"
+_INIT_ERROR_KEY = "__dcs_init_error__"
+
+
+class _NoStrings:
+    """Stand-in type: this FMU has no String variables."""
 
 
 class StrainController(Fmi2Slave):
@@ -118,6 +138,8 @@ class StrainController(Fmi2Slave):
 
         self._law = StrainLaw(defaults)
         self._initialized = False
+        self._init_error: str | None = None  # invalid parameters at initialization
+        self._call_error: str | None = None  # failed get/set, reported by the next doStep
         self._fixed_values: tuple[Any, ...] = ()
         self._tunable_values: tuple[Any, ...] | None = None
 
@@ -184,14 +206,24 @@ class StrainController(Fmi2Slave):
         try:
             params = self._params_from_variables()
         except ValueError as exc:
-            # pythonfmu 0.7.0: exception -> fmi2Fatal, message passed to the logger
-            raise ValueError(f"{self.instance_name}: invalid parameter: {exc}") from None
+            # no exception: see "Error handling" in the module docstring
+            self._init_error = f"invalid parameter: {exc}"
+            self._initialized = False
+            self._error(f"fmi2ExitInitializationMode: {self._init_error}; every doStep "
+                        f"will be discarded (reset or re-instantiate with valid parameters)")
+            return
+        self._init_error = None
         self._law = StrainLaw(params)
         self._fixed_values = self._snapshot(FIXED)
         self._tunable_values = self._snapshot(TUNABLE)
         self._initialized = True
 
     def do_step(self, current_time: float, step_size: float) -> bool:
+        if self._call_error is not None:
+            msg, self._call_error = self._call_error, None
+            return self._error(f"step rejected: an earlier call failed: {msg}")
+        if self._init_error is not None:
+            return self._error(f"step rejected: {self._init_error}")
         if not self._initialized:
             return self._error("doStep called before initialization "
                                "(fmi2ExitInitializationMode); step rejected")
@@ -214,48 +246,72 @@ class StrainController(Fmi2Slave):
             setattr(self, name, value)
         return True
 
-    # ------------------------------------------------- value-reference checks
-    def _check_vrs(self, vrs: list[int]) -> None:
-        unknown = [vr for vr in vrs if vr not in self.vars]
-        if unknown:
-            raise KeyError(f"{self.instance_name}: unknown value reference(s) {unknown}; "
-                           f"valid: 0..{len(self.vars) - 1}")
+    # ------------------------------------------ get/set without exceptions
+    def _accessible(self, vr: int, kind: type, call: str) -> bool:
+        """Whether ``vr`` may be accessed by ``call``; log and flag the error if not."""
+        var = self.vars.get(vr)
+        if var is None:
+            problem = f"unknown value reference {vr} (valid: 0..{len(self.vars) - 1})"
+        elif not isinstance(var, kind):
+            problem = f"value reference {vr} ({var.name}) is not of type {kind.__name__}"
+        elif call.startswith("set") and var.causality not in (
+                Fmi2Causality.input, Fmi2Causality.parameter):
+            problem = f"{var.name} (value reference {vr}) is an {var.causality.name}: not settable"
+        else:
+            return True
+        self._call_error = f"{call}: {problem}"
+        self._error(self._call_error)
+        return False
 
     def get_real(self, vrs: list[int]) -> list[float]:
-        self._check_vrs(vrs)
-        return super().get_real(vrs)
+        return [float(self.vars[vr].getter()) if self._accessible(vr, Real, "getReal")
+                else math.nan for vr in vrs]
 
     def get_integer(self, vrs: list[int]) -> list[int]:
-        self._check_vrs(vrs)
-        return super().get_integer(vrs)
+        return [int(self.vars[vr].getter()) if self._accessible(vr, Integer, "getInteger")
+                else 0 for vr in vrs]
 
     def get_boolean(self, vrs: list[int]) -> list[bool]:
-        self._check_vrs(vrs)
-        return super().get_boolean(vrs)
+        return [bool(self.vars[vr].getter()) if self._accessible(vr, Boolean, "getBoolean")
+                else False for vr in vrs]
+
+    def get_string(self, vrs: list[int]) -> list[str]:
+        for vr in vrs:
+            self._accessible(vr, _NoStrings, "getString")
+        return ["" for _ in vrs]
 
     def set_real(self, vrs: list[int], values: list[float]) -> None:
-        self._check_vrs(vrs)
-        super().set_real(vrs, values)
+        for vr, value in zip(vrs, values):
+            if self._accessible(vr, Real, "setReal"):
+                self.vars[vr].setter(float(value))
 
     def set_integer(self, vrs: list[int], values: list[int]) -> None:
-        self._check_vrs(vrs)
-        super().set_integer(vrs, values)
+        for vr, value in zip(vrs, values):
+            if self._accessible(vr, Integer, "setInteger"):
+                self.vars[vr].setter(int(value))
 
     def set_boolean(self, vrs: list[int], values: list[bool]) -> None:
-        self._check_vrs(vrs)
-        super().set_boolean(vrs, values)
+        for vr, value in zip(vrs, values):
+            if self._accessible(vr, Boolean, "setBoolean"):
+                self.vars[vr].setter(bool(value))
+
+    def set_string(self, vrs: list[int], values: list[str]) -> None:
+        for vr in vrs:
+            self._accessible(vr, _NoStrings, "setString")
 
     # ------------------------------------------------------------- FMU state
     def _get_fmu_state(self) -> dict[str, Any]:
         state = super()._get_fmu_state()
         state[_STATE_KEY] = self._law.get_state().tolist()
         state[_INIT_KEY] = self._initialized
+        state[_INIT_ERROR_KEY] = self._init_error
         return state
 
     def _set_fmu_state(self, state: dict[str, Any]) -> None:
         state = dict(state)  # the importer may set the same state again: do not mutate it
         law_state = state.pop(_STATE_KEY)
         initialized = state.pop(_INIT_KEY)
+        self._init_error = state.pop(_INIT_ERROR_KEY)
         super()._set_fmu_state(state)
         self._law.set_state(np.array(law_state, dtype=float))
         self._initialized = bool(initialized)
