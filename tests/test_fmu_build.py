@@ -1,0 +1,233 @@
+"""The FMU build (fmu_src/build.py): registry, atomic writes, vendoring, modelDescription."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+import textwrap
+import zipfile
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+import pytest
+from fmpy import read_model_description, simulate_fmu
+from fmpy.validation import validate_fmu
+
+from fmu_src.build import (
+    REGISTRY,
+    ROOT,
+    UNIT_DEFINITIONS,
+    FmuSpec,
+    build_all,
+    build_one,
+    finalize_model_description,
+)
+
+
+# ------------------------------------------------------------------------- registry
+def test_registry_entries() -> None:
+    names = [s.name for s in REGISTRY]
+    assert names[:2] == ["StrainController", "DrillstringPlant"]
+    assert len(set(names)) == len(names)
+    scripts = [Path(s.script).name for s in REGISTRY]
+    assert len(set(scripts)) == len(scripts)  # pythonfmu: one module name per process
+    plant = REGISTRY[1]
+    assert plant.script == "fmu_src/drillstring_plant_fmu.py"
+    assert dict(plant.vendored)["plant"].startswith("_dcs_plant_")
+
+
+def test_adapter_imports_the_registered_vendored_name() -> None:
+    spec = REGISTRY[0]
+    tree = ast.parse(spec.script_path.read_text())
+    imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    vendored = dict(spec.vendored)["controller"]
+    assert vendored in imported
+    assert "controller" not in imported
+    constants = {
+        t.id: n.value.value
+        for n in tree.body if isinstance(n, ast.Assign) and isinstance(n.value, ast.Constant)
+        for t in n.targets if isinstance(t, ast.Name)
+    }
+    assert constants["VENDORED_CONTROLLER"] == vendored
+
+
+def test_adapter_class_line_matches_pythonfmu_loader_regex() -> None:
+    # pythonfmu's C++ loader finds the class with ^class (\w+)\(\s*Fmi2Slave\s*\)\s*:
+    text = REGISTRY[0].script_path.read_text()
+    assert "\nclass StrainController(Fmi2Slave):\n" in text
+
+
+@pytest.mark.parametrize("bad", ["controller", "_dcs-x", "dcs_controller_0_1_0"])
+def test_spec_rejects_unversioned_or_invalid_vendored_names(bad: str) -> None:
+    with pytest.raises(ValueError, match="_dcs_"):
+        FmuSpec(name="X", script="x.py", vendored=(("controller", bad),))
+
+
+# ---------------------------------------------------------------------------- build
+def test_build_all_builds_existing_and_skips_missing_scripts(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    missing = FmuSpec(name="NotYet", script="fmu_src/not_yet_written_fmu.py")
+    built = build_all(tmp_path, specs=(REGISTRY[0], missing))
+    assert built == [tmp_path.resolve() / "StrainController.fmu"]
+    out = capsys.readouterr().out
+    assert "skipping NotYet" in out and "not_yet_written_fmu.py" in out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["StrainController.fmu"]  # no temp dirs
+    assert validate_fmu(str(built[0])) == []
+
+
+def test_build_replaces_atomically_and_keeps_old_fmu_on_failure(tmp_path: Path) -> None:
+    first = build_one(REGISTRY[0], tmp_path)
+    guid1 = read_model_description(str(first)).guid
+    second = build_one(REGISTRY[0], tmp_path)
+    assert second == first
+    assert read_model_description(str(second)).guid != guid1  # replaced
+
+    broken = tmp_path / "broken_src" / "broken_fmu.py"
+    broken.parent.mkdir()
+    broken.write_text("raise RuntimeError('adapter import fails')\n")
+    target = tmp_path / "StrainController.fmu"
+    before = target.read_bytes()
+    with pytest.raises(RuntimeError, match="adapter import fails"):
+        build_one(FmuSpec(name="StrainController", script=str(broken)), tmp_path)
+    assert target.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["StrainController.fmu", "broken_src"]
+
+
+def test_build_leaves_the_calling_process_untouched(tmp_path: Path) -> None:
+    path_before = list(sys.path)
+    modules_before = set(sys.modules)
+    build_one(REGISTRY[0], tmp_path)
+    assert sys.path == path_before
+    new = set(sys.modules) - modules_before
+    assert not {m for m in new if m.startswith(("_dcs_", "strain_controller_fmu", "pythonfmu"))}
+
+
+def test_cli(tmp_path: Path) -> None:
+    proc = subprocess.run([sys.executable, "-m", "fmu_src.build", "--out", str(tmp_path),
+                           "--only", "StrainController"], cwd=ROOT, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "StrainController.fmu").is_file()
+    bad = subprocess.run([sys.executable, "-m", "fmu_src.build", "--out", str(tmp_path),
+                          "--only", "Nope"], cwd=ROOT, capture_output=True, text=True,
+                         timeout=300)
+    assert bad.returncode == 2 and "unknown FMU" in bad.stderr
+
+
+# ------------------------------------------------------- registering one more FMU
+DUMMY_ADAPTER = textwrap.dedent('''
+    """A second FMU registered like the plant will be: vendored package + extra file."""
+    import os
+
+    from _dcs_dummy_0_1_0 import scale
+    from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+    from pythonfmu.enums import Fmi2Initial
+
+
+    class DummyScaler(Fmi2Slave):
+        VARIABLE_UNITS = {"u": "m", "y": "N"}
+        DIRECT_FEEDTHROUGH = {"y": ("u",)}
+
+        def __init__(self, **kwargs):
+            super().__init__(**kwargs)
+            self.u = 0.0
+            self.y = 0.0
+            with open(os.path.join(self.resources, "factor.txt")) as f:
+                self.factor = float(f.read())
+            self.register_variable(Real("u", causality=Fmi2Causality.input,
+                                        variability=Fmi2Variability.continuous))
+            self.register_variable(Real("y", causality=Fmi2Causality.output,
+                                        variability=Fmi2Variability.continuous,
+                                        initial=Fmi2Initial.calculated))
+
+        def do_step(self, current_time, step_size):
+            self.y = scale(self.u, self.factor)
+            return True
+''')
+
+
+def test_registering_another_fmu_with_vendored_package_and_extra_file(tmp_path: Path) -> None:
+    src = tmp_path / "src"
+    pkg = src / "dummypkg"
+    pkg.mkdir(parents=True)
+    (pkg / "__init__.py").write_text("from .core import scale\n")
+    (pkg / "core.py").write_text("def scale(u, k):\n    return k * u\n")
+    (src / "factor.txt").write_text("3.0")
+    (src / "dummy_scaler_fmu.py").write_text(DUMMY_ADAPTER)
+    spec = FmuSpec(name="DummyScaler", script=str(src / "dummy_scaler_fmu.py"),
+                   vendored=((str(pkg), "_dcs_dummy_0_1_0"),),
+                   extra_files=(str(src / "factor.txt"),))
+    fmu = build_one(spec, tmp_path / "out")
+    names = zipfile.ZipFile(fmu).namelist()
+    assert "resources/_dcs_dummy_0_1_0/core.py" in names
+    assert "resources/factor.txt" in names
+    assert not any(n.startswith("resources/dummypkg/") for n in names)
+    assert validate_fmu(str(fmu)) == []
+    md = read_model_description(str(fmu))
+    y = next(v for v in md.modelVariables if v.name == "y")
+    assert y.unit == "N"
+    assert [v.name for v in md.outputs[0].dependencies] == ["u"]
+    assert [u.variable.name for u in md.initialUnknowns] == ["y"]
+    res = simulate_fmu(str(fmu), stop_time=0.002, step_size=1e-3, output_interval=1e-3,
+                       start_values={"u": 2.0}, output=["y"])
+    assert res["y"][-1] == 6.0
+
+
+# ------------------------------------------------------------- modelDescription
+MINIMAL_XML = b"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="M" guid="g">
+  <CoSimulation modelIdentifier="M"/>
+  <LogCategories><Category name="logAll"/></LogCategories>
+  <ModelVariables>
+    <ScalarVariable name="a" valueReference="0" causality="input" variability="continuous">
+      <Real start="0"/></ScalarVariable>
+    <ScalarVariable name="b" valueReference="1" causality="input" variability="continuous">
+      <Real start="0"/></ScalarVariable>
+    <ScalarVariable name="y" valueReference="2" causality="output" variability="continuous">
+      <Real/></ScalarVariable>
+    <ScalarVariable name="z" valueReference="3" causality="output" variability="continuous"
+      initial="exact"><Real start="0"/></ScalarVariable>
+    <ScalarVariable name="n" valueReference="4" causality="parameter" variability="fixed">
+      <Integer start="1"/></ScalarVariable>
+  </ModelVariables>
+  <ModelStructure><Outputs><Unknown index="3"/><Unknown index="4"/></Outputs></ModelStructure>
+</fmiModelDescription>"""
+
+
+def test_finalize_model_description_units_and_structure() -> None:
+    out = finalize_model_description(MINIMAL_XML, {"a": "m", "y": "N", "z": "N"},
+                                     {"y": ("b", "a")})
+    root = ET.fromstring(out)
+    assert [c.tag for c in root][:3] == ["CoSimulation", "UnitDefinitions", "LogCategories"]
+    units = {u.get("name"): u.find("BaseUnit").attrib for u in root.iter("Unit")}
+    assert units == {"m": {"m": "1"}, "N": {"kg": "1", "m": "1", "s": "-2"}}
+    reals = {sv.get("name"): sv.find("Real") for sv in root.iter("ScalarVariable")}
+    assert reals["a"].get("unit") == "m" and reals["b"].get("unit") is None
+    outputs = root.find("ModelStructure/Outputs")
+    assert [u.attrib for u in outputs] == [{"index": "3", "dependencies": "2 1"},
+                                          {"index": "4"}]
+    assert [u.attrib for u in root.find("ModelStructure/InitialUnknowns")] == [{"index": "3"}]
+
+
+@pytest.mark.parametrize(
+    ("units", "feed", "message"),
+    [
+        ({"nope": "m"}, None, "unknown variable 'nope'"),
+        ({"a": "furlong"}, None, "unit 'furlong'"),
+        ({"n": "s"}, None, "not a Real"),
+        ({}, {"a": ()}, "non-outputs"),
+        ({}, {"y": ("z",)}, "non-inputs"),
+    ],
+)
+def test_finalize_model_description_rejects_mistakes(units: dict, feed: dict | None,
+                                                     message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        finalize_model_description(MINIMAL_XML, units, feed)
+
+
+def test_unit_definitions_are_dimensionally_consistent() -> None:
+    assert UNIT_DEFINITIONS["N.m"] == {"kg": 1, "m": 2, "s": -2}
+    assert UNIT_DEFINITIONS["1"] == {}
+    for name, exps in UNIT_DEFINITIONS.items():
+        assert set(exps) <= {"kg", "m", "s", "A", "K", "mol", "cd", "rad"}, name
