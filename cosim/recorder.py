@@ -102,10 +102,13 @@ class Recorder:
         if execution.tick % self.interval_ticks:
             return
         y = self._y
-        row = [execution.time]
-        for i, j in enumerate(self._fast):
-            row.append(y[j] if j >= 0 else execution.get_real(self._slow[i]))
-        self._rows.append(tuple(row))
+        if self._slow:
+            row = [execution.time]
+            for i, j in enumerate(self._fast):
+                row.append(y[j] if j >= 0 else execution.get_real(self._slow[i]))
+            self._rows.append(tuple(row))
+        else:
+            self._rows.append((execution.time, *[y[j] for j in self._fast]))
         self.n_rows += 1
         if len(self._rows) >= self.flush_every:
             self.flush()
