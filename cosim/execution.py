@@ -117,8 +117,14 @@ class Execution:
 
     # -- hooks ----------------------------------------------------------------
     def add_observer(self, observer: Observer) -> None:
-        """Register a read-only observer (``on_step(execution)``)."""
+        """Register a read-only observer (``on_step(execution)``).
+
+        Its ``on_start`` (if any) runs at initialisation, or at once if the
+        execution is already initialised.
+        """
         self.observers.append(observer)
+        if self.initialized and hasattr(observer, "on_start"):
+            observer.on_start(self)
 
     def add_manipulator(self, manipulator: Manipulator) -> None:
         """Register a write-only manipulator (``before_step(execution)``)."""

@@ -268,3 +268,43 @@ def test_system_from_dict_and_validation(tmp_path):
 def test_invalid_specs_name_the_field(make, match):
     with pytest.raises(ValueError, match=match):
         make()
+
+
+# --- hooks ------------------------------------------------------------------------------
+def test_scheduled_change_manipulator_and_late_observer(fmus):  # noqa: F811
+    from cosim.manipulators import ScheduledChange
+
+    system = SystemSpec([FmuSpec("i", fmus["mt_integrator"])], base_step=0.01)
+    with Execution(system, read_outputs=["i.x"]) as ex:
+        ex.add_manipulator(ScheduledChange(0.25, "i.u", 2.0))
+        ex.simulate_until(0.2)
+        rec = Recorder(["i.x"])  # added after initialisation: still resolves its sources
+        ex.add_observer(rec)
+        ex.simulate_until(1.0)
+        # x' = 2 from t = 0.25 on
+        np.testing.assert_allclose(ex.get_real("i.x"), 2.0 * 0.75, rtol=1e-12)
+        np.testing.assert_allclose(rec.data["i.x"], 2.0 * np.maximum(rec.data["time"] - 0.25,
+                                                                     0.0), atol=1e-12)
+
+
+def test_streaming_csv_keeps_memory_flat(fmus, tmp_path):  # noqa: F811
+    out = tmp_path / "stream.csv"
+    system = SystemSpec([FmuSpec("i", fmus["mt_integrator"], {"u": 1.0})], base_step=0.01)
+    with Execution(system, read_outputs=["i.x"]) as ex:
+        rec = Recorder(["i.x"], csv_path=out, flush_every=16, keep_in_memory=False)
+        ex.add_observer(rec)
+        ex.simulate_until(1.0)
+        assert len(rec.data) < 16 and rec.n_rows == 101
+        rec.close()
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert data.shape == (101, 2)
+    np.testing.assert_allclose(data[:, 1], data[:, 0], atol=1e-12)
+
+
+def test_progress_bar_shows_real_time_factor(fmus, capsys):  # noqa: F811
+    system = SystemSpec([FmuSpec("i", fmus["mt_integrator"])], base_step=0.01)
+    CoSimulation(system).run(1.0, progress=True)
+    err = capsys.readouterr().err
+    assert "RTF" in err and "1.000/1.000 s" in err
+    CoSimulation(system).run(1.0, progress=None)  # not a TTY under pytest: silent
+    assert capsys.readouterr().err == ""
