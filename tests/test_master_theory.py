@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import math
 
 import numpy as np
@@ -155,3 +156,43 @@ def test_fractional_delay_interpolates_linearly(fmus, frac_delay):  # noqa: F811
     dev = np.abs(res.data["probe.y"][late] - exact).max()
     bound = f * (1 - f) * H_D**2 * OMEGA**2 / 2
     assert 0.5 * bound < dev <= bound * (1 + 1e-6)
+
+
+def test_jacobi_loop_delay_agrees_with_libcosim(fmus):  # noqa: F811
+    """libcosim's fixed-step (Jacobi) master shows the same one-step loop delay:
+    both sequences obey x_{k+1} = x_k - a x_{k-1}; only the first step differs
+    (libcosim steps first with the input's start value u = 0)."""
+    lc = pytest.importorskip("libcosimpy.CosimExecution")
+    from fmpy import read_model_description
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    from libcosimpy.CosimObserver import CosimObserver
+    from libcosimpy.CosimSlave import CosimLocalSlave
+
+    log_output_level(CosimLogLevel.ERROR)
+    a, n = 0.3, 30
+    ex = lc.CosimExecution.from_step_size(int(round(H_LOOP * 1e9)))
+    p = ex.add_local_slave(CosimLocalSlave(str(fmus["mt_integrator"]), "plant"))
+    c = ex.add_local_slave(CosimLocalSlave(str(fmus["mt_gain"]), "ctrl"))
+    vr = {}
+    for key in ("mt_integrator", "mt_gain"):
+        vr[key] = {v.name: v.valueReference
+                   for v in read_model_description(str(fmus[key])).modelVariables}
+    ex.real_initial_value(p, vr["mt_integrator"]["x0"], 1.0)
+    ex.real_initial_value(c, vr["mt_gain"]["k"], a / H_LOOP)
+    ex.connect_real_variables(p, vr["mt_integrator"]["x"], c, vr["mt_gain"]["u"])
+    ex.connect_real_variables(c, vr["mt_gain"]["y"], p, vr["mt_integrator"]["u"])
+    obs = CosimObserver.create_last_value()
+    ex.add_observer(obs)
+    x_lc = [1.0]
+    for _ in range(n):
+        assert ex.step(1)
+        x_lc.append(obs.last_real_values(p, [vr["mt_integrator"]["x"]])[0])
+    x_lc = np.array(x_lc)
+    del obs, ex  # free libcosim now, not at interpreter shutdown (it aborts there)
+    gc.collect()
+    x_us = CoSimulation(loop_system(fmus, a, "jacobi", 0)).run(n * H_LOOP,
+                                                               outputs=["plant.x"]).data
+    x_us = x_us["plant.x"]
+    for x in (x_lc[1:], x_us):
+        np.testing.assert_allclose(x[2:], x[1:-1] - a * x[:-2], atol=1e-14)
+    assert x_lc[1] == 1.0 and x_us[1] == pytest.approx(1.0 - a)
