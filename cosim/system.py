@@ -81,7 +81,7 @@ class Connection:
         Transport delay [s], >= 0 (see :mod:`cosim.delays`).
     coupling : {'zoh', 'linear'}
         Zero-order hold of the latest sample, or linear extrapolation from the
-        last two samples (see :mod:`cosim.algorithms`).
+        last two samples (see :mod:`cosim.delays`).
     """
 
     source: str
