@@ -374,6 +374,8 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
     kc = p[K_CONT]
     cc = p[C_CONT]
     clr = p[CLEAR]
+    if kc == 0.0 and cc == 0.0:
+        nc = 0  # contact off: no cost
     for s in range(nc):
         k = ip[IP_HDR + ns + s]
         X = y[3 * k]

@@ -17,11 +17,11 @@ from functools import cached_property
 
 import numpy as np
 
-from . import kernels as K
-from . import layout as L
+from . import kernels as kern
+from . import layout as lay
 from .beam_fe import pinned_beam_frequencies
 from .integrators import advance_rk4, stable_step
-from .observables import outputs3d, outputs_at, output_names
+from .observables import output_names, outputs3d, outputs_at
 from .params import PlantParams
 
 __all__ = ["DrillstringModel", "ModelKind", "needs_lateral", "series"]
@@ -75,7 +75,6 @@ class Derived:
 def derive(params: PlantParams) -> Derived:
     """Compute segment masses, inertias, joint stiffnesses and damping factors."""
     pipe = params.pipe
-    n = pipe.n_segments
     dx = pipe.segment_length
     A = pipe.area
     I = pipe.second_moment
@@ -155,7 +154,7 @@ class DrillstringModel:
                 )
         self.params = params
         self.kind = kind
-        self.model_id = K.MODEL_FULL3D if kind == "full3d" else K.MODEL_AXIAL_TORSIONAL
+        self.model_id = kern.MODEL_FULL3D if kind == "full3d" else kern.MODEL_AXIAL_TORSIONAL
         self.derived = derive(params)
         self.n = params.pipe.n_segments
         self.n_state = (12 if kind == "full3d" else 4) * self.n
@@ -180,53 +179,53 @@ class DrillstringModel:
         d = self.derived
         n = self.n
         pipe = prm.pipe
-        p = np.zeros(L.NP)
-        p[L.DX] = d.dx
-        p[L.HALF] = 0.5 * d.dx
-        p[L.MASS] = d.mass
-        p[L.JT] = d.j_transverse
-        p[L.JP] = d.j_polar
-        p[L.GRAV] = prm.gravity
-        p[L.K_AX] = d.k_axial
-        p[L.K_SH] = d.k_shear
-        p[L.K_BE] = d.k_bend
-        p[L.K_TO] = d.k_tors
-        p[L.C_AX] = d.beta_axial * d.k_axial
-        p[L.C_SH] = d.beta_axial * d.k_shear
-        p[L.C_BE] = d.beta_axial * d.k_bend
-        p[L.C_TO] = d.beta_tors * d.k_tors
-        p[L.G1] = d.k_tors
-        p[L.G3] = 2.0 * d.k_bend - d.k_tors
+        p = np.zeros(lay.NP)
+        p[lay.DX] = d.dx
+        p[lay.HALF] = 0.5 * d.dx
+        p[lay.MASS] = d.mass
+        p[lay.JT] = d.j_transverse
+        p[lay.JP] = d.j_polar
+        p[lay.GRAV] = prm.gravity
+        p[lay.K_AX] = d.k_axial
+        p[lay.K_SH] = d.k_shear
+        p[lay.K_BE] = d.k_bend
+        p[lay.K_TO] = d.k_tors
+        p[lay.C_AX] = d.beta_axial * d.k_axial
+        p[lay.C_SH] = d.beta_axial * d.k_shear
+        p[lay.C_BE] = d.beta_axial * d.k_bend
+        p[lay.C_TO] = d.beta_tors * d.k_tors
+        p[lay.G1] = d.k_tors
+        p[lay.G3] = 2.0 * d.k_bend - d.k_tors
         td = prm.top_drive
-        p[L.KT_AX] = series(td.axial_stiffness, 2.0 * d.k_axial)
-        p[L.KT_LAT] = series(td.lateral_stiffness, 2.0 * d.k_shear)
-        p[L.KT_TO] = series(td.torsional_stiffness, 2.0 * d.k_tors)
-        p[L.CT_AX] = d.beta_axial * p[L.KT_AX]
-        p[L.CT_LAT] = d.beta_axial * p[L.KT_LAT]
-        p[L.CT_TO] = d.beta_tors * p[L.KT_TO]
-        p[L.OMEGA0] = td.rotary_speed
-        p[L.T_RAMP] = td.ramp_time
+        p[lay.KT_AX] = series(td.axial_stiffness, 2.0 * d.k_axial)
+        p[lay.KT_LAT] = series(td.lateral_stiffness, 2.0 * d.k_shear)
+        p[lay.KT_TO] = series(td.torsional_stiffness, 2.0 * d.k_tors)
+        p[lay.CT_AX] = d.beta_axial * p[lay.KT_AX]
+        p[lay.CT_LAT] = d.beta_axial * p[lay.KT_LAT]
+        p[lay.CT_TO] = d.beta_tors * p[lay.KT_TO]
+        p[lay.OMEGA0] = td.rotary_speed
+        p[lay.T_RAMP] = td.ramp_time
         bit = prm.bit
-        p[L.KB_AX] = series(bit.axial_stiffness, 2.0 * d.k_axial)
-        p[L.CB_AX] = d.beta_axial * p[L.KB_AX]
-        p[L.BIT_AMP] = bit.displacement_amplitude if bit.axial_stiffness > 0.0 else 0.0
-        p[L.BIT_LOBES] = bit.lobes
-        p[L.BIT_TORQUE] = bit.torque
-        p[L.BIT_EPS] = 0.1
+        p[lay.KB_AX] = series(bit.axial_stiffness, 2.0 * d.k_axial)
+        p[lay.CB_AX] = d.beta_axial * p[lay.KB_AX]
+        p[lay.BIT_AMP] = bit.displacement_amplitude if bit.axial_stiffness > 0.0 else 0.0
+        p[lay.BIT_LOBES] = bit.lobes
+        p[lay.BIT_TORQUE] = bit.torque
+        p[lay.BIT_EPS] = 0.1
         st = prm.stabilizers
-        p[L.K_STAB] = st.stiffness
-        p[L.C_STAB] = d.beta_axial * st.stiffness if st.damping < 0.0 else st.damping
+        p[lay.K_STAB] = st.stiffness
+        p[lay.C_STAB] = d.beta_axial * st.stiffness if st.damping < 0.0 else st.damping
         ct = prm.contact
-        p[L.K_CONT] = ct.stiffness if ct.enabled else 0.0
-        p[L.C_CONT] = ct.damping if ct.enabled else 0.0
-        p[L.CLEAR] = ct.clearance
+        p[lay.K_CONT] = ct.stiffness if ct.enabled else 0.0
+        p[lay.C_CONT] = ct.damping if ct.enabled else 0.0
+        p[lay.CLEAR] = ct.clearance
         ub = prm.unbalance
-        p[L.UNB] = ub.moment if ub.enabled else 0.0
-        p[L.ALPHA_LAT] = d.alpha_lateral
+        p[lay.UNB] = ub.moment if ub.enabled else 0.0
+        p[lay.ALPHA_LAT] = d.alpha_lateral
         ro = pipe.outer_diameter / 2.0
         act = prm.actuators
-        p[L.ACT_ARM] = 2.0 * (act.radius or ro)
-        p[L.GAUGE_R] = act.gauge_radius or ro
+        p[lay.ACT_ARM] = 2.0 * (act.radius or ro)
+        p[lay.GAUGE_R] = act.gauge_radius or ro
         self.p = p
 
         # stabilizers at material points: arc length s from the top
@@ -238,8 +237,8 @@ class DrillstringModel:
             stab_z.append(s - (k + 0.5) * d.dx)
         if st.stiffness == 0.0:
             stab_body, stab_z = [], []
-        self.contact_bodies = tuple(ct.bodies) if ct.enabled else ()
-        self.sites = tuple(act.joints)
+        self.contact_bodies = prm.contact_bodies
+        self.sites = prm.actuator_joints
         self.n_sites = len(self.sites)
         unb = prm.unbalance_body - 1 if (ub.enabled and ub.moment > 0.0) else -1
         ip = [n, len(stab_body), len(self.contact_bodies), self.n_sites, unb, len(prm.loads)]
@@ -275,7 +274,7 @@ class DrillstringModel:
             n = self.n
             ang = y[3 * n + 3 * (n - 1): 3 * n + 3 * n]
             R = np.empty((3, 3))
-            K.cardan(ang[0], ang[1], ang[2], R)
+            kern.cardan(ang[0], ang[1], ang[2], R)
             return float(y[3 * (n - 1) + 2] + h * R[2, 2])
         return float(y[self.n - 1] + h)
 
@@ -283,17 +282,21 @@ class DrillstringModel:
         """Static axial displacements [m] of the bodies under gravity and weight on bit.
 
         Solves the linear axial chain (top spring, joints; the bit force is the prescribed weight
-        on bit). Returns shape (n,).
+        on bit; axial step loads acting from t = 0 are included). Returns shape (n,).
         """
         n = self.n
         p = self.p
         m = self.derived.mass
         f = np.full(n, m * self.params.gravity)
         f[-1] -= self.params.bit.weight_on_bit
+        for ld in self.params.loads:  # axial forces acting from t = 0 on, for good
+            if ld.kind == "force" and ld.direction == "z" and ld.start <= 0.0 \
+                    and math.isinf(ld.duration):
+                f[ld.body - 1] += ld.magnitude
         if not np.any(f):
             return np.zeros(n)
-        kt = p[L.KT_AX]
-        ka = p[L.K_AX]
+        kt = p[lay.KT_AX]
+        ka = p[lay.K_AX]
         if kt == 0.0:
             if abs(f.sum()) > 1e-9 * max(1.0, np.abs(f).max()):
                 raise ValueError(
@@ -323,8 +326,8 @@ class DrillstringModel:
             y[:n] = z
         if self.params.bit.axial_stiffness > 0.0:
             zb = z[-1] + 0.5 * dx
-            kb = self.p[L.KB_AX]
-            self.p[L.ZBIT0] = zb - self.params.bit.weight_on_bit / kb
+            kb = self.p[lay.KB_AX]
+            self.p[lay.ZBIT0] = zb - self.params.bit.weight_on_bit / kb
         return y
 
     # ------------------------------------------------------------------ evaluation
@@ -340,7 +343,7 @@ class DrillstringModel:
             Actuator forces [N] (C, E per site); defaults to the model's held inputs.
         """
         dy = np.empty(self.n_state)
-        K.rhs(self.model_id, float(t), np.ascontiguousarray(y, dtype=float), dy, self.p, self.ip,
+        kern.rhs(self.model_id, float(t), np.ascontiguousarray(y, dtype=float), dy, self.p, self.ip,
               self.fp, self.u if u is None else np.asarray(u, dtype=float), self.wR, self.wF,
               self.wM)
         return dy
@@ -386,8 +389,8 @@ class DrillstringModel:
         y0 = self.initial_state()
         J = self.jacobian(0.0, y0)
         lam = float(np.max(np.abs(np.linalg.eigvals(J))))
-        kc = self.p[L.K_CONT] if self.contact_bodies and self.kind == "full3d" else 0.0
-        cc = self.p[L.C_CONT] if self.contact_bodies and self.kind == "full3d" else 0.0
+        kc = self.p[lay.K_CONT] if self.contact_bodies and self.kind == "full3d" else 0.0
+        cc = self.p[lay.C_CONT] if self.contact_bodies and self.kind == "full3d" else 0.0
         m = self.derived.mass
         return math.sqrt(lam**2 + kc / m) + cc / m
 

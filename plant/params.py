@@ -279,7 +279,9 @@ class ContactParams:
 
     OWNER = "contact"
     enabled: bool = _f(True, "-", "wellbore contact on/off")
-    bodies: tuple = _f((11, 26), "1", "bodies (1 = top) checked for contact")
+    bodies: tuple = _f(
+        (), "1", "bodies (1 = top) checked for contact; [] = the body at each span's middle"
+    )
     clearance: float = _f(0.02, "m", "radial clearance between collar and wellbore")
     stiffness: float = _f(1e7, "N/m", "wellbore contact stiffness k_w")
     damping: float = _f(0.0, "N s/m", "contact damping (acts only while in contact)")
@@ -316,7 +318,7 @@ class ActuatorParams:
 
     OWNER = "actuators"
     joints: tuple = _f(
-        (11, 26), "1", "site k sits at the joint below body joints[k] (site 1: long span)"
+        (), "1", "site k sits at the joint below body joints[k]; [] = below each span's middle body"
     )
     radius: float = _f(0.0, "m", "radius of the actuator points C, D, E, F; 0 = outer radius")
     gauge_radius: float = _f(0.0, "m", "radius of the strain gauges; 0 = outer radius")
@@ -386,13 +388,16 @@ class PlantParams:
                 raise ValueError(
                     f"stabilizers.heights: {h!r} m is beyond the string: allowed [0, {L:g}] m"
                 )
-        if self.contact.enabled:
-            for b in self.contact.bodies:
-                if not 1 <= b <= n:
-                    raise ValueError(f"contact.bodies: {b} is out of range: allowed [1, {n}]")
+        for b in self.contact.bodies:
+            if not 1 <= b <= n:
+                raise ValueError(f"contact.bodies: {b} is out of range: allowed [1, {n}]")
         for j in self.actuators.joints:
             if not 1 <= j <= n - 1:
                 raise ValueError(f"actuators.joints: {j} is out of range: allowed [1, {n - 1}]")
+        if not self.span_middle_bodies():
+            if self.contact.enabled and not self.contact.bodies:
+                raise ValueError("contact.bodies = [] needs at least one span (two lateral "
+                                 "supports); list the bodies explicitly")
         if self.unbalance.body > n:
             raise ValueError(f"unbalance.body = {self.unbalance.body} is out of range: [0, {n}]")
         loads = tuple(self.loads)
@@ -406,6 +411,37 @@ class PlantParams:
             raise ValueError(
                 "bit.weight_on_bit must be 0 when bit.axial_stiffness = 0 (an axially free bit)"
             )
+
+    def spans(self) -> list[tuple[float, float]]:
+        """Spans [m from the top] between lateral supports (top pin and stabilizers), top first."""
+        L = self.pipe.length
+        sup = sorted({L - h for h in self.stabilizers.heights}) if self.stabilizers.stiffness else []
+        if self.top_drive.lateral_stiffness > 0.0:
+            sup = sorted({0.0, *sup})
+        return [(a, b) for a, b in zip(sup[:-1], sup[1:]) if b - a > 1e-9]
+
+    def span_middle_bodies(self) -> tuple[int, ...]:
+        """Per span, the 1-based body whose top end is nearest the span's middle (paper: 11, 26)."""
+        dx = self.pipe.segment_length
+        n = self.pipe.n_segments
+        return tuple(min(max(int(round(0.5 * (a + b) / dx)) + 1, 1), n) for a, b in self.spans())
+
+    @property
+    def contact_bodies(self) -> tuple[int, ...]:
+        """Monitored contact bodies (1-based): the given ones, or each span's middle body.
+
+        They exist (with their X, Y, radial deflection outputs) even when contact is off; the
+        contact force is then zero.
+        """
+        return tuple(self.contact.bodies) or self.span_middle_bodies()
+
+    @property
+    def actuator_joints(self) -> tuple[int, ...]:
+        """Actuator/gauge sites: joint below body k (1-based), given or below each span's middle."""
+        if self.actuators.joints:
+            return tuple(self.actuators.joints)
+        n = self.pipe.n_segments
+        return tuple(min(b, n - 1) for b in self.span_middle_bodies())
 
     @property
     def unbalance_body(self) -> int:

@@ -1,0 +1,112 @@
+"""The ``drillcosim`` command line.
+
+Sub-commands: ``modes`` (modal analysis next to the analytic values and the paper's Table 1),
+``scenes`` (list the shipped scenes), ``build`` (write the FMUs). Bad input ends with a one-line
+message on stderr and exit code 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Sequence
+
+__all__ = ["main"]
+
+EXIT_USAGE = 2
+
+
+class UsageError(Exception):
+    """Bad input from the user: reported in one line, exit code 2."""
+
+
+def _cmd_modes(args: argparse.Namespace) -> int:
+    from plant.modal import PAPER_TABLE1, analytic_reference, first_modes
+    from plant.model import DrillstringModel
+    from plant.scene import load_scene
+
+    scene = load_scene(args.scene)
+    kind = args.model or scene.model
+    model = DrillstringModel(scene.plant, kind)
+    fm = first_modes(model)
+    ref = analytic_reference(model)
+    if args.json:
+        out = {k: {"frequency_rad_s": fm[k].frequency_rad_s, "damping_ratio": fm[k].damping_ratio}
+               for k in ("axial", "torsional", "lateral") if k in fm}
+        print(json.dumps(out, indent=2))
+        return 0
+    spin = scene.plant.top_drive.rotary_speed
+    print(f"scene {scene.name} ({kind}, n = {model.n}): first natural frequencies, linearized "
+          "about the static equilibrium" + (" at rest (spin not included)" if spin else ""))
+    hdr = (f"{'mode':<10} {'ours [rad/s]':>13} {'analytic':>10} {'paper calc.':>12} "
+           f"{'paper meas.':>12} {'zeta ours':>10} {'zeta paper':>11}")
+    print(hdr)
+    print("-" * len(hdr))
+    for k in ("axial", "torsional", "lateral"):
+        if k not in fm:
+            continue
+        m = fm[k]
+        p = PAPER_TABLE1[k]
+        a = ref[k]
+        a_s = f"{a:10.4g}" if not math.isnan(a) else f"{'-':>10}"
+        print(f"{k:<10} {m.frequency_rad_s:13.4f} {a_s} {p['calculated']:12.4g} "
+              f"{p['measured']:12.4g} {100 * m.damping_ratio:9.2f}% "
+              f"{100 * p['damping_ratio']:10.1f}%")
+    print("analytic: fixed-free rod pi c / (2 L); lateral: pinned multi-span Euler-Bernoulli "
+          "beam over the top pin and the stabilizers")
+    return 0
+
+
+def _cmd_scenes(args: argparse.Namespace) -> int:
+    from plant.scene import list_scenes, load_scene
+
+    for name in list_scenes():
+        sc = load_scene(name)
+        print(f"{name:<28} {sc.model:<16} {sc.description}")
+    return 0
+
+
+def _cmd_build(args: argparse.Namespace) -> int:
+    from fmu_src.build import build_all
+
+    for path in build_all(args.out):
+        print(path)
+    return 0
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="drillcosim", description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("modes", help="first axial, torsional and lateral modes of a scene")
+    p.add_argument("scene", nargs="?", default="table1_lateral_step",
+                   help="scene name from scenes/ or a path (default: table1_lateral_step)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--model", choices=("full3d", "axial_torsional"),
+                   help="override the scene's model")
+    p.set_defaults(func=_cmd_modes)
+    p = sub.add_parser("scenes", help="list the shipped scenes")
+    p.set_defaults(func=_cmd_scenes)
+    p = sub.add_parser("build", help="build the FMUs")
+    p.add_argument("--out", default="build/fmus", help="output folder (default build/fmus)")
+    p.set_defaults(func=_cmd_build)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``drillcosim`` console script; returns the exit code."""
+    ap = _parser()
+    args = ap.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (UsageError, ValueError, FileNotFoundError, PermissionError) as exc:
+        print(f"drillcosim {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print(f"drillcosim {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

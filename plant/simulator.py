@@ -1,0 +1,160 @@
+"""Stepping a model over communication steps: what the plant FMU (and the benchmarks) call.
+
+:class:`PlantSimulator` holds time, state and inputs, splits each communication step into equal
+internal RK4 steps no longer than the model's stable step, and checks the state after every step.
+A numerical failure is *returned* as a :class:`StepResult` naming the time and the quantity that
+diverged (scipy ``_ivp`` style); nothing is raised from :meth:`do_step`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .model import DrillstringModel
+
+__all__ = ["PlantSimulator", "StepResult", "simulate"]
+
+# Beyond these the lumped model has left its range of validity: report divergence.
+MAX_LATERAL = 1.0  # m, lateral position of any mass centre
+MAX_TILT = 0.5  # rad, Cardan tilt angles theta, phi
+MAX_SPEED = 1e4  # m/s or rad/s
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """Outcome of a step: ``ok`` and, on failure, a message naming time and quantity."""
+
+    ok: bool
+    message: str = ""
+    time: float = math.nan
+    quantity: str = ""
+    value: float = math.nan
+
+
+class PlantSimulator:
+    """Time, state and inputs of one plant instance.
+
+    Parameters
+    ----------
+    model : DrillstringModel
+    max_step : float, optional
+        Upper bound of the internal step [s]; default: the model's stable RK4 step.
+    """
+
+    def __init__(self, model: DrillstringModel, max_step: float | None = None) -> None:
+        self.model = model
+        self.max_step = model.stable_step() if max_step is None else float(max_step)
+        if not (self.max_step > 0.0 and math.isfinite(self.max_step)):
+            raise ValueError(f"max_step = {max_step!r} is not allowed: must be > 0 and finite (s)")
+        self.time = 0.0
+        self.y = model.initial_state()
+        self.u = np.zeros(2 * model.n_sites)
+        self._names = self._state_names()
+
+    def _state_names(self) -> list[str]:
+        m = self.model
+        n = m.n
+        if m.kind == "full3d":
+            blocks = (("X", "Y", "Z"), ("psi", "theta", "phi"), ("vX", "vY", "vZ"),
+                      ("wx", "wy", "wz"))
+            return [f"body{k + 1}.{c}" for b in blocks for k in range(n) for c in b]
+        return [f"body{k + 1}.{c}" for c in ("Z", "psi", "vZ", "wz") for k in range(n)]
+
+    def set_inputs(self, u: np.ndarray) -> None:
+        """Actuator forces [N], shape (2 n_sites,): site 1 C, site 1 E, site 2 C, ..."""
+        self.u[:] = u
+
+    def check(self) -> StepResult:
+        """Is the state finite and inside the model's range of validity?"""
+        y = self.y
+        bad = ~np.isfinite(y)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            return self._fail(f"{self._names[i]} is not finite", self._names[i], float(y[i]))
+        m = self.model
+        n = m.n
+        if m.kind == "full3d":
+            lat = np.hypot(y[0:3 * n:3], y[1:3 * n:3])
+            k = int(np.argmax(lat))
+            if lat[k] > MAX_LATERAL:
+                return self._fail(f"lateral deflection of body{k + 1} = {lat[k]:.3g} m exceeds "
+                                  f"{MAX_LATERAL} m", f"body{k + 1}.radial", float(lat[k]))
+            tilt = np.abs(y[3 * n:6 * n].reshape(n, 3)[:, 1:])
+            k = int(np.argmax(tilt.max(axis=1)))
+            if tilt[k].max() > MAX_TILT:
+                return self._fail(f"tilt of body{k + 1} = {tilt[k].max():.3g} rad exceeds "
+                                  f"{MAX_TILT} rad", f"body{k + 1}.tilt", float(tilt[k].max()))
+        v = np.abs(y[m.n_state // 2:])
+        i = int(np.argmax(v))
+        if v[i] > MAX_SPEED:
+            j = m.n_state // 2 + i
+            return self._fail(f"{self._names[j]} = {y[j]:.3g} exceeds {MAX_SPEED:g}",
+                              self._names[j], float(y[j]))
+        return StepResult(True)
+
+    def _fail(self, what: str, quantity: str, value: float) -> StepResult:
+        return StepResult(False, f"diverged at t = {self.time:.6g} s: {what}", self.time,
+                          quantity, value)
+
+    def do_step(self, t: float, h: float) -> StepResult:
+        """Advance from ``t`` [s] by ``h`` [s] with the inputs held.
+
+        The step is split into ``ceil(h / max_step)`` equal RK4 steps.
+        """
+        if not (h > 0.0 and math.isfinite(h)):
+            return StepResult(False, f"step size h = {h!r} s is not allowed: must be > 0")
+        if not np.all(np.isfinite(self.u)):
+            return StepResult(False, f"input is not finite at t = {t:.6g} s: {self.u.tolist()}")
+        n_sub = max(1, math.ceil(h / self.max_step - 1e-9))
+        done = self.model.advance(t, self.y, n_sub, h / n_sub, self.u)
+        self.time = t + h if done == n_sub else t + done * h / n_sub
+        return self.check()
+
+    def outputs(self) -> np.ndarray:
+        """Outputs at the current time, in the order of ``model.output_names`` (a reused view)."""
+        return self.model.outputs(self.time, self.y, self.u)
+
+    def get_state(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """A copy of (time, state, inputs) for FMU state save."""
+        return self.time, self.y.copy(), self.u.copy()
+
+    def set_state(self, state: tuple[float, np.ndarray, np.ndarray]) -> None:
+        """Restore a state from :meth:`get_state`."""
+        t, y, u = state
+        self.time = float(t)
+        self.y[:] = y
+        self.u[:] = u
+
+
+def simulate(model: DrillstringModel, stop_time: float, output_interval: float,
+             outputs: list[str] | None = None, max_step: float | None = None,
+             ) -> tuple[np.ndarray, dict[str, np.ndarray], StepResult]:
+    """Run the plant alone (inputs zero) and sample outputs.
+
+    Returns
+    -------
+    t : numpy.ndarray, shape (k,)
+        Sample times [s].
+    values : dict of str -> numpy.ndarray, shape (k,)
+        Requested outputs (all by default).
+    result : StepResult
+        ``ok`` or the divergence report; samples stop at the failure.
+    """
+    sim = PlantSimulator(model, max_step)
+    names = outputs or model.output_names
+    idx = [model.output_names.index(n) for n in names]
+    n_out = int(round(stop_time / output_interval))
+    ts = [0.0]
+    rows = [sim.outputs()[idx].copy()]
+    res = StepResult(True)
+    for k in range(n_out):
+        res = sim.do_step(k * output_interval, output_interval)
+        if not res.ok:
+            break
+        ts.append((k + 1) * output_interval)
+        rows.append(sim.outputs()[idx].copy())
+    arr = np.array(rows)
+    return np.array(ts), {n: arr[:, i] for i, n in enumerate(names)}, res
