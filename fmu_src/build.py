@@ -81,6 +81,8 @@ UNIT_DEFINITIONS: dict[str, dict[str, int]] = {
     "m/s": {"m": 1, "s": -1},
     "m/s2": {"m": 1, "s": -2},
     "kg": {"kg": 1},
+    "kg.m": {"kg": 1, "m": 1},
+    "kg/m3": {"kg": 1, "m": -3},
     "kg.m2": {"kg": 1, "m": 2},
     "rad": {"rad": 1},
     "rad/s": {"rad": 1, "s": -1},
@@ -152,6 +154,7 @@ REGISTRY: tuple[FmuSpec, ...] = (
         name="DrillstringPlant",
         script="fmu_src/drillstring_plant_fmu.py",
         vendored=(("plant", "_dcs_plant_0_1_0"),),
+        extra_files=("scenes",),
     ),
 )
 

@@ -1,0 +1,612 @@
+"""pythonfmu adapter: the drillstring plant as an FMI 2.0 co-simulation FMU.
+
+This file is the FMU's slave module. It holds no physics: ``exitInitializationMode``
+builds ``Scene -> PlantParams -> DrillstringModel -> PlantSimulator`` from the
+vendored copy of the ``plant`` package, and ``doStep`` sets the inputs, calls
+``PlantSimulator.do_step`` and writes the outputs. The build (``fmu_src/build.py``)
+ships ``plant/`` as ``resources/_dcs_plant_0_1_0/`` and the shipped scenes as
+``resources/scenes/*.toml``. The FMU needs numpy and numba in the host's Python.
+
+Numba cache in a stable place
+-----------------------------
+The kernels are compiled with ``numba.njit(cache=True)``; numba keys its cache by
+the source path, and fmpy (like most importers) unzips every FMU into a new
+temporary folder, which would recompile (~10 s) on every use. At import, the
+vendored package is therefore copied once to a per-user folder named by its
+content hash, ``$DRILLCOSIM_CACHE/_dcs_plant_0_1_0-<sha256[:16]>/`` (default
+``$XDG_CACHE_HOME/drillcosim`` or ``~/.cache/drillcosim``), and imported from
+there. The copy is made in a temporary folder beside it and renamed with
+``os.replace`` (atomic; a concurrent creator that wins the race is accepted).
+If the folder cannot be written, the package is imported from ``resources/``
+(correct, only slower to start) and a warning is logged at instantiation.
+
+Interface (value references follow the registration order)
+----------------------------------------------------------
+inputs (Real, N, continuous, start 0):
+    actuator1_force_C, actuator1_force_E, actuator2_force_C, actuator2_force_E.
+    Site 1 = long span, site 2 = short span; a force > 0 opposes positive strain
+    (compressive at D / F, tensile at C / E). Held constant over each step.
+outputs (Real, continuous, initial calculated):
+    the outputs of the full 3D model with the default scene (2 contact bodies,
+    2 actuator sites) in the model's order: ``body11_X`` ... ``strain1_C`` ...
+    ``total_energy`` (:data:`OUTPUTS`), units from ``DrillstringModel.output_units``.
+    Values at the communication point reached by the last ``doStep``; no direct
+    feedthrough (an input changes the outputs only through the next ``doStep``;
+    ``actuatorK_power`` uses the force held over the last step).
+parameters (all variability fixed: set before ``fmi2ExitInitializationMode``):
+    ``scene`` (String, default "paper_open_loop"): a shipped scene name or a path
+    to a scene TOML file (its ``extends`` names resolve among the shipped scenes);
+    ``model`` (String "auto" | "full3d" | "axial_torsional", default "full3d":
+    "auto" keeps the scene's model); ``max_internal_step`` [s] (0 = the model's
+    stable RK4 step; larger values may diverge); and every scalar field of
+    ``PlantParams`` flattened as ``section.field`` (``pipe.n_segments``,
+    ``contact.stiffness``, ``gravity``, ...), Real/Integer/Boolean with the unit
+    and description of the field metadata and start = the ``PlantParams`` default.
+
+Parameter rule: the scene is loaded first; then every FMU parameter whose value
+differs from its start value overrides the scene's value (the override goes
+through the scene validation, so messages name the parameter). Setting a
+parameter to its start value therefore never overrides the scene (importers that
+write all start values change nothing); to return a parameter to its default
+where the scene sets another value, use a scene file that ``extends`` the
+shipped scene. Tuple-valued fields (``stabilizers.heights``, ``contact.bodies``,
+``actuators.joints``) and ``[[loads]]`` are scene-only.
+
+The declared outputs need the 3D model with contact bodies 11 and 26 and two
+actuator sites. If the chosen scene, model or parameters give a model lacking any
+of them (``model = "auto"`` or ``"axial_torsional"`` resolving to the
+axial-torsional chain, contact disabled, other contact bodies), initialization
+fails with an error naming the missing outputs; they are never silently zero.
+
+Error handling (pythonfmu 0.7.0, checked in its C++ source)
+------------------------------------------------------------
+``PySlaveInstance`` ignores the return values of ``setup_experiment``,
+``enter_initialization_mode`` and ``exit_initialization_mode`` (it only checks for
+an exception) and maps ``do_step``'s return value through ``PyObject_IsTrue`` to
+fmi2OK / fmi2Discard. Any Python exception becomes ``cppfmu::FatalError``, i.e.
+fmi2Fatal, after ``cleanPyObject()`` released the instance's Python objects, which
+``fmi2FreeInstance`` releases again (heap corruption, later segfault). fmi2Error
+and fmi2Warning cannot be returned from Python at all. Hence no exception
+escapes any callback of this class (unexpected ones are caught too and reported
+as an internal error); each problem is logged with status fmi2Error (category
+logStatusError) naming the cause and reported through fmi2Discard:
+
+* invalid parameter (out of range, wrong ``scene`` / ``model``, missing outputs):
+  logged when the model is built, at ``fmi2ExitInitializationMode`` (which still
+  returns fmi2OK: nothing safer exists); every ``fmi2DoStep`` returns fmi2Discard
+  repeating the message. Re-instantiate (or ``fmi2Reset``) with valid parameters;
+* non-finite input, non-positive step, ``fmi2DoStep`` before initialization:
+  fmi2Discard, state unchanged (the importer may correct the cause and retry);
+* divergence (non-finite state, lateral deflection > 1 m, tilt > 0.5 rad, speed >
+  1e4): logged with status fmi2Discard (category logStatusDiscard) naming time,
+  quantity and value; fmi2Discard now and for every later ``fmi2DoStep`` until an
+  FMU state saved before is restored (``fmi2SetFMUstate``) or the FMU is reset;
+* unknown value reference, wrong type, setting an output or a fixed parameter
+  after initialization: logged; a get returns NaN / 0 / false / "" for it, a set
+  ignores it, and the next ``fmi2DoStep`` returns fmi2Discard naming the call.
+
+FMU state: ``_get_fmu_state`` / ``_set_fmu_state`` add the simulator's time, state
+vector and held inputs (JSON-safe floats, so serialisation is bit-exact) to
+pythonfmu's registered variables; restoring a state whose parameters differ
+from the instance's rebuilds the model first.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import math
+import os
+import shutil
+import sys
+import tempfile
+import traceback
+from dataclasses import MISSING, fields
+from pathlib import Path
+from typing import Any, ClassVar
+from xml.etree.ElementTree import Element
+
+import numpy as np
+from pythonfmu import (
+    Boolean,
+    DefaultExperiment,
+    Fmi2Causality,
+    Fmi2Initial,
+    Fmi2Slave,
+    Fmi2Variability,
+    Integer,
+    Real,
+    String,
+)
+from pythonfmu.enums import Fmi2Status
+
+#: Name under which the build vendors ``plant/`` into this FMU's resources.
+VENDORED_PLANT = "_dcs_plant_0_1_0"
+#: Scene loaded unless the ``scene`` parameter names another one.
+DEFAULT_SCENE = "paper_open_loop"
+MODEL_CHOICES: tuple[str, ...] = ("auto", "full3d", "axial_torsional")
+INPUTS: tuple[str, ...] = (
+    "actuator1_force_C", "actuator1_force_E", "actuator2_force_C", "actuator2_force_E")
+
+_COMPLETE = "COMPLETE"  # marker written last into a stable copy
+_SIM_KEY = "__dcs_plant_sim__"
+_MODE_KEY = "__dcs_mode__"
+_ERRORS_KEY = "__dcs_errors__"
+
+
+# ------------------------------------------------------------ vendored package
+def _package_source() -> Path:
+    """Folder of the vendored ``plant`` copy: ``resources/`` in the FMU, staging at build."""
+    here = Path(__file__).resolve().parent / VENDORED_PLANT
+    if (here / "__init__.py").is_file():
+        return here
+    for entry in sys.path:  # build time: the build puts its staging folder on sys.path
+        cand = Path(entry or ".") / VENDORED_PLANT
+        if (cand / "__init__.py").is_file():
+            return cand.resolve()
+    raise ImportError(f"vendored package {VENDORED_PLANT} not found beside {__file__}")
+
+
+def _content_hash(src: Path) -> str:
+    """SHA-256 (hex) over the relative paths and bytes of the package's ``.py`` files."""
+    digest = hashlib.sha256()
+    for path in sorted(src.rglob("*.py")):
+        if "__pycache__" in path.parts:
+            continue
+        digest.update(path.relative_to(src).as_posix().encode() + b"\0")
+        digest.update(path.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
+def cache_root() -> Path:
+    """Per-user folder of the stable package copies: $DRILLCOSIM_CACHE or ~/.cache/drillcosim."""
+    env = os.environ.get("DRILLCOSIM_CACHE")
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "drillcosim"
+
+
+def stable_copy(src: Path) -> Path:
+    """Copy the package once to ``cache_root()/<name>-<hash>/<name>/``; return the parent.
+
+    Atomic: the copy is built in a temporary folder and renamed with ``os.replace``;
+    if another process created the folder first, its (complete) copy is used.
+
+    Raises
+    ------
+    OSError
+        If the cache folder cannot be created or written.
+    """
+    final = cache_root() / f"{VENDORED_PLANT}-{_content_hash(src)[:16]}"
+    if (final / _COMPLETE).is_file():
+        return final
+    final.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}-", dir=final.parent))
+    try:
+        shutil.copytree(src, tmp / VENDORED_PLANT,
+                        ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        (tmp / _COMPLETE).write_text(str(src) + "\n")
+        try:
+            os.replace(tmp, final)
+        except OSError:
+            if not (final / _COMPLETE).is_file():  # not a lost race: a real problem
+                raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return final
+
+
+def _import_plant() -> tuple[Any, str]:
+    """Import the vendored package from its stable copy; return (package, warning)."""
+    warning = ""
+    if VENDORED_PLANT not in sys.modules:
+        src = _package_source()
+        try:
+            base = stable_copy(src)
+        except OSError as exc:
+            base = src.parent
+            warning = (f"cannot write the numba cache folder {cache_root()} ({exc}); "
+                       f"importing {VENDORED_PLANT} from {src.parent}: every new unzip "
+                       f"folder recompiles the kernels (set $DRILLCOSIM_CACHE)")
+        sys.path.insert(0, str(base))
+        try:
+            importlib.import_module(VENDORED_PLANT)
+            for sub in ("params", "scene", "model", "simulator", "observables"):
+                importlib.import_module(f"{VENDORED_PLANT}.{sub}")
+        finally:
+            sys.path.remove(str(base))  # submodules resolve through the package's __path__
+    return sys.modules[VENDORED_PLANT], warning
+
+
+_PLANT, _IMPORT_WARNING = _import_plant()
+_params_mod = sys.modules[f"{VENDORED_PLANT}.params"]
+_scene_mod = sys.modules[f"{VENDORED_PLANT}.scene"]
+_model_mod = sys.modules[f"{VENDORED_PLANT}.model"]
+_sim_mod = sys.modules[f"{VENDORED_PLANT}.simulator"]
+_obs_mod = sys.modules[f"{VENDORED_PLANT}.observables"]
+
+
+def scenes_folder() -> Path:
+    """Shipped scenes: ``resources/scenes`` in the FMU, ``scenes/`` of the repository at build."""
+    here = Path(__file__).resolve().parent
+    for cand in (here / "scenes", here.parent / "scenes"):
+        if cand.is_dir():
+            return cand
+    return here / "scenes"
+
+
+def fmi_unit(unit: str) -> str | None:
+    """FMI unit name of a ``plant`` metadata unit ("N m/rad" -> "N.m/rad"); None for "-"."""
+    if unit in ("-", ""):
+        return None
+    return unit.replace("^", "").replace(" ", ".")
+
+
+def _parameter_table() -> list[tuple[str, str, str, Any, str, str, bool]]:
+    """Rows (fmu name, section, field, default, unit, doc, integer) of the scalar parameters."""
+    rows = []
+    for section, cls in _scene_mod.SECTIONS.items():
+        for f in fields(cls):
+            if "unit" not in f.metadata or f.default is MISSING:
+                continue
+            if isinstance(f.default, (tuple, str)):  # scene-only
+                continue
+            rows.append((f"{section}.{f.name}", section, f.name, f.default,
+                         f.metadata["unit"], f.metadata["doc"], bool(f.metadata.get("integer"))))
+    for name, default, unit, doc in _params_mod.describe(_params_mod.PlantParams):
+        rows.append((name, "", name, default, unit, doc, False))
+    return rows
+
+
+def _declared_outputs() -> list[tuple[str, str, str]]:
+    """(name, unit, doc) of the outputs of the full 3D model with the default scene."""
+    scene = _scene_mod.load_scene(DEFAULT_SCENE, folder=scenes_folder(),
+                                  overrides={"model": "full3d"})
+    plant = scene.plant
+    return _obs_mod.output_names(True, list(plant.contact_bodies), len(plant.actuator_joints))
+
+
+PARAMETERS = _parameter_table()
+_OUTPUT_ROWS = _declared_outputs()
+OUTPUTS: tuple[str, ...] = tuple(r[0] for r in _OUTPUT_ROWS)
+
+
+def _xml_double(value: float) -> str:
+    """Shortest round-trip text of a float in XML Schema form (INF, -INF, NaN)."""
+    if math.isnan(value):
+        return "NaN"
+    if math.isinf(value):
+        return "INF" if value > 0 else "-INF"
+    return repr(float(value))
+
+
+def _variable_units() -> dict[str, str]:
+    """Unit of every Real variable that has one (FMI unit names)."""
+    units = dict.fromkeys(INPUTS, "N")
+    for name, unit, _doc in _OUTPUT_ROWS:
+        units[name] = fmi_unit(unit) or "1"
+    for name, _sec, _field, default, unit, _doc, integer in PARAMETERS:
+        fmi = fmi_unit(unit)
+        if fmi and not isinstance(default, bool) and not integer:
+            units[name] = fmi
+    units["max_internal_step"] = "s"
+    return units
+
+
+def _accessors(values: dict[str, Any], name: str) -> tuple[Any, Any]:
+    """Getter and setter of one flattened parameter kept in ``values``."""
+    def getter() -> Any:
+        return values[name]
+
+    def setter(value: Any) -> None:
+        values[name] = value
+
+    return getter, setter
+
+
+class _Real(Real):
+    """A Real whose start is written round-trip exact and XML-Schema valid (``INF``)."""
+
+    def to_xml(self) -> Element:
+        node = super().to_xml()
+        real = node.find("Real")
+        if real is not None and self.start is not None:
+            real.set("start", _xml_double(float(self.start)))
+        return node
+
+
+class DrillstringPlant(Fmi2Slave):
+    """FMI 2.0 co-simulation adapter of :class:`plant.simulator.PlantSimulator`."""
+
+    author = "drillcosim"
+    version = "0.1.0"
+    description = (
+        "Drillstring vibration plant (3D bond-graph rigid-segment model): inputs are the "
+        "bending actuator forces at 2 sites [N], outputs strains, contact, boundary forces. "
+        "Parameters: scene (shipped name or TOML path) first, then every parameter set to a "
+        "value different from its start overrides the scene")
+
+    #: Units of the Real variables, written into modelDescription.xml by the build.
+    VARIABLE_UNITS: ClassVar[dict[str, str]] = _variable_units()
+    #: Outputs change only in doStep: no output depends directly on an input.
+    DIRECT_FEEDTHROUGH: ClassVar[dict[str, tuple[str, ...]]] = dict.fromkeys(OUTPUTS, ())
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=30.0,
+                                                    step_size=1e-3)
+        for name in INPUTS + OUTPUTS:
+            setattr(self, name, 0.0)
+        self.scene = DEFAULT_SCENE
+        self.model = "full3d"
+        self.max_internal_step = 0.0
+        self._values: dict[str, Any] = {row[0]: row[3] for row in PARAMETERS}
+
+        self._mode = "instantiated"  # -> "initialization" -> "step"
+        self._start_time = 0.0
+        self._sim: Any = None
+        self._out_index: np.ndarray = np.zeros(0, dtype=np.int64)
+        self._built_key: tuple[Any, ...] | None = None
+        self._init_error: str | None = None  # invalid parameters: every doStep discarded
+        self._call_error: str | None = None  # failed get/set, reported by the next doStep
+        self._halted: str | None = None  # divergence, until a state is restored
+        self._u = np.zeros(len(INPUTS))
+
+        cont, fixed = Fmi2Variability.continuous, Fmi2Variability.fixed
+        sites = {"1": "site 1 (long span)", "2": "site 2 (short span)"}
+        for name in INPUTS:
+            site, axis = name[8], name[-1]
+            other = {"C": "D", "E": "F"}[axis]
+            self.register_variable(_Real(
+                name, causality=Fmi2Causality.input, variability=cont,
+                description=(f"Actuator force at {sites[site]}, axis {axis}; > 0 opposes "
+                             f"positive strain (compressive at {other}, tensile at {axis})")))
+        for name, _unit, doc in _OUTPUT_ROWS:
+            self.register_variable(_Real(
+                name, causality=Fmi2Causality.output, variability=cont,
+                initial=Fmi2Initial.calculated, description=doc))
+        param = Fmi2Causality.parameter
+        self.register_variable(String(
+            "scene", causality=param, variability=fixed,
+            description=("Shipped scene name (paper_open_loop, paper_closed_loop, "
+                         "table1_axial_pulse, ...) or path to a scene TOML file")))
+        self.register_variable(String(
+            "model", causality=param, variability=fixed,
+            description=("full3d (default: every output exists), axial_torsional, or auto "
+                         "(the scene's choice)")))
+        self.register_variable(_Real(
+            "max_internal_step", causality=param, variability=fixed,
+            description="Upper bound of the internal RK4 step; 0 = the model's stable step"))
+        for name, _sec, _field, default, unit, doc, integer in PARAMETERS:
+            getter, setter = _accessors(self._values, name)
+            kind = Boolean if isinstance(default, bool) else Integer if integer else _Real
+            text = doc if fmi_unit(unit) or kind is not _Real else f"{doc} [{unit}]"
+            self.register_variable(kind(
+                name, causality=param, variability=fixed, description=text,
+                getter=getter, setter=setter), nested=False)
+        if _IMPORT_WARNING:
+            self.log(f"{self.instance_name}: {_IMPORT_WARNING}", status=Fmi2Status.warning)
+
+    # ------------------------------------------------------------------ helpers
+    def _error(self, msg: str, status: Fmi2Status = Fmi2Status.error) -> bool:
+        self.log(f"{self.instance_name}: {msg}", status=status)
+        return False
+
+    def _key(self) -> tuple[Any, ...]:
+        return (self.scene, self.model, self.max_internal_step,
+                *(self._values[row[0]] for row in PARAMETERS))
+
+    def _overrides(self) -> dict[str, Any]:
+        """Nested scene overrides: every parameter whose value differs from its start."""
+        over: dict[str, Any] = {}
+        for name, section, field_, default, _unit, _doc, _int in PARAMETERS:
+            value = self._values[name]
+            if value == default and isinstance(value, bool) == isinstance(default, bool):
+                continue  # at its start value (NaN never is): the scene decides
+            if section:
+                over.setdefault(section, {})[field_] = value
+            else:
+                over[field_] = value
+        if self.model not in MODEL_CHOICES:
+            raise ValueError(f"model = {self.model!r} is not allowed: one of "
+                             f"{', '.join(MODEL_CHOICES)}")
+        if self.model != "auto":
+            over["model"] = self.model
+        return over
+
+    def _make_simulator(self) -> Any:
+        """Scene -> PlantParams -> DrillstringModel -> PlantSimulator (ValueError if invalid)."""
+        step = self.max_internal_step
+        if not (isinstance(step, float) and math.isfinite(step) and step >= 0.0):
+            raise ValueError(f"max_internal_step = {step!r} is out of range: allowed [0, inf) s "
+                             f"(0 = the model's stable step)")
+        scene = _scene_mod.load_scene(self.scene, folder=scenes_folder(),
+                                      overrides=self._overrides())
+        model = _model_mod.DrillstringModel(scene.plant, scene.model)
+        missing = [n for n in OUTPUTS if n not in model.output_names]
+        if missing:
+            raise ValueError(
+                f"scene {self.scene!r} with model = {self.model!r} builds the {model.kind} model "
+                f"with contact bodies {list(model.contact_bodies)} and {model.n_sites} actuator "
+                f"sites; it lacks the declared outputs {', '.join(missing)}. Use model = "
+                f"'full3d' and a scene with contact bodies [11, 26] and two actuator sites "
+                f"(a contact with stiffness 0 observes without touching)")
+        if model.n_sites != len(INPUTS) // 2:
+            raise ValueError(f"the model has {model.n_sites} actuator sites; this FMU's inputs "
+                             f"need {len(INPUTS) // 2}")
+        sim = _sim_mod.PlantSimulator(model, None if step == 0.0 else step)
+        sim.time = float(self._start_time)
+        self._out_index = np.array([model.output_names.index(n) for n in OUTPUTS])
+        return sim
+
+    def _build(self) -> None:
+        """(Re)build the simulator when the parameters changed; log a failure once."""
+        key = self._key()
+        if key == self._built_key:
+            return
+        self._built_key = key
+        self._sim = None
+        self._init_error = None
+        try:
+            self._sim = self._make_simulator()
+        except ValueError as exc:  # SceneError is a ValueError
+            self._init_error = f"invalid parameter: {exc}"
+        except Exception as exc:  # noqa: BLE001 - no exception may reach pythonfmu
+            self._init_error = (f"internal error while building the model: {exc!r} "
+                                f"({traceback.format_exc(limit=-1).strip().splitlines()[-1]})")
+        if self._init_error is not None:
+            self._error(f"initialization failed: {self._init_error}; every doStep will be "
+                        f"discarded (re-instantiate or reset with valid parameters)")
+        else:
+            self._write_outputs()
+
+    def _write_outputs(self) -> None:
+        values = self._sim.outputs()[self._out_index].tolist()
+        for name, value in zip(OUTPUTS, values):
+            setattr(self, name, value)
+
+    # ---------------------------------------------------------------- FMI calls
+    def setup_experiment(self, start_time: float, stop_time: float | None = None,
+                         tolerance: float | None = None) -> None:
+        self._start_time = float(start_time)
+
+    def enter_initialization_mode(self) -> None:
+        self._mode = "initialization"
+
+    def exit_initialization_mode(self) -> None:
+        self._mode = "step"
+        self._build()  # logs a failure; see "Error handling" in the module docstring
+
+    def do_step(self, current_time: float, step_size: float) -> bool:
+        try:
+            return self._do_step(current_time, step_size)
+        except Exception as exc:  # noqa: BLE001 - an exception would be fmi2Fatal + crash
+            return self._error(f"internal error in doStep at t = {current_time!r} s: {exc!r}; "
+                               f"step rejected")
+
+    def _do_step(self, t: float, h: float) -> bool:
+        if self._call_error is not None:
+            msg, self._call_error = self._call_error, None
+            return self._error(f"step rejected: an earlier call failed: {msg}")
+        if self._mode != "step":
+            return self._error("doStep called before initialization "
+                               "(fmi2ExitInitializationMode); step rejected")
+        if self._init_error is not None or self._sim is None:
+            return self._error(f"step rejected: {self._init_error}")
+        if self._halted is not None:
+            return self._error(f"step rejected at t = {t!r} s: the simulation diverged earlier "
+                               f"({self._halted}); restore an FMU state saved before "
+                               f"(fmi2SetFMUstate) or reset", Fmi2Status.discard)
+        u = self._u
+        for i, name in enumerate(INPUTS):
+            u[i] = getattr(self, name)
+        if not np.all(np.isfinite(u)):
+            bad = [f"{n} = {v!r}" for n, v in zip(INPUTS, u.tolist()) if not math.isfinite(v)]
+            return self._error(f"input {', '.join(bad)} is not finite at t = {t!r} s; step "
+                               f"rejected (state unchanged)")
+        if not (h > 0.0 and math.isfinite(h)):
+            return self._error(f"step size {h!r} s at t = {t!r} s is not allowed: must be > 0 "
+                               f"and finite; step rejected (state unchanged)")
+        sim = self._sim
+        sim.set_inputs(u)
+        result = sim.do_step(t, h)
+        if not result.ok:
+            if not result.quantity:  # refused before integrating: state unchanged
+                return self._error(f"step rejected: {result.message}")
+            self._halted = (f"{result.message} (time {result.time!r} s, quantity "
+                            f"{result.quantity}, value {result.value!r})")
+            return self._error(f"doStep(t = {t!r} s, h = {h!r} s) discarded: {self._halted}",
+                               Fmi2Status.discard)
+        self._write_outputs()
+        return True
+
+    # ------------------------------------------ get/set without exceptions
+    def _accessible(self, vr: int, kind: type, call: str) -> bool:
+        """Whether ``vr`` may be accessed by ``call``; log and flag the error if not."""
+        var = self.vars.get(vr)
+        if var is None:
+            problem = f"unknown value reference {vr} (valid: 0..{len(self.vars) - 1})"
+        elif not isinstance(var, kind):
+            problem = f"value reference {vr} ({var.name}) is not of type {kind.__name__}"
+        elif call.startswith("set") and var.causality not in (
+                Fmi2Causality.input, Fmi2Causality.parameter):
+            problem = f"{var.name} (value reference {vr}) is an {var.causality.name}: not settable"
+        elif (call.startswith("set") and var.causality == Fmi2Causality.parameter
+              and self._mode == "step"):
+            problem = (f"{var.name} (value reference {vr}) is a fixed parameter: it cannot be "
+                       f"set after initialization")
+        else:
+            if (call.startswith("get") and self._mode == "initialization"
+                    and var.causality == Fmi2Causality.output):
+                self._build()  # initial unknowns: computed from the parameters set so far
+            return True
+        self._call_error = f"{call}: {problem}"
+        self._error(self._call_error)
+        return False
+
+    def get_real(self, vrs: list[int]) -> list[float]:
+        return [float(self.vars[vr].getter()) if self._accessible(vr, Real, "getReal")
+                else math.nan for vr in vrs]
+
+    def get_integer(self, vrs: list[int]) -> list[int]:
+        return [int(self.vars[vr].getter()) if self._accessible(vr, Integer, "getInteger")
+                else 0 for vr in vrs]
+
+    def get_boolean(self, vrs: list[int]) -> list[bool]:
+        return [bool(self.vars[vr].getter()) if self._accessible(vr, Boolean, "getBoolean")
+                else False for vr in vrs]
+
+    def get_string(self, vrs: list[int]) -> list[str]:
+        return [str(self.vars[vr].getter()) if self._accessible(vr, String, "getString")
+                else "" for vr in vrs]
+
+    def set_real(self, vrs: list[int], values: list[float]) -> None:
+        for vr, value in zip(vrs, values):
+            if self._accessible(vr, Real, "setReal"):
+                self.vars[vr].setter(float(value))
+
+    def set_integer(self, vrs: list[int], values: list[int]) -> None:
+        for vr, value in zip(vrs, values):
+            if self._accessible(vr, Integer, "setInteger"):
+                self.vars[vr].setter(int(value))
+
+    def set_boolean(self, vrs: list[int], values: list[bool]) -> None:
+        for vr, value in zip(vrs, values):
+            if self._accessible(vr, Boolean, "setBoolean"):
+                self.vars[vr].setter(bool(value))
+
+    def set_string(self, vrs: list[int], values: list[str]) -> None:
+        for vr, value in zip(vrs, values):
+            if self._accessible(vr, String, "setString"):
+                self.vars[vr].setter(str(value))
+
+    # ------------------------------------------------------------- FMU state
+    def _get_fmu_state(self) -> dict[str, Any]:
+        state = super()._get_fmu_state()
+        sim = None
+        if self._sim is not None:
+            t, y, u = self._sim.get_state()
+            sim = [float(t), y.tolist(), u.tolist()]
+        state[_SIM_KEY] = sim
+        state[_MODE_KEY] = self._mode
+        state[_ERRORS_KEY] = [self._halted, self._start_time]
+        return state
+
+    def _set_fmu_state(self, state: dict[str, Any]) -> None:
+        try:
+            state = dict(state)  # the importer may set the same state again: do not mutate it
+            sim = state.pop(_SIM_KEY)
+            mode = state.pop(_MODE_KEY)
+            halted, start_time = state.pop(_ERRORS_KEY)
+            super()._set_fmu_state(state)
+            self._mode, self._halted, self._start_time = mode, halted, float(start_time)
+            self._call_error = None
+            if sim is not None:
+                self._build()  # no-op unless the restored parameters differ
+                if self._sim is not None:
+                    t, y, u = sim
+                    self._sim.set_state((t, np.array(y, dtype=float), np.array(u, dtype=float)))
+        except Exception as exc:  # noqa: BLE001 - never let an exception reach pythonfmu
+            self._call_error = f"fmi2SetFMUstate: invalid state: {exc!r}"
+            self._error(self._call_error)
