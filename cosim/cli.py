@@ -23,14 +23,16 @@ class UsageError(Exception):
 
 
 def _cmd_modes(args: argparse.Namespace) -> int:
-    from plant.modal import PAPER_TABLE1, analytic_reference, first_modes
+    from plant.modal import PAPER_TABLE1, analytic_reference, operating_modes
     from plant.model import DrillstringModel
     from plant.scene import load_scene
 
     scene = load_scene(args.scene)
     kind = args.model or scene.model
     model = DrillstringModel(scene.plant, kind)
-    fm = first_modes(model)
+    fm = {}
+    for md in operating_modes(scene.plant, kind):
+        fm.setdefault(md.kind, md)
     ref = analytic_reference(model)
     if args.json:
         out = {k: {"frequency_rad_s": fm[k].frequency_rad_s, "damping_ratio": fm[k].damping_ratio}
@@ -39,7 +41,8 @@ def _cmd_modes(args: argparse.Namespace) -> int:
         return 0
     spin = scene.plant.top_drive.rotary_speed
     print(f"scene {scene.name} ({kind}, n = {model.n}): first natural frequencies, linearized "
-          "about the static equilibrium" + (" at rest (spin not included)" if spin else ""))
+          "about the static equilibrium" + (f" spinning at {spin:g} rad/s (inertial-frame "
+                                             "frequencies)" if spin else " at rest"))
     hdr = (f"{'mode':<10} {'ours [rad/s]':>13} {'analytic':>10} {'paper calc.':>12} "
            f"{'paper meas.':>12} {'zeta ours':>10} {'zeta paper':>11}")
     print(hdr)
@@ -54,8 +57,8 @@ def _cmd_modes(args: argparse.Namespace) -> int:
         print(f"{k:<10} {m.frequency_rad_s:13.4f} {a_s} {p['calculated']:12.4g} "
               f"{p['measured']:12.4g} {100 * m.damping_ratio:9.2f}% "
               f"{100 * p['damping_ratio']:10.1f}%")
-    print("analytic: fixed-free rod pi c / (2 L); lateral: pinned multi-span Euler-Bernoulli "
-          "beam over the top pin and the stabilizers")
+    print("analytic: rod pi c / (2 L) fixed-free (pi c / L when the bit is held axially); lateral: "
+          "pinned multi-span Euler-Bernoulli beam over the top pin and stabilizers, no axial load")
     return 0
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from .kernels import rhs
@@ -69,3 +70,299 @@ def stable_step(max_abs_eigenvalue: float, radius: float = RK4_STABILITY_RADIUS,
     if not math.isfinite(max_abs_eigenvalue) or max_abs_eigenvalue <= 0.0:
         raise ValueError(f"max_abs_eigenvalue = {max_abs_eigenvalue!r}: must be finite and > 0")
     return safety * radius / max_abs_eigenvalue
+
+
+# ---------------------------------------------------------------------------------------------
+# Adaptive embedded Runge-Kutta: Dormand-Prince 5(4), error control, step to the output time.
+
+# Butcher tableau (Dormand & Prince 1980; Hairer, Norsett & Wanner, "Solving ODEs I", II.5).
+DP5_C = np.array([0.0, 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0, 1.0, 1.0])
+DP5_A = np.zeros((7, 7))
+DP5_A[1, :1] = [1.0 / 5.0]
+DP5_A[2, :2] = [3.0 / 40.0, 9.0 / 40.0]
+DP5_A[3, :3] = [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0]
+DP5_A[4, :4] = [19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0]
+DP5_A[5, :5] = [9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0, 49.0 / 176.0,
+                -5103.0 / 18656.0]
+DP5_A[6, :6] = [35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0]
+DP5_B = DP5_A[6].copy()  # 5th-order weights (FSAL: the last stage is at the new point)
+DP5_E = np.array([  # b - b_hat (5th minus embedded 4th order weights)
+    71.0 / 57600.0, 0.0, -71.0 / 16695.0, 71.0 / 1920.0, -17253.0 / 339200.0, 22.0 / 525.0,
+    -1.0 / 40.0,
+])
+
+# status codes of advance_dopri5
+DP5_OK = 0
+DP5_NONFINITE = -1
+DP5_MAX_STEPS = -2
+DP5_STEP_TOO_SMALL = -3
+
+
+@njit(cache=_CACHE)
+def _dp5_stage(model, t, h, y, K, s, yt, p, ip, fp, u, wR, wF, wM):
+    """yt = y + h * sum_j a[s][j] K[j]; K[s] = rhs(t + c_s h, yt)."""
+    N = y.size
+    for i in range(N):
+        acc = 0.0
+        for j in range(s):
+            acc += DP5_A[s, j] * K[j, i]
+        yt[i] = y[i] + h * acc
+    rhs(model, t + DP5_C[s] * h, yt, K[s], p, ip, fp, u, wR, wF, wM)
+
+
+@njit(cache=_CACHE)
+def advance_dopri5(model, t0, t1, y, hstate, stats, rtol, atol, max_steps, p, ip, fp, u, wR, wF,
+                   wM, K, yt, ynew):
+    """Adaptive Dormand-Prince 5(4) from ``t0`` to exactly ``t1`` [s], ``y`` updated in place.
+
+    Error control on the embedded 4th-order estimate, scaled per component by
+    ``atol + rtol * max(|y|, |y_new|)`` (RMS norm, as scipy's ``RK45``); step-size controller
+    ``h_new = h * min(5, max(0.2, 0.9 * err^(-1/5)))``. The last step is shortened to land on
+    ``t1`` (step to output, no dense output needed). Inputs ``u`` are held.
+
+    Parameters
+    ----------
+    hstate : numpy.ndarray, shape (1,)
+        In: proposed first step [s] (<= 0: choose one); out: the step to try next call.
+    stats : numpy.ndarray of int64, shape (3,)
+        Accumulated (accepted steps, rejected steps, rhs evaluations).
+    K : numpy.ndarray, shape (7, N)
+        Stage scratch; ``yt``, ``ynew`` scratch shaped like ``y``.
+
+    Returns
+    -------
+    int
+        ``DP5_OK`` (0) or a negative failure code (non-finite state, too many steps, step
+        underflow); on failure ``y`` holds the last accepted state.
+    """
+    N = y.size
+    t = t0
+    span = t1 - t0
+    if span <= 0.0:
+        return DP5_OK
+    rhs(model, t, y, K[0], p, ip, fp, u, wR, wF, wM)
+    stats[2] += 1
+    h = hstate[0]
+    if h <= 0.0:
+        # Hairer's starting step guess from the rhs scale
+        d0 = 0.0
+        d1 = 0.0
+        for i in range(N):
+            sc = atol + rtol * abs(y[i])
+            d0 += (y[i] / sc) ** 2
+            d1 += (K[0, i] / sc) ** 2
+        d0 = math.sqrt(d0 / N)
+        d1 = math.sqrt(d1 / N)
+        h = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    steps = 0
+    while t < t1:
+        last = False
+        if t + h >= t1 - 1e-12 * span:
+            h_use = t1 - t
+            last = True
+        else:
+            h_use = h
+        for s in range(1, 7):
+            _dp5_stage(model, t, h_use, y, K, s, ynew, p, ip, fp, u, wR, wF, wM)
+        stats[2] += 6
+        # stage 7 was evaluated at y_new (FSAL): ynew holds the 5th-order solution
+        err = 0.0
+        for i in range(N):
+            e = 0.0
+            for j in range(7):
+                e += DP5_E[j] * K[j, i]
+            sc = atol + rtol * max(abs(y[i]), abs(ynew[i]))
+            err += (h_use * e / sc) ** 2
+        err = math.sqrt(err / N)
+        if not (err == err) or err > 1e300:
+            err = 1e300
+        if err <= 1.0:
+            t = t1 if last else t + h_use
+            for i in range(N):
+                y[i] = ynew[i]
+                K[0, i] = K[6, i]
+            stats[0] += 1
+            fac = 5.0 if err == 0.0 else min(5.0, max(0.2, 0.9 * err ** -0.2))
+            if not last:
+                h = h_use * fac
+            elif fac < 1.0:
+                h = h_use * fac
+            # a shortened last step keeps the previous, longer proposal otherwise
+            if not _all_finite(y):
+                return DP5_NONFINITE
+        else:
+            stats[1] += 1
+            h = h_use * max(0.2, 0.9 * err ** -0.2)
+            if h < 1e-14 * max(1.0, abs(t)):
+                hstate[0] = h
+                return DP5_STEP_TOO_SMALL
+        steps += 1
+        if steps >= max_steps:
+            hstate[0] = h
+            return DP5_MAX_STEPS
+    hstate[0] = h
+    return DP5_OK
+
+
+# ---------------------------------------------------------------------------------------------
+# Velocity Verlet on the second-order structure: y = [q, v] with q = positions (and Cardan angles
+# in 3D) in the first half and v = velocities (and body angular velocities) in the second.
+
+
+@njit(cache=_CACHE)
+def _qdot(model, n, y, v, out):
+    """out = dq/dt for configuration q = y[:N/2] and generalized velocities v (length N/2).
+
+    Axial-torsional: dq/dt = v. Full 3D: positions' rate = velocities; Cardan rates from the body
+    angular velocities (the kinematic map of ``kernels.rhs3d``).
+    """
+    if model != 0:  # MODEL_AXIAL_TORSIONAL
+        for i in range(v.size):
+            out[i] = v[i]
+        return
+    for i in range(3 * n):
+        out[i] = v[i]
+    oA = 3 * n
+    for k in range(n):
+        th = y[oA + 3 * k + 1]
+        ph = y[oA + 3 * k + 2]
+        wx = v[oA + 3 * k]
+        wy = v[oA + 3 * k + 1]
+        wz = v[oA + 3 * k + 2]
+        sph = math.sin(ph)
+        cph = math.cos(ph)
+        a = wy * sph + wz * cph
+        out[oA + 3 * k] = a / math.cos(th)
+        out[oA + 3 * k + 1] = wy * cph - wz * sph
+        out[oA + 3 * k + 2] = wx + math.tan(th) * a
+
+
+@njit(cache=_CACHE)
+def advance_verlet(model, t0, y, n_steps, dt, p, ip, fp, u, wR, wF, wM, f, yt, vh, qd):
+    """Velocity Verlet (kick-drift-kick), one rhs evaluation a step, in place.
+
+    Kick ``v+ = v + dt/2 a(q, v)``; drift ``q1 = q + dt qdot(q_mid, v+)`` (kinematics at the
+    midpoint configuration, 2nd order for the Cardan map); kick ``v1 = v+ + dt/2 a(q1, v*)``
+    with the velocity-dependent (damping) forces at the predicted ``v* = v + dt a(q, v)``.
+    The acceleration of the last kick is reused for the next step's first kick (FSAL), so after
+    the first step each step costs one rhs call. Symplectic for conservative forces; second
+    order. Stability: ``dt |lambda| < 2`` on the imaginary axis (undamped modes), like the
+    explicit Euler bound ``dt |lambda| < 2`` for the overdamped (real) modes.
+
+    ``f``, ``yt`` are scratch shaped like ``y``; ``vh``, ``qd`` half as long. Returns the number of
+    completed steps (``n_steps`` on success), as :func:`advance_rk4`.
+    """
+    N = y.size
+    H = N // 2
+    n = ip[0]
+    rhs(model, t0, y, f, p, ip, fp, u, wR, wF, wM)
+    for s in range(n_steps):
+        t = t0 + s * dt
+        for i in range(H):
+            vh[i] = y[H + i] + 0.5 * dt * f[H + i]
+        # midpoint configuration for the kinematic map
+        _qdot(model, n, y, vh, qd)
+        for i in range(H):
+            yt[i] = y[i] + 0.5 * dt * qd[i]
+        _qdot(model, n, yt, vh, qd)
+        for i in range(H):
+            y[i] += dt * qd[i]
+            yt[i] = y[i]
+            yt[H + i] = y[H + i] + dt * f[H + i]
+        rhs(model, t + dt, yt, f, p, ip, fp, u, wR, wF, wM)
+        for i in range(H):
+            y[H + i] = vh[i] + 0.5 * dt * f[H + i]
+        if (s & 63) == 63 and not _all_finite(y):
+            return s
+    if not _all_finite(y):
+        return n_steps - 1
+    return n_steps
+
+
+# ---------------------------------------------------------------------------------------------
+# Exponential integrators for (nearly) linear models: y' = A y + g(t, y), A a fixed matrix
+# (the Jacobian at the static equilibrium), g = f - A y the forcing and nonlinear remainder.
+
+
+@njit(cache=_CACHE)
+def _matvec_add(M, x, out, c):
+    """out += c * M @ x for a dense square (or row-block) M."""
+    R, C = M.shape
+    for i in range(R):
+        acc = 0.0
+        for j in range(C):
+            acc += M[i, j] * x[j]
+        out[i] += c * acc
+
+
+@njit(cache=_CACHE)
+def advance_expeuler(model, t0, y, n_steps, dt, P1, p, ip, fp, u, wR, wF, wM, f):
+    """Exponential Euler ``y1 = y + dt phi1(dt A) f(t, y)``, ``P1 = dt phi1(dt A)`` precomputed.
+
+    Exact for linear autonomous systems with constant forcing over the step (any ``dt``: no
+    stability limit from the stiff, overdamped high modes); first order in the variation of the
+    forcing and the nonlinear remainder ``g = f - A y``. One rhs and one dense mat-vec a step.
+    ``P1`` must be computed for this ``dt``. Returns completed steps like :func:`advance_rk4`.
+    """
+    for s in range(n_steps):
+        t = t0 + s * dt
+        rhs(model, t, y, f, p, ip, fp, u, wR, wF, wM)
+        _matvec_add(P1, f, y, 1.0)
+        if (s & 63) == 63 and not _all_finite(y):
+            return s
+    if not _all_finite(y):
+        return n_steps - 1
+    return n_steps
+
+
+@njit(cache=_CACHE)
+def advance_etd2(model, t0, y, n_steps, dt, P1, P2, Q, p, ip, fp, u, wR, wF, wM, f, fa, ya):
+    """Second-order exponential Runge-Kutta (ETD2RK, Cox & Matthews 2002), in place.
+
+    ``a = y + P1 f(t, y)``; ``y1 = a + P2 (g(t + dt, a) - g(t, y))`` with ``g = f - A y``,
+    rewritten without ``A``: ``y1 = y + (P1 - Q) f(t, y) + P2 f(t + dt, a)``, where
+    ``P1 = dt phi1(dt A)``, ``P2 = dt phi2(dt A)``, ``Q = P2 exp(dt A)`` (see
+    :func:`exponential_matrices`). Two rhs calls and three mat-vecs a step; exact for linear
+    systems with forcing linear in time over the step.
+    """
+    N = y.size
+    for s in range(n_steps):
+        t = t0 + s * dt
+        rhs(model, t, y, f, p, ip, fp, u, wR, wF, wM)
+        for i in range(N):
+            ya[i] = y[i]
+        _matvec_add(P1, f, ya, 1.0)
+        rhs(model, t + dt, ya, fa, p, ip, fp, u, wR, wF, wM)
+        _matvec_add(P1, f, y, 1.0)
+        _matvec_add(Q, f, y, -1.0)
+        _matvec_add(P2, fa, y, 1.0)
+        if (s & 63) == 63 and not _all_finite(y):
+            return s
+    if not _all_finite(y):
+        return n_steps - 1
+    return n_steps
+
+
+def exponential_matrices(A, dt: float):
+    """``(P1, P2, Q)`` of the exponential integrators for the matrix ``A`` [1/s] and step ``dt`` [s].
+
+    ``P1 = dt phi1(dt A)``, ``P2 = dt phi2(dt A)``, ``Q = P2 exp(dt A)``, with
+    ``phi1(z) = (e^z - 1) / z`` and ``phi2(z) = (e^z - 1 - z) / z^2``, from one matrix
+    exponential of the augmented block matrix ``[[A, I, 0], [0, 0, I], [0, 0, 0]] dt``
+    (Higham's scaling and squaring in ``scipy.linalg.expm``; no inverse of ``A`` needed, so a
+    singular ``A`` — free rigid-body modes — is fine).
+    """
+    from scipy.linalg import expm
+
+    A = np.asarray(A, dtype=float)
+    N = A.shape[0]
+    M = np.zeros((3 * N, 3 * N))
+    M[:N, :N] = A * dt
+    M[:N, N:2 * N] = np.eye(N) * dt
+    M[N:2 * N, 2 * N:] = np.eye(N) * dt
+    E = expm(M)
+    eA = E[:N, :N]
+    P1 = np.ascontiguousarray(E[:N, N:2 * N])
+    P2 = np.ascontiguousarray(E[:N, 2 * N:] / dt)
+    Q = np.ascontiguousarray(P2 @ eA)
+    return P1, P2, Q

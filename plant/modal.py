@@ -130,16 +130,55 @@ def first_modes(model: DrillstringModel, y: np.ndarray | None = None) -> dict[st
     return res
 
 
+def operating_modes(params, kind: str = "full3d", spin: float | None = None) -> list[Mode]:
+    """Modes about the operating point: the straight string spinning with the top drive.
+
+    Linearized in the top-drive frame (:mod:`plant.linearize`); lateral eigenvalues are shifted
+    back to the inertial frame by their whirl direction, so that frequencies are the ones an
+    observer at rest sees. With zero spin this equals :func:`modes` at the unforced equilibrium.
+    """
+    from .linearize import inertial_lateral_eigenvalue, linearize
+
+    lm = linearize(params, kind, spin)
+    lam, vecs = np.linalg.eig(lm.A)
+    lam_max = np.max(np.abs(lam))
+    out = []
+    for i in range(lam.size):
+        share = _energy_shares(lm.model, vecs[:, i])
+        k = int(np.argmax(share))
+        mu = lam[i]
+        if KINDS[k] == "lateral" and lm.spin != 0.0:
+            mu = inertial_lateral_eigenvalue(lm, lam[i], vecs[:, i])
+        elif mu.imag <= 0.0:
+            continue
+        mag = abs(mu)
+        if mu.imag <= 1e-9 * lam_max or mag < 1e-9 * lam_max:
+            continue
+        out.append(Mode(KINDS[k], float(mag), float(-mu.real / mag), float(share[k])))
+    # each lateral pair was seen twice (lambda and its conjugate map to the same mu)
+    uniq: list[Mode] = []
+    for md in sorted(out, key=lambda m: (m.kind, m.frequency_rad_s)):
+        if uniq and uniq[-1].kind == md.kind and abs(uniq[-1].frequency_rad_s
+                                                     - md.frequency_rad_s) < 1e-9 * lam_max:
+            continue
+        uniq.append(md)
+    uniq.sort(key=lambda m: m.frequency_rad_s)
+    return uniq
+
+
 def analytic_reference(model: DrillstringModel) -> dict[str, float]:
     """Continuous-beam reference frequencies [rad/s] for the model's layout.
 
-    axial / torsional: fixed-free rod (2k-1) pi c / (2L) with k = 1; lateral: first mode of the
-    pinned multi-span Euler-Bernoulli beam over the top pin and the stabilizers (FE solution,
+    axial / torsional: fixed-free rod (2k-1) pi c / (2L) with k = 1 (axial: fixed-fixed pi c / L
+    when the bit is axially held by its spring); lateral: first mode of the pinned multi-span
+    Euler-Bernoulli beam over the top pin and the stabilizers without axial load (FE solution,
     which equals (pi/L)^2 sqrt(EI/rho A) for one span).
     """
     d = model.derived
+    pipe = model.params.pipe
+    held = model.params.bit.axial_stiffness > 0.0  # bit axially held: fixed-fixed rod
     return {
-        "axial": d.w_axial_ref,
+        "axial": math.pi * pipe.axial_wave_speed / pipe.length if held else d.w_axial_ref,
         "torsional": d.w_tors_ref,
         "lateral": d.w_lateral_ref if model.kind == "full3d" else math.nan,
     }

@@ -13,21 +13,32 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 
 from . import kernels as kern
 from . import layout as lay
 from .beam_fe import pinned_beam_frequencies
-from .integrators import advance_rk4, stable_step
+from .integrators import (
+    advance_dopri5,
+    advance_etd2,
+    advance_expeuler,
+    advance_rk4,
+    advance_verlet,
+    exponential_matrices,
+    stable_step,
+)
 from .observables import output_names, outputs3d, outputs_at
 from .params import PlantParams
 
-__all__ = ["DrillstringModel", "ModelKind", "needs_lateral", "series"]
+__all__ = ["DrillstringModel", "FIXED_STEP_METHODS", "ModelKind", "needs_lateral", "series"]
 
 ModelKind = str  # "full3d" | "axial_torsional"
 MODEL_KINDS = ("full3d", "axial_torsional")
+# Fixed-step methods of :meth:`DrillstringModel.advance` and their stability radius |lambda dt|
+# (None: no stability limit; exponential integrators treat the linear part exactly).
+FIXED_STEP_METHODS = {"rk4": 2.6, "verlet": 2.0, "expeuler": None, "etd2": None}
 
 
 def series(k_boundary: float, k_half: float) -> float:
@@ -111,6 +122,7 @@ def derive(params: PlantParams) -> Derived:
     )
 
 
+@lru_cache(maxsize=64)
 def lateral_reference_frequency(params: PlantParams) -> float:
     """First bending frequency [rad/s] of the pinned multi-span Euler-Bernoulli beam.
 
@@ -399,14 +411,61 @@ class DrillstringModel:
         return stable_step(self.max_eigenvalue)
 
     def advance(self, t0: float, y: np.ndarray, n_steps: int, dt: float,
-                u: np.ndarray | None = None) -> int:
-        """Integrate ``y`` in place over ``n_steps`` RK4 steps of ``dt`` [s] from ``t0`` [s].
+                u: np.ndarray | None = None, method: str = "rk4") -> int:
+        """Integrate ``y`` in place over ``n_steps`` fixed steps of ``dt`` [s] from ``t0`` [s].
 
-        Returns the number of completed steps before a non-finite state (``n_steps`` if none).
+        ``method``: ``"rk4"`` (default), ``"verlet"`` (velocity Verlet, 1 rhs a step),
+        ``"expeuler"`` / ``"etd2"`` (exponential integrators about the equilibrium Jacobian,
+        axial-torsional model only). Returns the number of completed steps before a non-finite
+        state (``n_steps`` if none).
         """
         k1, k2, k3, k4, yt = self._scratch
+        uu = self.u if u is None else u
+        a = (self.model_id, float(t0), y, int(n_steps), float(dt))
+        w = (self.p, self.ip, self.fp, uu, self.wR, self.wF, self.wM)
+        if method == "rk4":
+            return int(advance_rk4(*a, *w, k1, k2, k3, k4, yt))
+        if method == "verlet":
+            H = self.n_state // 2
+            return int(advance_verlet(*a, *w, k1, k2, k3[:H], k4[:H]))
+        if method in ("expeuler", "etd2"):
+            P1, P2, Q = self.exponential_matrices(float(dt))
+            if method == "expeuler":
+                return int(advance_expeuler(*a, P1, *w, k1))
+            return int(advance_etd2(*a, P1, P2, Q, *w, k1, k2, k3))
+        raise ValueError(f"method = {method!r} is not allowed: one of "
+                         f"{', '.join(FIXED_STEP_METHODS)}")
+
+    def exponential_matrices(self, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(P1, P2, Q)`` of the exponential integrators for step ``dt`` [s] (cached per dt).
+
+        Built from the Jacobian at the initial (static equilibrium) state; only for the
+        axial-torsional model, which is linear up to the small-twist ``sin`` and the bit torque.
+        """
+        if self.kind != "axial_torsional":
+            raise ValueError("exponential integrators need the axial-torsional model (the full "
+                             "3D model is far from linear under spin): use 'rk4' or 'verlet'")
+        cache = self.__dict__.setdefault("_expm_cache", {})
+        if dt not in cache:
+            A = self.jacobian(0.0, self.initial_state())
+            cache[dt] = exponential_matrices(A, dt)
+        return cache[dt]
+
+    def advance_adaptive(self, t0: float, t1: float, y: np.ndarray, hstate: np.ndarray,
+                         rtol: float = 1e-6, atol: float = 1e-9, u: np.ndarray | None = None,
+                         max_steps: int = 1_000_000, stats: np.ndarray | None = None) -> int:
+        """Adaptive Dormand-Prince 5(4) from ``t0`` to exactly ``t1`` [s], ``y`` in place.
+
+        ``hstate`` (shape (1,)) carries the step proposal [s] between calls (<= 0: automatic).
+        Returns 0 on success, a negative code on failure (see ``integrators.DP5_*``).
+        """
+        K = self.__dict__.get("_dp5_K")
+        if K is None:
+            K = self.__dict__.setdefault("_dp5_K", np.zeros((7, self.n_state)))
+        st = np.zeros(3, dtype=np.int64) if stats is None else stats
+        k1, k2 = self._scratch[:2]
         return int(
-            advance_rk4(self.model_id, float(t0), y, int(n_steps), float(dt), self.p, self.ip,
-                        self.fp, self.u if u is None else u, self.wR, self.wF, self.wM, k1, k2,
-                        k3, k4, yt)
+            advance_dopri5(self.model_id, float(t0), float(t1), y, hstate, st, float(rtol),
+                           float(atol), int(max_steps), self.p, self.ip, self.fp,
+                           self.u if u is None else u, self.wR, self.wF, self.wM, K, k1, k2)
         )

@@ -1,7 +1,8 @@
 """Stepping a model over communication steps: what the plant FMU (and the benchmarks) call.
 
 :class:`PlantSimulator` holds time, state and inputs, splits each communication step into equal
-internal RK4 steps no longer than the model's stable step, and checks the state after every step.
+internal steps (RK4 by default) no longer than the method's stable step, and checks the state
+after every step.
 A numerical failure is *returned* as a :class:`StepResult` naming the time and the quantity that
 diverged (scipy ``_ivp`` style); nothing is raised from :meth:`do_step`.
 """
@@ -13,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .model import DrillstringModel
+from .integrators import stable_step
+from .model import FIXED_STEP_METHODS, DrillstringModel
 
 __all__ = ["PlantSimulator", "StepResult", "simulate"]
 
@@ -41,13 +43,33 @@ class PlantSimulator:
     ----------
     model : DrillstringModel
     max_step : float, optional
-        Upper bound of the internal step [s]; default: the model's stable RK4 step.
+        Upper bound of the internal step [s]; default: the model's stable step for ``method``
+        (``inf``, i.e. one step a communication step, for the exponential integrators).
+    method : {"rk4", "verlet", "expeuler", "etd2", "dopri5"}, optional
+        Internal integrator (default ``"rk4"``); see :meth:`DrillstringModel.advance`.
+        ``"dopri5"`` is adaptive (``rtol``, ``atol``) and steps to each communication point.
     """
 
-    def __init__(self, model: DrillstringModel, max_step: float | None = None) -> None:
+    def __init__(self, model: DrillstringModel, max_step: float | None = None,
+                 method: str = "rk4", rtol: float = 1e-6, atol: float = 1e-9) -> None:
+        if method not in FIXED_STEP_METHODS and method != "dopri5":
+            raise ValueError(f"method = {method!r} is not allowed: one of "
+                             f"{', '.join([*FIXED_STEP_METHODS, 'dopri5'])}")
         self.model = model
-        self.max_step = model.stable_step() if max_step is None else float(max_step)
-        if not (self.max_step > 0.0 and math.isfinite(self.max_step)):
+        self.method = method
+        self.rtol = float(rtol)
+        self.atol = float(atol)
+        self._hstate = np.zeros(1)
+        radius = FIXED_STEP_METHODS.get(method)
+        if max_step is not None:
+            self.max_step = float(max_step)
+        elif method == "rk4":
+            self.max_step = model.stable_step()
+        elif radius is None:
+            self.max_step = math.inf
+        else:
+            self.max_step = stable_step(model.max_eigenvalue, radius)
+        if not self.max_step > 0.0 or (math.isinf(self.max_step) and radius is not None):
             raise ValueError(f"max_step = {max_step!r} is not allowed: must be > 0 and finite (s)")
         self.time = 0.0
         self.y = model.initial_state()
@@ -108,8 +130,17 @@ class PlantSimulator:
             return StepResult(False, f"step size h = {h!r} s is not allowed: must be > 0")
         if not np.all(np.isfinite(self.u)):
             return StepResult(False, f"input is not finite at t = {t:.6g} s: {self.u.tolist()}")
+        if self.method == "dopri5":
+            code = self.model.advance_adaptive(t, t + h, self.y, self._hstate, self.rtol,
+                                               self.atol, self.u)
+            self.time = t + h
+            res = self.check()
+            if res.ok and code != 0:
+                return StepResult(False, f"adaptive step failed at t = {t:.6g} s (code {code})",
+                                  t)
+            return res
         n_sub = max(1, math.ceil(h / self.max_step - 1e-9))
-        done = self.model.advance(t, self.y, n_sub, h / n_sub, self.u)
+        done = self.model.advance(t, self.y, n_sub, h / n_sub, self.u, self.method)
         self.time = t + h if done == n_sub else t + done * h / n_sub
         return self.check()
 
@@ -131,6 +162,7 @@ class PlantSimulator:
 
 def simulate(model: DrillstringModel, stop_time: float, output_interval: float,
              outputs: list[str] | None = None, max_step: float | None = None,
+             method: str = "rk4",
              ) -> tuple[np.ndarray, dict[str, np.ndarray], StepResult]:
     """Run the plant alone (inputs zero) and sample outputs.
 
@@ -143,7 +175,7 @@ def simulate(model: DrillstringModel, stop_time: float, output_interval: float,
     result : StepResult
         ``ok`` or the divergence report; samples stop at the failure.
     """
-    sim = PlantSimulator(model, max_step)
+    sim = PlantSimulator(model, max_step, method)
     names = outputs or model.output_names
     idx = [model.output_names.index(n) for n in names]
     n_out = int(round(stop_time / output_interval))
