@@ -21,6 +21,8 @@ from . import kernels as kern
 from . import layout as lay
 from .beam_fe import pinned_beam_frequencies
 from .integrators import (
+    RK4_STABILITY_RADIUS,
+    VERLET_STABILITY_RADIUS,
     advance_dopri5,
     advance_etd2,
     advance_expeuler,
@@ -38,7 +40,8 @@ ModelKind = str  # "full3d" | "axial_torsional"
 MODEL_KINDS = ("full3d", "axial_torsional")
 # Fixed-step methods of :meth:`DrillstringModel.advance` and their stability radius |lambda dt|
 # (None: no stability limit; exponential integrators treat the linear part exactly).
-FIXED_STEP_METHODS = {"rk4": 2.6, "verlet": 2.0, "expeuler": None, "etd2": None}
+FIXED_STEP_METHODS = {"rk4": RK4_STABILITY_RADIUS, "verlet": VERLET_STABILITY_RADIUS,
+                      "expeuler": None, "etd2": None}
 
 
 def series(k_boundary: float, k_half: float) -> float:
@@ -77,7 +80,8 @@ class Derived:
     k_tors: float  # [N m/rad]
     beta_axial: float  # [s]
     beta_tors: float  # [s]
-    alpha_lateral: float  # [1/s]
+    beta_bend: float  # [s] bending joint dampers
+    alpha_lateral: float  # [1/s] lateral drag
     w_axial_ref: float  # [rad/s] first fixed-free axial rod frequency
     w_tors_ref: float  # [rad/s]
     w_lateral_ref: float  # [rad/s]
@@ -115,7 +119,9 @@ def derive(params: PlantParams) -> Derived:
         k_tors=G * pipe.polar_moment / dx,
         beta_axial=2.0 * d.axial_ratio / w_ax,
         beta_tors=2.0 * d.torsional_ratio / w_to,
-        alpha_lateral=2.0 * d.lateral_ratio * w_lat,
+        beta_bend=(2.0 * d.lateral_ratio / w_lat if d.lateral_model == "joint"
+                   else 2.0 * d.axial_ratio / w_ax),
+        alpha_lateral=2.0 * d.lateral_ratio * w_lat if d.lateral_model == "drag" else 0.0,
         w_axial_ref=w_ax,
         w_tors_ref=w_to,
         w_lateral_ref=w_lat,
@@ -176,6 +182,7 @@ class DrillstringModel:
         self.wF = np.zeros((n, 3))
         self.wM = np.zeros((n, 3))
         self._scratch = [np.zeros(self.n_state) for _ in range(5)]
+        self.verlet_lambda = 1.0  # velocity predictor of the Verlet damping forces (0.5 .. 1)
         names = output_names(kind == "full3d", list(self.contact_bodies), self.n_sites)
         self.output_names = [r[0] for r in names]
         self.output_units = {r[0]: r[1] for r in names}
@@ -204,7 +211,7 @@ class DrillstringModel:
         p[lay.K_TO] = d.k_tors
         p[lay.C_AX] = d.beta_axial * d.k_axial
         p[lay.C_SH] = d.beta_axial * d.k_shear
-        p[lay.C_BE] = d.beta_axial * d.k_bend
+        p[lay.C_BE] = d.beta_bend * d.k_bend
         p[lay.C_TO] = d.beta_tors * d.k_tors
         p[lay.G1] = d.k_tors
         p[lay.G3] = 2.0 * d.k_bend - d.k_tors
@@ -427,7 +434,7 @@ class DrillstringModel:
             return int(advance_rk4(*a, *w, k1, k2, k3, k4, yt))
         if method == "verlet":
             H = self.n_state // 2
-            return int(advance_verlet(*a, *w, k1, k2, k3[:H], k4[:H]))
+            return int(advance_verlet(*a, self.verlet_lambda, *w, k1, k2, k3[:H], k4[:H]))
         if method in ("expeuler", "etd2"):
             P1, P2, Q = self.exponential_matrices(float(dt))
             if method == "expeuler":
