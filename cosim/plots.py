@@ -1,0 +1,242 @@
+"""PNG figures of a run, after the paper's Figs. 9-16.
+
+* :func:`plot_orbit` - lateral X-Y orbit of the long span's middle body with the
+  wellbore clearance circle (Figs. 9, 15);
+* :func:`plot_deflection_contact` - radial deflection and contact force vs time
+  at every contact body (Figs. 10, 12, 14, 16);
+* :func:`plot_actuators` - actuator forces and powers vs time (Figs. 11, 13, 14);
+* :func:`plot_run` - all of the above for one run;
+* :func:`plot_comparison` - several runs (e.g. open loop, closed loop,
+  restricted actuator) on common axes.
+
+Inputs are the structured arrays of :class:`cosim.master.Result` or
+:func:`cosim.summary.load_results` (columns ``plant.<output>`` /
+``controller.<output>``). Files are written atomically (temporary file +
+``os.replace``). Uses matplotlib's non-interactive Agg backend.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .summary import load_results, publish  # noqa: E402
+
+__all__ = ["plot_actuators", "plot_comparison", "plot_deflection_contact", "plot_orbit",
+           "plot_run", "save_figure"]
+
+MM = 1e3  # m -> mm
+KN = 1e-3  # N -> kN
+
+
+def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:
+    """Save ``fig`` as PNG atomically and close it."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".png")
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=dpi, format="png")
+        publish(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    finally:
+        plt.close(fig)
+    return path
+
+
+def _col(data: np.ndarray, name: str) -> np.ndarray | None:
+    for cand in (name, f"plant.{name}", f"controller.{name}"):
+        if cand in (data.dtype.names or ()):
+            return np.asarray(data[cand], dtype=float)
+    return None
+
+
+def _bodies(data: np.ndarray) -> list[int]:
+    names = data.dtype.names or ()
+    return sorted({int(n.split("body")[1].split("_")[0]) for n in names
+                   if "body" in n and n.endswith("_radial_deflection")})
+
+
+def _span_label(body: int, spans: Mapping[int, Mapping] | None) -> str:
+    info = (spans or {}).get(body, {})
+    kind = info.get("span", "")
+    return f"body {body} ({kind} span)" if kind and kind != "only" else f"body {body}"
+
+
+def _long_body(data: np.ndarray, spans: Mapping[int, Mapping] | None) -> int | None:
+    if spans:
+        for b, info in spans.items():
+            if info.get("span") == "long":
+                return b
+    bodies = _bodies(data)
+    return bodies[0] if bodies else None
+
+
+def plot_orbit(data: np.ndarray, path: str | Path, clearance: float,
+               spans: Mapping[int, Mapping] | None = None, title: str = "",
+               t_from: float | None = None) -> Path | None:
+    """X-Y orbit [mm] of the long span's middle body with the clearance circle.
+
+    Parameters
+    ----------
+    t_from : float, optional
+        Plot only ``t >= t_from`` [s] (default: everything).
+    """
+    body = _long_body(data, spans)
+    if body is None:
+        return None
+    x, y = _col(data, f"body{body}_X"), _col(data, f"body{body}_Y")
+    if x is None or y is None:
+        return None
+    sel = np.ones(len(x), bool) if t_from is None else data["time"] >= t_from
+    fig, ax = plt.subplots(figsize=(5.5, 5.5), layout="constrained")
+    ax.plot(x[sel] * MM, y[sel] * MM, lw=0.6, color="tab:blue", label="mass centre")
+    phi = np.linspace(0, 2 * np.pi, 361)
+    ax.plot(clearance * MM * np.cos(phi), clearance * MM * np.sin(phi), "k--", lw=1.0,
+            label=f"clearance {clearance * MM:g} mm")
+    lim = 1.15 * max(clearance * MM, float(np.nanmax(np.hypot(x[sel], y[sel]))) * MM)
+    ax.set_xlim(-lim, lim)
+    ax.set_ylim(-lim, lim)
+    ax.set_aspect("equal")
+    ax.set_xlabel("X [mm]")
+    ax.set_ylabel("Y [mm]")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper right", fontsize=8)
+    window = "" if t_from is None else f", t >= {t_from:g} s"
+    ax.set_title(f"{title}\nlateral orbit, {_span_label(body, spans)}{window}".strip())
+    return save_figure(fig, path)
+
+
+def plot_deflection_contact(data: np.ndarray, path: str | Path, clearance: float,
+                            spans: Mapping[int, Mapping] | None = None,
+                            title: str = "") -> Path | None:
+    """Radial deflection [mm] and contact force [kN] vs time at each contact body."""
+    bodies = _bodies(data)
+    if not bodies:
+        return None
+    t = data["time"]
+    fig, axes = plt.subplots(2, len(bodies), figsize=(5 * len(bodies), 6), sharex=True,
+                             squeeze=False, layout="constrained")
+    for j, b in enumerate(bodies):
+        r = _col(data, f"body{b}_radial_deflection")
+        f = _col(data, f"body{b}_contact_force")
+        ax = axes[0, j]
+        ax.plot(t, r * MM, lw=0.7)
+        ax.axhline(clearance * MM, color="k", ls="--", lw=1.0, label="clearance")
+        ax.set_ylabel("radial deflection [mm]")
+        ax.set_title(_span_label(b, spans))
+        ax.legend(loc="upper left", fontsize=8)
+        ax.grid(alpha=0.3)
+        ax = axes[1, j]
+        if f is not None:
+            ax.plot(t, f * KN, lw=0.7, color="tab:red")
+        ax.set_ylabel("contact force [kN]")
+        ax.set_xlabel("time [s]")
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"{title}: radial deflection and wellbore contact force" if title else
+                 "radial deflection and wellbore contact force")
+    return save_figure(fig, path)
+
+
+def plot_actuators(data: np.ndarray, path: str | Path, n_sites: int = 2,
+                   spans_by_site: Sequence[str] | None = None, title: str = "") -> Path | None:
+    """Actuator forces [kN] (C and E) and delivered power [W] vs time per site."""
+    t = data["time"]
+    if all(_col(data, f"actuator{s}_power") is None for s in range(1, n_sites + 1)):
+        return None
+    fig, axes = plt.subplots(2, n_sites, figsize=(5 * n_sites, 6), sharex=True, squeeze=False,
+                             layout="constrained")
+    for j, s in enumerate(range(1, n_sites + 1)):
+        ax = axes[0, j]
+        for a, color in (("C", "tab:blue"), ("E", "tab:orange")):
+            f = _col(data, f"actuator{s}_force_{a}")
+            if f is not None:
+                ax.plot(t, f * KN, lw=0.7, color=color, label=f"force {a}")
+        ax.set_ylabel("actuator force [kN]")
+        where = f" ({spans_by_site[j]} span)" if spans_by_site and j < len(spans_by_site) else ""
+        ax.set_title(f"site {s}{where}")
+        if ax.lines:
+            ax.legend(loc="upper left", fontsize=8)
+        else:
+            ax.text(0.5, 0.5, "controller disabled", ha="center", transform=ax.transAxes)
+        ax.grid(alpha=0.3)
+        ax = axes[1, j]
+        p = _col(data, f"actuator{s}_power")
+        if p is not None:
+            ax.plot(t, p, lw=0.7, color="tab:green")
+        ax.set_ylabel("actuator power [W]")
+        ax.set_xlabel("time [s]")
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"{title}: actuator force and power" if title else "actuator force and power")
+    return save_figure(fig, path)
+
+
+def plot_run(data: np.ndarray, out_dir: str | Path, clearance: float,
+             spans: Mapping[int, Mapping] | None = None, n_sites: int = 2,
+             title: str = "") -> list[Path]:
+    """Write ``orbit.png``, ``deflection_contact.png`` and ``actuators.png``; return paths."""
+    out = Path(out_dir)
+    t = data["time"]
+    t_from = float(t[0] + 2.0 / 3.0 * (t[-1] - t[0])) if len(t) > 1 else None
+    site_spans = None
+    if spans:
+        site_spans = [info.get("span", "") for _, info in sorted(spans.items())]
+    paths = [plot_orbit(data, out / "orbit.png", clearance, spans, title),
+             plot_orbit(data, out / "orbit_steady.png", clearance, spans, title, t_from),
+             plot_deflection_contact(data, out / "deflection_contact.png", clearance, spans,
+                                     title),
+             plot_actuators(data, out / "actuators.png", n_sites, site_spans, title)]
+    return [p for p in paths if p is not None]
+
+
+def plot_comparison(runs: Sequence[tuple[str, str | Path | np.ndarray]], path: str | Path,
+                    body: int = 11, site: int = 1, clearance: float | None = 0.02,
+                    title: str = "comparison") -> Path:
+    """Several runs on common axes: radial deflection at ``body``, force and power at ``site``.
+
+    Parameters
+    ----------
+    runs : sequence of (label, results)
+        ``results`` is a ``results.csv`` path or a structured array.
+    path : path-like
+        Output PNG.
+    body : int
+        Contact body whose radial deflection [mm] is shown (11: long span).
+    site : int
+        Actuator site whose force magnitude sqrt(F_C^2 + F_E^2) [kN] and power [W]
+        are shown (1: long span).
+    clearance : float, optional
+        Drawn as a dashed line [m].
+    """
+    fig, axes = plt.subplots(3, 1, figsize=(9, 9), sharex=True, layout="constrained")
+    for label, res in runs:
+        data = res if isinstance(res, np.ndarray) else load_results(res)
+        t = data["time"]
+        r = _col(data, f"body{body}_radial_deflection")
+        if r is not None:
+            axes[0].plot(t, r * MM, lw=0.7, label=label)
+        fc, fe = _col(data, f"actuator{site}_force_C"), _col(data, f"actuator{site}_force_E")
+        f = np.hypot(fc, fe) if fc is not None and fe is not None else np.zeros_like(t)
+        axes[1].plot(t, f * KN, lw=0.7, label=label)
+        p = _col(data, f"actuator{site}_power")
+        axes[2].plot(t, p if p is not None else np.zeros_like(t), lw=0.7, label=label)
+    if clearance is not None:
+        axes[0].axhline(clearance * MM, color="k", ls="--", lw=1.0, label="clearance")
+    axes[0].set_ylabel(f"radial deflection\nbody {body} [mm]")
+    axes[1].set_ylabel(f"actuator force site {site}\n|F| [kN]")
+    axes[2].set_ylabel(f"actuator power site {site} [W]")
+    axes[2].set_xlabel("time [s]")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right", fontsize=8)
+    fig.suptitle(title)
+    return save_figure(fig, path)

@@ -1,0 +1,239 @@
+"""Run summary: peak and steady-state deflection, actuator effort, contact events.
+
+:func:`summarize` reduces a recorded run (the structured array of
+:class:`cosim.master.Result`, or :func:`load_results` of a ``results.csv``) to a
+JSON-ready dict; :func:`write_json` writes it atomically. Every quantity carries
+its unit in its key (``_m``, ``_N``, ``_W``, ``_s``).
+
+Keys of the summary
+-------------------
+``scene``, ``scene_file``
+    Scene name and file.
+``stop_time_s``, ``end_time_s``, ``completed``
+    Requested stop time, simulated time reached [s], and whether it was reached.
+``wall_time_s``, ``real_time_factor``
+    Wall-clock time of the stepping loop [s]; simulated / wall time [-].
+``step_s``, ``output_interval_s``, ``steady_window_s``
+    Base step, recording interval, and the window ``[t0, t1]`` [s] of the
+    steady-state statistics: the last third of the recorded time.
+``spans``
+    Per contact body ``"body<b>"``: ``span`` ("long" / "short"),
+    ``span_length_m``, ``peak_radial_deflection_m``,
+    ``steady_radial_deflection_mean_m``, ``steady_radial_deflection_std_m``,
+    ``peak_contact_force_N``, ``contact_events`` (number of entries into
+    contact, i.e. samples where the contact force turns > 0 after a sample at
+    0), ``contact_time_s`` (samples in contact x output interval), and, when
+    the controller switches on during the run, ``before_switch_on`` with the
+    same deflection statistics over the last third before the switch-on.
+``actuators``
+    Per site ``"site<s>"``: ``peak_force_N`` (max abs over the C and E
+    actuators), ``peak_force_C_N``, ``peak_force_E_N``, ``peak_power_W`` (max
+    of the delivered power), ``peak_abs_power_W``, ``steady_mean_power_W``.
+    Forces are 0 when the controller is disabled.
+``diverged``
+    ``null``, or ``{"time_s", "quantity", "value", "message"}`` of the failure
+    that stopped the run.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["SUMMARY_KEYS", "load_results", "publish", "summarize", "write_json"]
+
+#: Top-level keys every summary has.
+SUMMARY_KEYS = ("scene", "scene_file", "stop_time_s", "end_time_s", "completed", "wall_time_s",
+                "real_time_factor", "step_s", "output_interval_s", "steady_window_s", "spans",
+                "actuators", "diverged")
+
+
+def load_results(csv_path: str | Path) -> np.ndarray:
+    """Read a ``results.csv`` into a structured array (``time`` first, names kept as is)."""
+    path = Path(csv_path)
+    with open(path) as fh:
+        header = fh.readline().strip().split(",")
+    values = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    dtype = np.dtype([(n, np.float64) for n in header])
+    out = np.zeros(len(values), dtype=dtype)
+    for i, n in enumerate(header):
+        out[n] = values[:, i]
+    return out
+
+
+def _col(data: np.ndarray, name: str) -> np.ndarray | None:
+    for cand in (name, f"plant.{name}", f"controller.{name}"):
+        if cand in (data.dtype.names or ()):
+            return np.asarray(data[cand], dtype=float)
+    return None
+
+
+def _stats(t: np.ndarray, r: np.ndarray, t0: float, t1: float) -> dict[str, float]:
+    sel = (t >= t0) & (t <= t1)
+    if not np.any(sel):
+        return {"steady_radial_deflection_mean_m": math.nan,
+                "steady_radial_deflection_std_m": math.nan}
+    return {"steady_radial_deflection_mean_m": float(np.mean(r[sel])),
+            "steady_radial_deflection_std_m": float(np.std(r[sel]))}
+
+
+def _peak(x: np.ndarray | None) -> float:
+    if x is None or x.size == 0:
+        return 0.0
+    finite = x[np.isfinite(x)]
+    return float(np.max(np.abs(finite))) if finite.size else math.nan
+
+
+def _contact(t: np.ndarray, f: np.ndarray | None, dt: float) -> tuple[int, float, float]:
+    if f is None or f.size == 0:
+        return 0, 0.0, 0.0
+    on = f > 0.0
+    entries = int(np.count_nonzero(on[1:] & ~on[:-1])) + int(bool(on[0]))
+    return entries, float(np.count_nonzero(on) * dt), float(np.max(f))
+
+
+def summarize(data: np.ndarray, *, scene: str = "", scene_file: str = "",
+              spans: Mapping[int, Mapping[str, Any]] | None = None, n_sites: int = 2,
+              stop_time: float = math.nan, step: float = math.nan,
+              output_interval: float | None = None, wall_time: float = math.nan,
+              real_time_factor: float = math.nan, end_time: float | None = None,
+              switch_on_time: float | None = None,
+              diverged: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Summary of a recorded run (keys: module docstring).
+
+    Parameters
+    ----------
+    data : numpy.ndarray
+        Structured array, ``time`` [s] first, columns named ``plant.<output>``
+        and ``controller.<output>`` (bare output names are accepted too).
+    scene, scene_file : str
+        Scene name and file.
+    spans : mapping, optional
+        ``{body: {"span": ..., "span_length": [m]}}`` (see
+        :func:`cosim.scene_system.span_info`); default: bodies found in ``data``.
+    n_sites : int
+        Number of actuator sites.
+    stop_time, step : float
+        Requested stop time and base step [s].
+    output_interval : float, optional
+        Recording interval [s]; default: spacing of the first two rows.
+    wall_time, real_time_factor : float
+        From :class:`cosim.master.Result` [s], [-].
+    end_time : float, optional
+        Simulated time reached [s]; default: the last row's time.
+    switch_on_time : float, optional
+        Controller switch-on time [s]; adds ``before_switch_on`` statistics when
+        inside the recorded time.
+    diverged : mapping, optional
+        Failure report ``{"time_s", "quantity", "value", "message"}``.
+
+    Returns
+    -------
+    dict
+        JSON-ready (non-finite floats become ``None`` in :func:`write_json`).
+    """
+    t = np.asarray(data["time"], dtype=float) if len(data) else np.zeros(0)
+    if output_interval is None:
+        output_interval = float(t[1] - t[0]) if t.size > 1 else step
+    if end_time is not None:
+        end = float(end_time)
+    else:
+        end = float(t[-1]) if t.size else math.nan
+    t_first = float(t[0]) if t.size else 0.0
+    t_last = float(t[-1]) if t.size else 0.0
+    w0 = t_first + 2.0 / 3.0 * (t_last - t_first)
+    if spans is None:
+        names = data.dtype.names or ()
+        bodies = sorted({int(n.split("body")[1].split("_")[0]) for n in names if "body" in n
+                         and n.endswith("_radial_deflection")})
+        spans = {b: {"span": "", "span_length": math.nan} for b in bodies}
+    out_spans: dict[str, Any] = {}
+    for body, info in spans.items():
+        r = _col(data, f"body{body}_radial_deflection")
+        if r is None:
+            continue
+        entries, t_contact, f_peak = _contact(t, _col(data, f"body{body}_contact_force"),
+                                              output_interval)
+        entry: dict[str, Any] = {"span": info.get("span", ""),
+                                 "span_length_m": info.get("span_length", math.nan),
+                                 "peak_radial_deflection_m": _peak(r), **_stats(t, r, w0, t_last),
+                                 "peak_contact_force_N": f_peak, "contact_events": entries,
+                                 "contact_time_s": t_contact}
+        if switch_on_time is not None and t_first < switch_on_time < t_last:
+            b0 = t_first + 2.0 / 3.0 * (switch_on_time - t_first)
+            sel = t < switch_on_time
+            entry["before_switch_on"] = {"window_s": [b0, switch_on_time],
+                                         "peak_radial_deflection_m": _peak(r[sel]),
+                                         **_stats(t, r, b0, switch_on_time)}
+        out_spans[f"body{body}"] = entry
+    actuators: dict[str, Any] = {}
+    for s in range(1, n_sites + 1):
+        fc = _peak(_col(data, f"actuator{s}_force_C"))
+        fe = _peak(_col(data, f"actuator{s}_force_E"))
+        p = _col(data, f"actuator{s}_power")
+        sel = t >= w0
+        actuators[f"site{s}"] = {
+            "peak_force_N": max(fc, fe), "peak_force_C_N": fc, "peak_force_E_N": fe,
+            "peak_power_W": float(np.max(p)) if p is not None and p.size else 0.0,
+            "peak_abs_power_W": _peak(p),
+            "steady_mean_power_W": float(np.mean(p[sel])) if p is not None and np.any(sel)
+            else 0.0,
+        }
+    return {
+        "scene": scene, "scene_file": scene_file, "stop_time_s": stop_time, "end_time_s": end,
+        "completed": bool(diverged is None and math.isfinite(end)
+                          and end >= stop_time - 1e-9 * max(1.0, abs(stop_time))),
+        "wall_time_s": wall_time, "real_time_factor": real_time_factor, "step_s": step,
+        "output_interval_s": output_interval, "steady_window_s": [w0, t_last],
+        "spans": out_spans, "actuators": actuators,
+        "diverged": dict(diverged) if diverged is not None else None,
+    }
+
+
+def _clean(obj: Any) -> Any:
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, Mapping):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, Sequence) and not isinstance(obj, str):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return _clean(obj.item())
+    return obj
+
+
+def publish(tmp: str | Path, path: str | Path) -> Path:
+    """Give ``tmp`` the default permissions (0666 minus the umask) and rename it onto ``path``.
+
+    ``tempfile.mkstemp`` creates files readable by the owner only; the published
+    file gets the mode an ordinary ``open`` would have given it.
+    """
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
+    os.replace(tmp, path)
+    return Path(path)
+
+
+def write_json(obj: Any, path: str | Path) -> Path:
+    """Write ``obj`` as indented JSON atomically (temp file + ``os.replace``); nan -> null."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(_clean(obj), fh, indent=2, allow_nan=False)
+            fh.write("\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        publish(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
