@@ -176,11 +176,15 @@ class DampingParams:
     """Material and lateral damping, set from target damping ratios.
 
     Joint dampers are stiffness-proportional (c = beta k): ``beta_axial = 2 zeta_a / w_a`` with
-    ``w_a`` the first fixed-free axial rod frequency, likewise torsion; shear and bending joints use
-    ``beta_axial`` (one material loss factor). Lateral damping is viscous drag on the lateral
-    velocity of each body (mass proportional, c = alpha m), ``alpha = 2 zeta_l w_l`` with ``w_l``
-    the first lateral frequency of the pinned multi-span Euler-Bernoulli beam given by the top pin
-    and the stabilizers (or ``lateral_reference_frequency`` if > 0).
+    ``w_a`` the first fixed-free axial rod frequency, likewise torsion; shear joints use
+    ``beta_axial``. The first lateral mode gets ``lateral_ratio`` at ``w_l``, the first frequency
+    of the pinned multi-span Euler-Bernoulli beam over the top pin and the stabilizers (or
+    ``lateral_reference_frequency`` if > 0), in one of two ways (``lateral_model``):
+    ``"drag"`` (default): viscous drag on each body's lateral velocity, ``alpha = 2 zeta_l w_l``
+    (mass proportional, external damping), bending joints keep ``beta_axial``. ``"joint"``
+    (like joint R elements): bending dampers with ``beta_lateral = 2 zeta_l / w_l``. Joint dampers
+    rotate with the pipe: above the first critical speed (20 rad/s >> 0.68 rad/s here) internal
+    damping drives forward whirl unstable (Kimball-Newkirk), which this model reproduces.
     """
 
     OWNER = "damping"
@@ -191,6 +195,11 @@ class DampingParams:
     lateral_ratio: float = _f(0.40, "1", "damping ratio of the first lateral mode (Table 1: 40 %)")
     lateral_reference_frequency: float = _f(
         0.0, "rad/s", "frequency at which lateral_ratio is met; 0 = first pinned multi-span beam mode"
+    )
+    lateral_model: str = _f(
+        "drag", "-",
+        "'drag': viscous drag on lateral velocity c = alpha m (external, fluid-like); 'joint': "
+        "bending dampers c = beta_l k_bend (internal: destabilizes whirl above the first critical speed)",
     )
 
     def __post_init__(self) -> None:
@@ -203,6 +212,10 @@ class DampingParams:
             o, "lateral_reference_frequency", self.lateral_reference_frequency, 0.0, 1e4,
             unit="rad/s",
         )
+        if self.lateral_model not in ("joint", "drag"):
+            raise ValueError(
+                f"damping.lateral_model = {self.lateral_model!r} is not allowed: 'joint' or 'drag'"
+            )
 
 
 @dataclass(frozen=True)

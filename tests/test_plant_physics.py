@@ -357,3 +357,17 @@ def test_spin_leaves_axial_torsional_modes_and_barely_moves_lateral():
         assert spun[k].frequency_rad_s == pytest.approx(rest[k].frequency_rad_s, rel=1e-6)
     assert spun["lateral"].frequency_rad_s == pytest.approx(rest["lateral"].frequency_rad_s,
                                                             rel=1e-3)
+
+
+def test_internal_damping_destabilizes_supercritical_whirl():
+    """Rotordynamics (Kimball-Newkirk): damping that rotates with the shaft (joint dampers) makes
+    forward whirl unstable above the first critical speed; external drag keeps it stable."""
+    from plant.modal import operating_modes
+
+    def min_lateral_damping(model: str) -> float:
+        prm = quiet(damping=DampingParams(lateral_model=model))
+        return min(m.damping_ratio for m in operating_modes(prm, "full3d", 20.0)
+                   if m.kind == "lateral")
+
+    assert min_lateral_damping("drag") > 0.0
+    assert min_lateral_damping("joint") < 0.0
