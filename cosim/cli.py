@@ -1,8 +1,9 @@
 """The ``drillcosim`` command line.
 
 Sub-commands: ``modes`` (modal analysis next to the analytic values and the paper's Table 1),
-``scenes`` (list the shipped scenes), ``build`` (write the FMUs). Bad input ends with a one-line
-message on stderr and exit code 2, never a traceback.
+``scenes`` (list the shipped scenes), ``build`` (write the FMUs), ``run`` (co-simulate a scene:
+results.csv, summary.json, plots). Bad input ends with a one-line message on stderr and exit
+code 2, never a traceback; a run that diverges ends with a one-line report and exit code 1.
 """
 
 from __future__ import annotations
@@ -79,6 +80,22 @@ def _cmd_build(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_run(args: argparse.Namespace) -> int:
+    from .errors import CosimError
+    from .run import run_scene
+
+    try:
+        outcome = run_scene(args.scene, stop_time=args.stop_time, step=args.step,
+                            delay=args.delay, gain=args.gain, sets=args.set, out_dir=args.out,
+                            progress=False if args.no_progress else None,
+                            plots=not args.no_plots)
+    except CosimError as exc:  # failed before the first step: earlier files are kept
+        print(f"drillcosim run: failed: {exc}", file=sys.stderr)
+        return 1
+    print(outcome.message, file=sys.stderr if outcome.exit_code else sys.stdout)
+    return outcome.exit_code
+
+
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="drillcosim", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True)
@@ -94,6 +111,20 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("build", help="build the FMUs")
     p.add_argument("--out", default="build/fmus", help="output folder (default build/fmus)")
     p.set_defaults(func=_cmd_build)
+    p = sub.add_parser("run", help="co-simulate a scene (plant FMU + controller FMU)")
+    p.add_argument("scene", nargs="?", default="paper_closed_loop",
+                   help="scene name from scenes/ or a path (default: paper_closed_loop)")
+    p.add_argument("--stop-time", type=float, metavar="S", help="stop time [s]")
+    p.add_argument("--step", type=float, metavar="H", help="communication step [s]")
+    p.add_argument("--delay", type=float, metavar="TAU", help="actuator delay [s]")
+    p.add_argument("--gain", type=float, metavar="K", help="controller gain [N per unit strain]")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene key, e.g. cosim.sensor_delay=0.002 (value in TOML "
+                        "syntax; repeatable)")
+    p.add_argument("--out", metavar="DIR", help="output folder (default out/<scene>)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.set_defaults(func=_cmd_run)
     return ap
 
 

@@ -1,0 +1,339 @@
+"""Run a scene end to end: scene -> system -> co-simulation -> results, summary, plots.
+
+Used by ``drillcosim run`` (:mod:`cosim.cli`). The output folder (default
+``out/<scene>``) receives
+
+* ``results.csv`` - every recorded variable at the output interval, header
+  line ``time,plant.body11_X,...`` (streamed during the run, moved into place
+  atomically; readable by ``numpy.loadtxt(..., delimiter=",", skiprows=1)``);
+* ``summary.json`` - see :mod:`cosim.summary`;
+* ``orbit.png``, ``orbit_steady.png``, ``deflection_contact.png``,
+  ``actuators.png`` - see :mod:`cosim.plots`.
+
+A run that fails while stepping (divergence: a non-finite output, or the plant
+discarding a step) keeps the rows recorded so far, writes the summary (with
+``diverged`` set) and the plots, and reports one line; exit code 1. A run that
+fails before the first step leaves earlier files of the folder untouched. Bad
+input raises ``ValueError`` (exit code 2 in the CLI).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import math
+import os
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+from .errors import CosimError, DivergenceError
+from .execution import Execution
+from .master import CoSimulation, Divergence, Result
+from .progress import ProgressObserver
+from .recorder import Recorder
+
+__all__ = ["EXIT_DIVERGED", "EXIT_OK", "RunOutcome", "parse_set", "run_scene", "run_system"]
+
+EXIT_OK = 0
+EXIT_DIVERGED = 1
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    """What :func:`run_scene` produced.
+
+    Attributes
+    ----------
+    exit_code : int
+        0 (completed) or 1 (stopped early: divergence or an FMU failure).
+    message : str
+        One line: where the files are, or why the run stopped.
+    out_dir : Path
+    summary : dict
+        The content of ``summary.json``.
+    files : tuple of Path
+        Files written.
+    """
+
+    exit_code: int
+    message: str
+    out_dir: Path
+    summary: dict
+    files: tuple[Path, ...]
+
+
+def _value(text: str) -> Any:
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text  # a bare word: take it as a string (e.g. mode=compressive_only)
+
+
+def parse_set(items: Sequence[str]) -> dict[str, Any]:
+    """``["section.key=value", ...]`` -> nested overrides dict (values parsed as TOML).
+
+    ``key=value`` without a section sets a top-level scene key (e.g.
+    ``gravity=0``). A value that is not valid TOML is taken as a string.
+
+    Raises
+    ------
+    ValueError
+        On an item without ``=`` or with an empty key.
+    """
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        key = key.strip()
+        if not sep or not key or any(not p for p in key.split(".")):
+            raise ValueError(f"--set {item!r}: expected section.key=value (value in TOML "
+                             "syntax, e.g. cosim.actuator_delay=0.002)")
+        node = out
+        *path, last = key.split(".")
+        for p in path:
+            node = node.setdefault(p, {})
+            if not isinstance(node, dict):
+                raise ValueError(f"--set {item!r}: '{p}' is set both as a value and a table")
+        node[last] = _value(text.strip())
+    return out
+
+
+def _merge(base: dict[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for k, v in over.items():
+        if isinstance(v, Mapping) and isinstance(out.get(k), dict):
+            out[k] = _merge(out[k], v)
+        else:
+            out[k] = dict(v) if isinstance(v, Mapping) else v
+    return out
+
+
+class _FmuLog(io.TextIOBase):
+    """stdout pass-through remembering FMU log lines (fmpy prints them as ``[STATUS] msg``)."""
+
+    def __init__(self, target):
+        self.target = target
+        self.problems: list[str] = []
+        self._buf = ""
+
+    def write(self, s: str) -> int:
+        self.target.write(s)
+        self._buf += s
+        *lines, self._buf = self._buf.split("\n")
+        for ln in lines:
+            if ln.startswith(("[DISCARD]", "[ERROR]", "[FATAL]")):
+                self.problems.append(ln)
+        return len(s)
+
+    def flush(self) -> None:
+        self.target.flush()
+
+
+def _failure(err: CosimError | None, result: Result, log: _FmuLog) -> dict[str, Any] | None:
+    if result.diverged is not None:
+        d = result.diverged
+        return {"time_s": d.time, "quantity": d.quantity, "value": d.value,
+                "message": f"non-finite {d.quantity} = {d.value!r} at t = {d.time:.6g} s"}
+    if err is None:
+        return None
+    detail = log.problems[-1].split("] ", 1)[-1] if log.problems else err.message
+    return {"time_s": err.time, "quantity": f"{err.fmu_name}.{err.call}", "value": None,
+            "message": f"FMU '{err.fmu_name}' {err.call} failed at t = {err.time:.6g} s: "
+                       f"{detail}"}
+
+
+class _FmuLogging:
+    """Observer switching on the FMUs' logging (``fmi2SetDebugLogging``) at the start.
+
+    fmpy instantiates with logging off; pythonfmu then drops the messages that
+    explain a discarded step (e.g. the plant's divergence report).
+    """
+
+    def on_start(self, execution) -> None:
+        for slave in execution.slaves.values():
+            with contextlib.suppress(Exception):
+                slave.fmu.fmi2SetDebugLogging(slave.component, 1, 0, None)
+
+    def on_step(self, execution) -> None:
+        """Nothing to do per step."""
+
+
+def _simulate(ss, stop: float, progress: bool | None, csv_path: Path) -> Result:
+    """:meth:`CoSimulation.run` with the FMU-logging observer added.
+
+    Same steps as the facade (whose ``_finish`` finalises the CSV and closes the
+    FMUs); only the extra observer differs.
+    """
+    H = ss.system.base_step
+    recorder = Recorder(ss.outputs, max(1, round(ss.output_interval / H)), csv_path)
+    execution = None
+    wall0 = time.perf_counter()
+    diverged = None
+    try:
+        execution = Execution(ss.system, read_outputs=ss.outputs)
+        execution.add_observer(_FmuLogging())
+        execution.add_observer(recorder)
+        if progress is not False:
+            execution.add_observer(ProgressObserver(stop, disable=None if progress is None
+                                                    else not progress))
+        execution.initialize()
+        wall0 = time.perf_counter()
+        execution.simulate_until(stop)
+    except DivergenceError as exc:
+        diverged = Divergence(exc.time, exc.quantity, exc.value)
+    except CosimError as exc:
+        exc.result = CoSimulation._finish(recorder, execution, wall0, None)
+        raise
+    except BaseException:
+        CoSimulation._finish(recorder, execution, wall0, None)
+        raise
+    return CoSimulation._finish(recorder, execution, wall0, diverged)
+
+
+def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
+               progress: bool | None = None, plots: bool = True) -> RunOutcome:
+    """Run a :class:`cosim.scene_system.SceneSystem` and write results, summary and plots.
+
+    Parameters
+    ----------
+    ss : SceneSystem
+    out_dir : path-like
+        Created if missing.
+    stop_time : float, optional
+        [s]; default ``ss.stop_time``.
+    progress : bool or None
+        Progress bar (None: only on a TTY).
+    plots : bool
+        Write the PNGs.
+
+    Returns
+    -------
+    RunOutcome
+        ``exit_code`` 1 if the run stopped before ``stop_time``.
+
+    Raises
+    ------
+    ValueError
+        Bad stop time or output interval (nothing is written).
+    CosimError
+        If the run failed before its first step (earlier files are kept).
+    """
+    from .plots import plot_run
+    from .scene_system import controller_parameters, span_info
+    from .summary import publish, summarize, write_json
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    stop = ss.stop_time if stop_time is None else float(stop_time)
+    if not (math.isfinite(stop) and stop > 0):
+        raise ValueError(f"stop time: a finite number > 0 [s], got {stop!r}")
+    staging = out / ".results.running.csv"
+    log = _FmuLog(sys.stdout)
+    err: CosimError | None = None
+    try:
+        with contextlib.redirect_stdout(log):
+            result = _simulate(ss, stop, progress, staging)
+    except CosimError as exc:
+        err = exc
+        result = exc.result
+        if result is None or not math.isfinite(result.end_time) or \
+                result.end_time <= ss.system.start_time:
+            staging.unlink(missing_ok=True)
+            raise
+    except BaseException:
+        staging.unlink(missing_ok=True)
+        raise
+    csv = out / "results.csv"
+    if staging.exists():
+        publish(staging, csv)
+    failure = _failure(err, result, log)
+    scene = ss.scene
+    spans = span_info(scene)
+    n_sites = len(scene.plant.actuator_joints)
+    ctrl = controller_parameters(scene)
+    switch = ctrl["switch_on_time"] if ctrl["enabled"] else None
+    summary = summarize(result.data, scene=scene.name, scene_file=scene.source, spans=spans,
+                        n_sites=n_sites, stop_time=stop, step=ss.system.base_step,
+                        output_interval=ss.output_interval, wall_time=result.wall_time,
+                        real_time_factor=result.real_time_factor, end_time=result.end_time,
+                        switch_on_time=switch, diverged=failure)
+    summary["controller"] = ctrl
+    summary["cosim"] = {k: v for k, v in vars(ss.settings).items()}
+    files = [csv, write_json(summary, out / "summary.json")]
+    if plots and len(result.data) > 1:
+        files += plot_run(result.data, out, scene.plant.contact.clearance, spans, n_sites,
+                          title=scene.name)
+    if failure is not None:
+        msg = (f"run stopped at t = {result.end_time:.6g} s of {stop:g} s: "
+               f"{failure['message']}; partial results in {out}")
+        return RunOutcome(EXIT_DIVERGED, msg, out, summary, tuple(files))
+    msg = (f"{scene.name}: {result.end_time:g} s simulated in {result.wall_time:.1f} s "
+           f"(real-time factor {result.real_time_factor:.3g}); results in {out}")
+    return RunOutcome(EXIT_OK, msg, out, summary, tuple(files))
+
+
+def run_scene(scene: str | os.PathLike = "paper_closed_loop", *, stop_time: float | None = None,
+              step: float | None = None, delay: float | None = None, gain: float | None = None,
+              sets: Sequence[str] = (), out_dir: str | Path | None = None,
+              fmu_dir: str | Path | None = None, progress: bool | None = None,
+              plots: bool = True) -> RunOutcome:
+    """Load a scene with overrides, run it and write the output folder.
+
+    Parameters
+    ----------
+    scene : str or path
+        Scene name (``scenes/<name>.toml``) or file.
+    stop_time : float, optional
+        Overrides ``[cosim] stop_time`` [s].
+    step : float, optional
+        Overrides ``[cosim] step`` [s].
+    delay : float, optional
+        Overrides ``[cosim] actuator_delay`` [s].
+    gain : float, optional
+        Overrides ``[controller] gain`` [N per unit strain] (does not enable a
+        disabled controller).
+    sets : sequence of str
+        ``section.key=value`` overrides of any scene key (value parsed as TOML);
+        applied after the options above.
+    out_dir : path-like, optional
+        Default ``out/<scene name>``.
+    fmu_dir : path-like, optional
+        FMU folder (default ``build/fmus``; built on demand).
+    progress : bool or None
+        Progress bar (None: only on a TTY).
+    plots : bool
+        Write the PNGs.
+
+    Returns
+    -------
+    RunOutcome
+
+    Raises
+    ------
+    ValueError
+        Bad input (scene, keys, values), one line.
+    """
+    from plant.scene import load_scene
+
+    from .scene_system import scene_system
+
+    over: dict[str, Any] = {}
+    for section, key, value in (("cosim", "stop_time", stop_time), ("cosim", "step", step),
+                                ("cosim", "actuator_delay", delay),
+                                ("controller", "gain", gain)):
+        if value is not None:
+            over.setdefault(section, {})[key] = value
+    over = _merge(over, parse_set(sets))
+    sc = load_scene(scene, overrides=over or None)
+    plant_over = {k: v for k, v in over.items() if k not in ("cosim", "controller")}
+    ss = scene_system(sc, fmu_dir, plant_overrides=plant_over)
+    out = Path(out_dir) if out_dir is not None else Path("out") / sc.name
+    return run_system(ss, out, progress=progress, plots=plots)

@@ -1,0 +1,136 @@
+"""``drillcosim run`` end to end on short runs of the real plant + controller FMUs.
+
+Files (results.csv, summary.json, PNGs), exit codes (0 ok, 1 stopped early, 2 bad
+input) and that a failing run never damages the files of an earlier one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.cli import main
+from cosim.errors import CosimError
+from cosim.run import run_system
+from cosim.scene_system import ensure_fmus, scene_system
+from cosim.summary import SUMMARY_KEYS
+from plant.scene import load_scene
+
+PNGS = ("orbit.png", "orbit_steady.png", "deflection_contact.png", "actuators.png")
+#: Fixed co-simulation settings, so the tests do not follow tuning of the scene files.
+COSIM = ["--set", "cosim.step=1e-3", "--set", 'cosim.algorithm="jacobi"',
+         "--no-progress"]
+
+
+@pytest.fixture(scope="module")
+def fmu_dir() -> Path:
+    try:
+        paths = ensure_fmus()
+    except (FileNotFoundError, RuntimeError) as exc:
+        pytest.skip(f"plant/controller FMUs unavailable: {exc}")
+    return paths["DrillstringPlant"].parent
+
+
+@pytest.fixture(scope="module")
+def good_run(fmu_dir, tmp_path_factory) -> tuple[Path, int]:
+    out = tmp_path_factory.mktemp("run") / "closed"
+    code = main(["run", "paper_closed_loop", "--stop-time", "0.2", "--out", str(out), *COSIM])
+    return out, code
+
+
+def _snapshot(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir()) if p.is_file()}
+
+
+def test_run_writes_results_summary_and_plots(good_run) -> None:
+    out, code = good_run
+    assert code == 0
+    header = (out / "results.csv").read_text().splitlines()[0].split(",")
+    assert header[0] == "time" and "plant.body11_radial_deflection" in header
+    assert "controller.actuator1_force_C" in header and "plant.actuator2_power" in header
+    data = np.loadtxt(out / "results.csv", delimiter=",", skiprows=1)
+    assert data.shape == (201, len(header))
+    np.testing.assert_allclose(data[:, 0], np.arange(201) * 1e-3, atol=1e-12)
+    assert np.all(np.isfinite(data))
+    for name in PNGS:
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+    assert not list(out.glob(".*")), "temporary files left behind"
+
+
+def test_summary_has_the_documented_keys_and_units(good_run) -> None:
+    out, _ = good_run
+    s = json.loads((out / "summary.json").read_text())
+    assert set(SUMMARY_KEYS) <= set(s)
+    assert s["scene"] == "paper_closed_loop" and s["completed"] and s["diverged"] is None
+    assert s["end_time_s"] == pytest.approx(0.2) and s["step_s"] == 1e-3
+    assert s["wall_time_s"] > 0 and s["real_time_factor"] > 0
+    assert s["steady_window_s"] == pytest.approx([0.2 * 2 / 3, 0.2])
+    assert s["spans"]["body11"]["span"] == "long" and s["spans"]["body26"]["span"] == "short"
+    for span in s["spans"].values():
+        assert set(span) >= {"span_length_m", "peak_radial_deflection_m",
+                             "steady_radial_deflection_mean_m",
+                             "steady_radial_deflection_std_m", "peak_contact_force_N",
+                             "contact_events", "contact_time_s"}
+        assert 0 <= span["peak_radial_deflection_m"] < 0.02  # no contact in 0.2 s
+        assert span["contact_events"] == 0 and span["contact_time_s"] == 0.0
+    data = np.loadtxt(out / "results.csv", delimiter=",", skiprows=1)
+    header = (out / "results.csv").read_text().splitlines()[0].split(",")
+    r11 = data[:, header.index("plant.body11_radial_deflection")]
+    assert s["spans"]["body11"]["peak_radial_deflection_m"] == pytest.approx(np.max(r11))
+    for site in ("site1", "site2"):
+        a = s["actuators"][site]
+        assert set(a) >= {"peak_force_N", "peak_force_C_N", "peak_force_E_N", "peak_power_W",
+                          "peak_abs_power_W", "steady_mean_power_W"}
+    f1 = np.abs(data[:, [header.index("controller.actuator1_force_C"),
+                         header.index("controller.actuator1_force_E")]])
+    assert s["actuators"]["site1"]["peak_force_N"] == pytest.approx(f1.max())
+    assert s["controller"]["gain"] == 1e9 and s["cosim"]["step"] == 1e-3
+
+
+def test_bad_input_exits_2_in_one_line_and_keeps_files(good_run, capsys) -> None:
+    out, _ = good_run
+    before = _snapshot(out)
+    capsys.readouterr()
+    for argv in (["--set", "cosim.stepp=1"], ["--set", "controller.gian=1"],
+                 ["--set", "nonsense"], ["--stop-time", "-1"], ["--delay", "-0.1"]):
+        code = main(["run", "paper_closed_loop", "--out", str(out), *COSIM, *argv])
+        err = capsys.readouterr().err
+        assert code == 2, argv
+        assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert main(["run", "no_such_scene", "--out", str(out), "--no-progress"]) == 2
+    assert "not found" in capsys.readouterr().err
+    assert _snapshot(out) == before
+
+
+def test_failure_before_the_first_step_keeps_earlier_files(good_run, fmu_dir) -> None:
+    out, _ = good_run
+    before = _snapshot(out)
+    sc = dataclasses.replace(load_scene("paper_closed_loop"), cosim={"step": 1e-3})
+    ss = scene_system(sc, fmu_dir)
+    plant = ss.system.fmu("plant")
+    bad = dataclasses.replace(plant, parameters={**plant.parameters, "pipe.length": -1.0})
+    ss = dataclasses.replace(ss, system=dataclasses.replace(
+        ss.system, fmus=[bad, ss.system.fmu("controller")]))
+    with pytest.raises(CosimError, match="fmi2DoStep"):
+        run_system(ss, out, stop_time=0.1, progress=False)
+    assert _snapshot(out) == before
+
+
+def test_diverging_run_exits_1_and_keeps_partial_results(fmu_dir, tmp_path, capsys) -> None:
+    out = tmp_path / "diverging"
+    # A huge gain with a 5 ms actuator delay: the loop blows up within a fraction of a second
+    # and the plant discards the step (lateral deflection beyond its validity range).
+    code = main(["run", "paper_closed_loop", "--stop-time", "1.0", "--gain", "1e14",
+                 "--delay", "0.005", "--out", str(out), "--no-plots", *COSIM])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1
+    assert err and err[-1].startswith("run stopped at t = "), err
+    s = json.loads((out / "summary.json").read_text())
+    assert not s["completed"] and s["diverged"]["time_s"] < 1.0
+    assert s["diverged"]["message"] and "\n" not in s["diverged"]["message"]
+    data = np.loadtxt(out / "results.csv", delimiter=",", skiprows=1, ndmin=2)
+    assert 1 < len(data) and data[-1, 0] == pytest.approx(s["end_time_s"])
