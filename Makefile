@@ -20,8 +20,8 @@ $(STAMP): $(BIN)/python pyproject.toml
 
 install: $(STAMP)
 
-$(FMUS) &: $(STAMP) $(SRC)
-	@if [ -f fmu_src/build.py ]; then $(BIN)/python -m fmu_src.build --out build/fmus; fi
+$(FMUS) &: $(STAMP) $(SRC) $(wildcard scenes/*.toml)
+	$(BIN)/python -m fmu_src.build --out build/fmus
 
 fmus: $(FMUS)
 
