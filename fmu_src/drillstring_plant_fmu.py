@@ -227,8 +227,16 @@ _sim_mod = sys.modules[f"{VENDORED_PLANT}.simulator"]
 _obs_mod = sys.modules[f"{VENDORED_PLANT}.observables"]
 
 
-def scenes_folder() -> Path:
-    """Shipped scenes: ``resources/scenes`` in the FMU, ``scenes/`` of the repository at build."""
+def scenes_folder(resources: str | None = None) -> Path:
+    """Shipped scenes: ``<resources>/scenes`` of this instance; at build time ``scenes/``.
+
+    pythonfmu 0.7.0 re-executes this module's code at every instantiation, and a
+    Python exception there crashes the host (segfault, reproduced with fmpy after
+    the first unzip folder was deleted). So module-level code touches no files;
+    the folder comes from the instance's ``resources`` argument.
+    """
+    if resources:
+        return Path(resources) / "scenes"
     here = Path(__file__).resolve().parent
     for cand in (here / "scenes", here.parent / "scenes"):
         if cand.is_dir():
@@ -260,10 +268,12 @@ def _parameter_table() -> list[tuple[str, str, str, Any, str, str, bool]]:
 
 
 def _declared_outputs() -> list[tuple[str, str, str]]:
-    """(name, unit, doc) of the outputs of the full 3D model with the default scene."""
-    scene = _scene_mod.load_scene(DEFAULT_SCENE, folder=scenes_folder(),
-                                  overrides={"model": "full3d"})
-    plant = scene.plant
+    """(name, unit, doc) of the outputs of the full 3D model with the default scene.
+
+    The default scene's contact bodies (11, 26) and actuator sites (2) are the
+    ``PlantParams`` defaults (a test checks), so no scene file is read here.
+    """
+    plant = _params_mod.PlantParams()
     return _obs_mod.output_names(True, list(plant.contact_bodies), len(plant.actuator_joints))
 
 
@@ -352,6 +362,7 @@ class DrillstringPlant(Fmi2Slave):
         self._call_error: str | None = None  # failed get/set, reported by the next doStep
         self._halted: str | None = None  # divergence, until a state is restored
         self._u = np.zeros(len(INPUTS))
+        self._scenes = scenes_folder(self.resources)
 
         cont, fixed = Fmi2Variability.continuous, Fmi2Variability.fixed
         sites = {"1": "site 1 (long span)", "2": "site 2 (short span)"}
@@ -421,7 +432,7 @@ class DrillstringPlant(Fmi2Slave):
         if not (isinstance(step, float) and math.isfinite(step) and step >= 0.0):
             raise ValueError(f"max_internal_step = {step!r} is out of range: allowed [0, inf) s "
                              f"(0 = the model's stable step)")
-        scene = _scene_mod.load_scene(self.scene, folder=scenes_folder(),
+        scene = _scene_mod.load_scene(self.scene, folder=self._scenes,
                                       overrides=self._overrides())
         model = _model_mod.DrillstringModel(scene.plant, scene.model)
         missing = [n for n in OUTPUTS if n not in model.output_names]
