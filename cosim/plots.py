@@ -116,10 +116,22 @@ def plot_orbit(data: np.ndarray, path: str | Path, clearance: float,
     return save_figure(fig, path)
 
 
+def _mark(axes, switch_on_time: float | None) -> None:
+    if switch_on_time:
+        for ax in np.ravel(axes):
+            ax.axvline(switch_on_time, color="0.4", ls=":", lw=1.0)
+        ax = np.ravel(axes)[0]
+        ax.annotate("controller on", (switch_on_time, 1.0), xycoords=("data", "axes fraction"),
+                    xytext=(3, -12), textcoords="offset points", fontsize=8, color="0.3")
+
+
 def plot_deflection_contact(data: np.ndarray, path: str | Path, clearance: float,
                             spans: Mapping[int, Mapping] | None = None,
-                            title: str = "") -> Path | None:
-    """Radial deflection [mm] and contact force [kN] vs time at each contact body."""
+                            title: str = "", switch_on_time: float | None = None) -> Path | None:
+    """Radial deflection [mm] and contact force [kN] vs time at each contact body.
+
+    ``switch_on_time`` [s], if given, is marked by a dotted line.
+    """
     bodies = _bodies(data)
     if not bodies:
         return None
@@ -142,13 +154,15 @@ def plot_deflection_contact(data: np.ndarray, path: str | Path, clearance: float
         ax.set_ylabel("contact force [kN]")
         ax.set_xlabel("time [s]")
         ax.grid(alpha=0.3)
+    _mark(axes, switch_on_time)
     fig.suptitle(f"{title}: radial deflection and wellbore contact force" if title else
                  "radial deflection and wellbore contact force")
     return save_figure(fig, path)
 
 
 def plot_actuators(data: np.ndarray, path: str | Path, n_sites: int = 2,
-                   spans_by_site: Sequence[str] | None = None, title: str = "") -> Path | None:
+                   spans_by_site: Sequence[str] | None = None, title: str = "",
+                   switch_on_time: float | None = None) -> Path | None:
     """Actuator forces [kN] (C and E) and delivered power [W] vs time per site."""
     t = data["time"]
     if all(_col(data, f"actuator{s}_power") is None for s in range(1, n_sites + 1)):
@@ -176,14 +190,16 @@ def plot_actuators(data: np.ndarray, path: str | Path, n_sites: int = 2,
         ax.set_ylabel("actuator power [W]")
         ax.set_xlabel("time [s]")
         ax.grid(alpha=0.3)
+    _mark(axes, switch_on_time)
     fig.suptitle(f"{title}: actuator force and power" if title else "actuator force and power")
     return save_figure(fig, path)
 
 
 def plot_run(data: np.ndarray, out_dir: str | Path, clearance: float,
              spans: Mapping[int, Mapping] | None = None, n_sites: int = 2,
-             title: str = "") -> list[Path]:
-    """Write ``orbit.png``, ``deflection_contact.png`` and ``actuators.png``; return paths."""
+             title: str = "", switch_on_time: float | None = None) -> list[Path]:
+    """Write ``orbit.png``, ``orbit_steady.png`` (last third), ``deflection_contact.png``
+    and ``actuators.png``; return their paths (a plot without data is skipped)."""
     out = Path(out_dir)
     t = data["time"]
     t_from = float(t[0] + 2.0 / 3.0 * (t[-1] - t[0])) if len(t) > 1 else None
@@ -193,8 +209,9 @@ def plot_run(data: np.ndarray, out_dir: str | Path, clearance: float,
     paths = [plot_orbit(data, out / "orbit.png", clearance, spans, title),
              plot_orbit(data, out / "orbit_steady.png", clearance, spans, title, t_from),
              plot_deflection_contact(data, out / "deflection_contact.png", clearance, spans,
-                                     title),
-             plot_actuators(data, out / "actuators.png", n_sites, site_spans, title)]
+                                     title, switch_on_time),
+             plot_actuators(data, out / "actuators.png", n_sites, site_spans, title,
+                            switch_on_time)]
     return [p for p in paths if p is not None]
 
 

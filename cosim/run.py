@@ -270,7 +270,7 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
     files = [csv, write_json(summary, out / "summary.json")]
     if plots and len(result.data) > 1:
         files += plot_run(result.data, out, scene.plant.contact.clearance, spans, n_sites,
-                          title=scene.name)
+                          title=scene.name, switch_on_time=switch or None)
     if failure is not None:
         msg = (f"run stopped at t = {result.end_time:.6g} s of {stop:g} s: "
                f"{failure['message']}; partial results in {out}")

@@ -28,8 +28,11 @@ Keys of the summary
 ``actuators``
     Per site ``"site<s>"``: ``peak_force_N`` (max abs over the C and E
     actuators), ``peak_force_C_N``, ``peak_force_E_N``, ``peak_power_W`` (max
-    of the delivered power), ``peak_abs_power_W``, ``steady_mean_power_W``.
-    Forces are 0 when the controller is disabled.
+    of the delivered power), ``peak_abs_power_W``, ``steady_mean_power_W``,
+    ``peak_abs_strain`` and ``steady_strain_rms`` (gauges C and E together, unit
+    1), and ``before_switch_on_strain_rms`` (last third before the switch-on)
+    when the controller switches on during the run. Forces are 0 when the
+    controller is disabled.
 ``diverged``
     ``null``, or ``{"time_s", "quantity", "value", "message"}`` of the failure
     that stopped the run.
@@ -179,12 +182,25 @@ def summarize(data: np.ndarray, *, scene: str = "", scene_file: str = "",
         fe = _peak(_col(data, f"actuator{s}_force_E"))
         p = _col(data, f"actuator{s}_power")
         sel = t >= w0
+        strains = [x for x in (_col(data, f"strain{s}_C"), _col(data, f"strain{s}_E"))
+                    if x is not None]
+        extra: dict[str, float] = {}
+        if strains:
+            eps = np.stack(strains)
+            extra["peak_abs_strain"] = _peak(eps.ravel())
+            extra["steady_strain_rms"] = float(np.sqrt(np.mean(eps[:, sel] ** 2))) \
+                if np.any(sel) else math.nan
+            if switch_on_time is not None and t_first < switch_on_time < t_last:
+                b0 = t_first + 2.0 / 3.0 * (switch_on_time - t_first)
+                pre = (t >= b0) & (t < switch_on_time)
+                extra["before_switch_on_strain_rms"] = float(np.sqrt(np.mean(eps[:, pre] ** 2)))
         actuators[f"site{s}"] = {
             "peak_force_N": max(fc, fe), "peak_force_C_N": fc, "peak_force_E_N": fe,
             "peak_power_W": float(np.max(p)) if p is not None and p.size else 0.0,
             "peak_abs_power_W": _peak(p),
             "steady_mean_power_W": float(np.mean(p[sel])) if p is not None and np.any(sel)
             else 0.0,
+            **extra,
         }
     return {
         "scene": scene, "scene_file": scene_file, "stop_time_s": stop_time, "end_time_s": end,
