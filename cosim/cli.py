@@ -87,7 +87,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     try:
         outcome = run_scene(args.scene, stop_time=args.stop_time, step=args.step,
                             delay=args.delay, gain=args.gain, sets=args.set, out_dir=args.out,
-                            progress=False if args.no_progress else None,
+                            fmu_dir=args.fmu_dir, progress=False if args.no_progress else None,
                             plots=not args.no_plots)
     except CosimError as exc:  # failed before the first step: earlier files are kept
         print(f"drillcosim run: failed: {exc}", file=sys.stderr)
@@ -122,6 +122,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="override a scene key, e.g. cosim.sensor_delay=0.002 (value in TOML "
                         "syntax; repeatable)")
     p.add_argument("--out", metavar="DIR", help="output folder (default out/<scene>)")
+    p.add_argument("--fmu-dir", metavar="DIR", help="folder of DrillstringPlant.fmu and "
+                   "StrainController.fmu, used as is (default build/fmus, rebuilt when stale)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.set_defaults(func=_cmd_run)

@@ -333,7 +333,11 @@ def _stale(fmu: Path, name: str) -> bool:
 
 def ensure_fmus(fmu_dir: str | Path | None = None, names: Sequence[str] = (
         "DrillstringPlant", "StrainController")) -> dict[str, Path]:
-    """Paths of the project FMUs in ``fmu_dir``, building missing or stale ones.
+    """Paths of the project FMUs in ``fmu_dir``, building missing (or stale) ones.
+
+    In the default folder (``build/fmus``) an FMU older than its adapter or
+    vendored package is rebuilt; an explicitly given folder is used as is (built
+    only if missing), so a frozen set of FMUs stays frozen.
 
     Raises
     ------
@@ -346,7 +350,7 @@ def ensure_fmus(fmu_dir: str | Path | None = None, names: Sequence[str] = (
     paths = {}
     for name in names:
         path = folder / f"{name}.fmu"
-        if _stale(path, name):
+        if not path.is_file() or (fmu_dir is None and _stale(path, name)):
             spec = next((s for s in REGISTRY if s.name == name), None)
             if spec is not None and spec.script_path.is_file():
                 build_one(spec, folder)
