@@ -10,6 +10,12 @@ target with ``os.replace``. An earlier file under the target name is thus
 never truncated before the new one is complete; if the run fails, closing
 (which the facade does in a ``finally``) still finalises the partial,
 readable file under the target name.
+
+If writing the CSV fails (disk full, quota, I/O error), the recorder raises
+:class:`ResultWriteError` (a :class:`~cosim.errors.CosimError`, so the facade
+attaches the partial result recorded in memory as ``error.result``), deletes
+its temporary file (freeing the space; it may end in a cut row) and never
+replaces the target: an earlier file under the target name stays unchanged.
 """
 
 from __future__ import annotations
@@ -21,7 +27,31 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import CosimError
 from .system import split_variable
+
+
+class ResultWriteError(CosimError):
+    """Writing the result CSV failed (e.g. ``ENOSPC``); the run stopped.
+
+    Attributes
+    ----------
+    path : Path
+        The target CSV (left unchanged: an earlier file under that name survives).
+    os_errno : int or None
+        ``errno`` of the underlying ``OSError``.
+    """
+
+    def __init__(self, path: str | Path, time: float, reason: str,
+                 os_errno: int | None = None):
+        super().__init__("", "write results", time, reason)
+        self.path = Path(path)
+        self.os_errno = os_errno
+        self.args = (f"cannot write results to '{self.path}' (last row at t = {time:.9g} s): "
+                     f"{reason}",)
+
+    def __reduce__(self):
+        return (type(self), (self.path, self.time, self.message, self.os_errno))
 
 
 class Recorder:
@@ -70,6 +100,8 @@ class Recorder:
         self.csv_path = Path(csv_path) if csv_path is not None else None
         self._tmp_path: Path | None = None
         self._file = None
+        self._last_time = float("nan")
+        self.write_error: ResultWriteError | None = None
         self.closed = False
         if self.csv_path is not None:
             self._open_csv()
@@ -102,6 +134,7 @@ class Recorder:
         if execution.tick % self.interval_ticks:
             return
         y = self._y
+        self._last_time = execution.time
         if self._slow:
             row = [execution.time]
             for i, j in enumerate(self._fast):
@@ -128,8 +161,27 @@ class Recorder:
             self._chunks.append(chunk)
         if self._file is not None:
             flat = chunk.view(np.float64).reshape(len(chunk), len(self.names))
-            np.savetxt(self._file, flat, delimiter=",", fmt="%.17g")
-            self._file.flush()
+            try:
+                np.savetxt(self._file, flat, delimiter=",", fmt="%.17g")
+                self._file.flush()
+            except OSError as exc:
+                self._write_failed(exc)
+
+    def _write_failed(self, exc: OSError) -> None:
+        """Drop the temporary file (never the target) and raise :class:`ResultWriteError`."""
+        file, self._file = self._file, None
+        try:
+            file.close()
+        except OSError:
+            pass  # the buffered rows cannot be written either
+        if self._tmp_path is not None:
+            self._tmp_path.unlink(missing_ok=True)
+        kept = ("the rows recorded so far are in memory (error.result.data)"
+                if self.keep_in_memory else "keep_in_memory=False: the rows are lost")
+        reason = (f"{exc.strerror or exc} (errno {exc.errno}); {self.n_rows} rows recorded, "
+                  f"{kept}; the target file was not replaced")
+        self.write_error = ResultWriteError(self.csv_path, self._last_time, reason, exc.errno)
+        raise self.write_error from exc
 
     @property
     def data(self) -> np.ndarray:
@@ -147,19 +199,31 @@ class Recorder:
             return
         self.closed = True
         if self._file is not None:
-            self._file.close()
+            try:
+                self._file.close()
+            except OSError:
+                pass  # unflushed rows of a file that is deleted anyway
             self._tmp_path.unlink(missing_ok=True)
             self._file = None
 
     def close(self) -> None:
-        """Flush and atomically move the CSV onto its target name (idempotent)."""
+        """Flush and atomically move the CSV onto its target name (idempotent).
+
+        Raises
+        ------
+        ResultWriteError
+            If the last rows cannot be written; the target is not replaced.
+        """
         if self.closed:
             return
         self.closed = True
         self.flush()
         if self._file is not None:
-            self._file.flush()
-            os.fsync(self._file.fileno())
-            self._file.close()
+            try:
+                self._file.flush()
+                os.fsync(self._file.fileno())
+                self._file.close()
+            except OSError as exc:
+                self._write_failed(exc)
             os.replace(self._tmp_path, self.csv_path)
             self._file = None
