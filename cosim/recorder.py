@@ -12,8 +12,10 @@ never truncated before the new one is complete; if the run fails, closing
 readable file under the target name.
 
 If writing the CSV fails (disk full, quota, I/O error), the recorder raises
-:class:`ResultWriteError` (a :class:`~cosim.errors.CosimError`, so the facade
-attaches the partial result recorded in memory as ``error.result``), deletes
+:class:`ResultWriteError` (a :class:`~cosim.errors.CosimError`: when it happens
+while stepping, the facade attaches the rows recorded in memory as
+``error.result``; when the final write in :meth:`Recorder.close` fails, the
+rows stay in :attr:`Recorder.data`), deletes
 its temporary file (freeing the space; it may end in a cut row) and never
 replaces the target: an earlier file under the target name stays unchanged.
 """
@@ -176,10 +178,9 @@ class Recorder:
             pass  # the buffered rows cannot be written either
         if self._tmp_path is not None:
             self._tmp_path.unlink(missing_ok=True)
-        kept = ("the rows recorded so far are in memory (error.result.data)"
-                if self.keep_in_memory else "keep_in_memory=False: the rows are lost")
-        reason = (f"{exc.strerror or exc} (errno {exc.errno}); {self.n_rows} rows recorded, "
-                  f"{kept}; the target file was not replaced")
+        kept = "kept in memory" if self.keep_in_memory else "lost (keep_in_memory=False)"
+        reason = (f"{exc.strerror or exc} (errno {exc.errno}); {self.n_rows} rows recorded "
+                  f"({kept}); the target file was not replaced")
         self.write_error = ResultWriteError(self.csv_path, self._last_time, reason, exc.errno)
         raise self.write_error from exc
 
