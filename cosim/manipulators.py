@@ -35,3 +35,50 @@ class ScheduledChange:
             self._tick = execution.ticks_until(self.time)
         if execution.tick == self._tick:
             execution.set_value(self.ref, self.value)
+
+
+class InjectFault:
+    """Fault injection: write ``value`` to ``'fmu.var'`` before every step in [start, stop).
+
+    Unlike :class:`ScheduledChange` the value is written again before each step,
+    so it persists while the FMU (or an importer) would reset it. At ``stop``
+    (if given) ``restore`` is written once, when not None. Typical faults: a NaN
+    or huge value on an unconnected input, a parameter that makes an FMU
+    discard its steps.
+
+    Parameters
+    ----------
+    start : float
+        First step affected [s], on the base-step grid.
+    ref : str
+        ``'fmu.var'`` to write.
+    value : float, int, bool or str
+        Faulty value.
+    stop : float, optional
+        First step no longer affected [s]; default: until the end.
+    restore : float, int, bool or str, optional
+        Value written at ``stop``.
+    """
+
+    def __init__(self, start: float, ref: str, value: ParameterValue,
+                 stop: float | None = None, restore: ParameterValue | None = None):
+        split_variable(ref, "InjectFault.ref")
+        if stop is not None and not stop > start:
+            raise ValueError(f"InjectFault.stop: > start = {start} s, got {stop!r} s")
+        self.start, self.stop, self.ref = start, stop, ref
+        self.value, self.restore = value, restore
+        self.applied = 0  #: steps the fault was written before
+        self._ticks: tuple[int, int | None] | None = None
+
+    def before_step(self, execution) -> None:
+        """Write the fault while the execution's tick lies in [start, stop)."""
+        if self._ticks is None:
+            self._ticks = (execution.ticks_until(self.start),
+                           None if self.stop is None else execution.ticks_until(self.stop))
+        first, end = self._ticks
+        tick = execution.tick
+        if tick >= first and (end is None or tick < end):
+            execution.set_value(self.ref, self.value)
+            self.applied += 1
+        elif end is not None and tick == end and self.restore is not None:
+            execution.set_value(self.ref, self.restore)
