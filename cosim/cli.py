@@ -63,6 +63,19 @@ def _cmd_modes(args: argparse.Namespace) -> int:
     return 0
 
 
+def scene_schema() -> str:
+    """The whole scene schema (plant tables, then [controller] and [cosim]) as markdown."""
+    from cosim.scene_system import cosim_schema_markdown
+    from plant.scene import schema_markdown
+
+    return schema_markdown() + "\n" + cosim_schema_markdown()
+
+
+def _cmd_schema(args: argparse.Namespace) -> int:
+    print(scene_schema(), end="")
+    return 0
+
+
 def _cmd_scenes(args: argparse.Namespace) -> int:
     from plant.scene import list_scenes, load_scene
 
@@ -106,6 +119,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--model", choices=("full3d", "axial_torsional"),
                    help="override the scene's model")
     p.set_defaults(func=_cmd_modes)
+    p = sub.add_parser("schema", help="print the scene file schema (markdown, docs/scenes.md)")
+    p.set_defaults(func=_cmd_schema)
     p = sub.add_parser("scenes", help="list the shipped scenes")
     p.set_defaults(func=_cmd_scenes)
     p = sub.add_parser("build", help="build the FMUs")

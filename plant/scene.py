@@ -320,14 +320,4 @@ def schema_markdown() -> str:
         for name, default, unit, text in describe(cls):
             lines.append(f"| {name} | {_fmt_default(default)} | {unit} | {text} |")
         lines.append("")
-    lines += [
-        "## [controller] and [cosim]",
-        "",
-        "Validated by the controller package and the co-simulation master; see the README.",
-        "",
-    ]
     return "\n".join(lines)
-
-
-if __name__ == "__main__":  # pragma: no cover
-    print(schema_markdown(), end="")
