@@ -186,8 +186,10 @@ def operations(h: Harness) -> st.SearchStrategy:
         st.tuples(st.just("setString"), pairs(texts)),
         getters,
         st.tuples(st.just("setInputs"), reals),
+        st.tuples(st.just("setInputs"), st.floats(-1e4, 1e4)),  # valid: reach deeper states
         st.tuples(st.just("doStep"), st.one_of(st.just("now"), st.sampled_from(START_TIMES)),
                   st.sampled_from(STEP_SIZES)),
+        st.tuples(st.just("doStep"), st.just("now"), st.just(1e-3)),
         st.tuples(st.just("doStep"), st.just("now"), st.just(1e-3)),
         st.tuples(st.sampled_from(["setFMUstate", "freeFMUstate", "serialize"]),
                   st.integers(0, 3)),
