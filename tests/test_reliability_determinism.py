@@ -108,22 +108,23 @@ def test_controller_fmu_runs_are_bit_identical_in_process_and_in_a_worker(fmu_pa
     assert _bit_equal(first, solo_run(fmu, params)) and _bit_equal(first, worker)
 
 
-def scene_run(out_dir: str) -> bytes:
+def scene_run(out_dir: str, fmu_dir: str) -> bytes:
     """``drillcosim run`` (plant + controller through the master): results.csv bytes."""
     from cosim.run import run_scene
 
-    outcome = run_scene("paper_closed_loop", stop_time=0.01, out_dir=out_dir, progress=False,
-                        plots=False)
+    outcome = run_scene("paper_closed_loop", stop_time=0.01, out_dir=out_dir, fmu_dir=fmu_dir,
+                        progress=False, plots=False)
     assert outcome.exit_code == 0, outcome.message
     return (Path(out_dir) / "results.csv").read_bytes()
 
 
 def test_master_plant_and_controller_bit_identical_in_process_and_in_a_worker(
-        tmp_path: Path) -> None:
-    first = scene_run(str(tmp_path / "a"))
-    second = scene_run(str(tmp_path / "b"))
+        fmu_paths, tmp_path: Path) -> None:
+    fmu_dir = str(Path(fmu_paths["DrillstringPlant"]).parent)
+    first = scene_run(str(tmp_path / "a"), fmu_dir)
+    second = scene_run(str(tmp_path / "b"), fmu_dir)
     with _spawn_pool() as pool:
-        worker = pool.submit(scene_run, str(tmp_path / "c")).result(timeout=900)
+        worker = pool.submit(scene_run, str(tmp_path / "c"), fmu_dir).result(timeout=900)
     assert first.count(b"\n") > 10
     assert first == second
     assert first == worker
