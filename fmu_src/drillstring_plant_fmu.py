@@ -20,6 +20,14 @@ there. The copy is made in a temporary folder beside it and renamed with
 If the folder cannot be written, the package is imported from ``resources/``
 (correct, only slower to start) and a warning is logged at instantiation.
 
+pythonfmu 0.7.0 compiles and executes this file's code anew at every
+instantiation (``Py_CompileString`` + ``PyEval_EvalCode``), and a Python exception
+there crashes the host process (segfault inside ``fmi2Instantiate``; reproduced
+with fmpy once the first unzip folder was deleted and a scene file was read at
+module level). Module-level code therefore reads no files; the vendored package
+is imported once per process (``sys.modules``) and each instance finds the scenes
+through its own ``resources`` argument.
+
 Interface (value references follow the registration order)
 ----------------------------------------------------------
 inputs (Real, N, continuous, start 0):
