@@ -1,0 +1,521 @@
+"""Linear, discrete-time stability prediction of the sampled strain-feedback loop.
+
+The plant is linearized about the straight string spinning with the top drive
+(:func:`plant.linearize.linearize`, top-drive frame, where gauges and actuators
+are body-fixed and the loop is linear time-invariant)::
+
+    dx/dt = A x + B u,    s = C x        (u: actuator forces [N], s: strains [1])
+
+The co-simulation holds ``u`` constant over each communication step ``H``
+(FMI 2: no input derivatives), so the plant over one step is exactly the
+zero-order-hold discretization ``x_{k+1} = Ad x_k + Bd u_k`` (``method="zoh"``,
+matrix exponential of the augmented matrix), or the map of the plant's own
+internal integrator (``method="rk4"``: ``ceil(H / max_step)`` RK4 sub-steps on the
+linear system; the two agree to many digits for the drillstring).
+
+The controller (:class:`controller.StrainController`) samples the strains at
+the communication points and outputs, after each step, ``F = a F_prev + (1 - a)
+K c`` with ``a = exp(-H / T_lag)`` (``a = 0`` without actuator lag, ``F = K c``).
+
+Loop timing (the master's conventions, :mod:`cosim.algorithms`,
+:mod:`cosim.delays`): with samples ``s_k = C x_k`` and ``G_k`` the controller
+output computed from ``s_k`` (lag filter applied to the samples),
+
+    u_k = sum_l W_l G_{k-l}
+
+where ``W`` is the convolution of
+
+* the algorithm's inherent delay: **Gauss-Seidel** (either order) uses the
+  strains of ``t_k`` for the force over ``[t_k, t_k+1]`` (``m0 = 0``);
+  **Jacobi** exchanges outputs sampled at ``t_k``, and the controller output at
+  ``t_k`` was computed from the strains of ``t_{k-1}`` (``m0 = 1``: one step more);
+* each connection's transport delay ``tau = (n + f) H``: the sample ``n`` steps
+  back, linearly interpolated with the one ``n + 1`` back for ``0 < f < 1``
+  (``(1 - f) s[-n] + f s[-n-1]``, exactly the master's :class:`~cosim.delays.DelayLine`);
+* with ``coupling="linear"``, the extrapolation ``(1 + h) d[0] - h d[-1]`` of each
+  delayed signal to the midpoint of the target's step (``h = +-1/2`` source
+  steps, depending on algorithm and stepping order, see :func:`loop_weights`).
+
+The closed loop is the discrete system on ``z_k = [x_k, G_{k-1}, ..., G_{k-D}]``;
+it is stable iff the spectral radius of its matrix is < 1. ``ln(rho) / H`` is
+the growth rate [1/s] of the slowest-decaying (or fastest-growing) mode.
+
+Only single-rate loops (controller period = communication step) are modelled.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+
+__all__ = [
+    "ALGORITHM_DELAY_STEPS",
+    "LoopModel",
+    "closed_loop_matrix",
+    "discretize",
+    "line_weights",
+    "loop_weights",
+    "reduce_loop",
+    "spectral_radius",
+]
+
+#: Inherent loop delay of each algorithm [communication steps].
+ALGORITHM_DELAY_STEPS = {"gauss_seidel": 0, "jacobi": 1}
+_EPS = 1e-9
+
+
+def discretize(A: np.ndarray, B: np.ndarray, step: float, method: str = "zoh",
+               max_step: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """One communication step of ``dx/dt = A x + B u`` with ``u`` held.
+
+    Parameters
+    ----------
+    A : numpy.ndarray, shape (N, N)
+        System matrix [1/s].
+    B : numpy.ndarray, shape (N, M)
+        Input matrix [state units / (input unit s)].
+    step : float
+        Communication step H [s], > 0.
+    method : {"zoh", "rk4"}
+        ``"zoh"``: exact (matrix exponential of ``[[A, B], [0, 0]] H``).
+        ``"rk4"``: ``ceil(H / max_step)`` classical RK4 sub-steps.
+    max_step : float, optional
+        Largest RK4 sub-step [s] (required for ``"rk4"``).
+
+    Returns
+    -------
+    Ad : numpy.ndarray, shape (N, N)
+    Bd : numpy.ndarray, shape (N, M)
+    """
+    if not (step > 0 and math.isfinite(step)):
+        raise ValueError(f"step: a finite number > 0 [s], got {step!r}")
+    n, m = B.shape
+    if method == "zoh":
+        aug = np.zeros((n + m, n + m))
+        aug[:n, :n] = A * step
+        aug[:n, n:] = B * step
+        e = scipy.linalg.expm(aug)
+        return e[:n, :n], e[:n, n:]
+    if method != "rk4":
+        raise ValueError(f"method = {method!r}: 'zoh' or 'rk4'")
+    if max_step is None or not max_step > 0:
+        raise ValueError("method 'rk4' needs max_step > 0 [s]")
+    n_sub = max(1, math.ceil(step / max_step - _EPS))
+    h = step / n_sub
+    eye = np.eye(n)
+    z = h * A
+    z2 = z @ z
+    z3 = z2 @ z
+    r = eye + z + z2 / 2 + z3 / 6 + z3 @ z / 24
+    s = (eye + z / 2 + z2 / 6 + z3 / 24) @ (h * B)
+    ad = eye
+    bd = np.zeros_like(B, dtype=float)
+    for _ in range(n_sub):
+        bd = r @ bd + s
+        ad = r @ ad
+    return ad, bd
+
+
+def _scalar_map(lam: np.ndarray, step: float, method: str, max_step: float | None
+                ) -> np.ndarray:
+    """One-step amplification of ``dx/dt = lam x`` (as :func:`discretize`)."""
+    if method == "zoh":
+        return np.exp(lam * step)
+    n_sub = max(1, math.ceil(step / max_step - _EPS))
+    z = lam * step / n_sub
+    return (1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24) ** n_sub
+
+
+def line_weights(delay_steps: float, coupling: str = "zoh", horizon: float = 0.5
+                 ) -> dict[int, float]:
+    """Weights of past samples delivered by one connection (master's DelayLine).
+
+    Parameters
+    ----------
+    delay_steps : float
+        Transport delay in source sample periods, >= 0.
+    coupling : {"zoh", "linear"}
+    horizon : float
+        Linear coupling only: time from the newest source sample to the midpoint
+        of the target's step [source periods].
+
+    Returns
+    -------
+    dict of int -> float
+        ``{j: w_j}``: the delivered value is ``sum_j w_j s[-j]``, ``s[0]`` the
+        newest sample.
+    """
+    if not (delay_steps >= 0 and math.isfinite(delay_steps)):
+        raise ValueError(f"delay: a finite number >= 0, got {delay_steps!r} steps")
+    n = math.floor(delay_steps + _EPS)
+    f = delay_steps - n
+    if f < _EPS:
+        f = 0.0
+
+    def delayed(back: int) -> dict[int, float]:
+        if f == 0.0:
+            return {n + back: 1.0}
+        return {n + back: 1.0 - f, n + back + 1: f}
+
+    if coupling == "zoh":
+        return delayed(0)
+    if coupling != "linear":
+        raise ValueError(f"coupling = {coupling!r}: 'zoh' or 'linear'")
+    out: dict[int, float] = {}
+    for j, w in delayed(0).items():
+        out[j] = out.get(j, 0.0) + (1.0 + horizon) * w
+    for j, w in delayed(1).items():
+        out[j] = out.get(j, 0.0) - horizon * w
+    return out
+
+
+def _convolve(a: Mapping[int, float], b: Mapping[int, float]) -> dict[int, float]:
+    out: dict[int, float] = {}
+    for i, wa in a.items():
+        for j, wb in b.items():
+            out[i + j] = out.get(i + j, 0.0) + wa * wb
+    return {k: w for k, w in out.items() if w != 0.0}
+
+
+def loop_weights(actuator_delay_steps: float, sensor_delay_steps: float = 0.0,
+                 algorithm: str = "gauss_seidel",
+                 order: Sequence[str] = ("plant", "controller"),
+                 coupling: str = "zoh") -> dict[int, float]:
+    """Weights ``W_l`` of ``u_k = sum_l W_l G_{k-l}`` for the master's loop timing.
+
+    Parameters
+    ----------
+    actuator_delay_steps, sensor_delay_steps : float
+        Transport delays [communication steps], >= 0 (fractional: linear
+        interpolation between samples, as the master does).
+    algorithm : {"gauss_seidel", "jacobi"}
+    order : sequence of str
+        Gauss-Seidel stepping order (``("plant", "controller")`` or reversed).
+    coupling : {"zoh", "linear"}
+
+    Returns
+    -------
+    dict of int -> float
+
+    Notes
+    -----
+    Linear-coupling horizons (newest source sample to the target's step midpoint,
+    in steps): Jacobi +1/2 on both connections; Gauss-Seidel plant first: the
+    controller reads strains already at ``t_k+1`` (sensor -1/2, actuator +1/2);
+    controller first: the reverse.
+    """
+    if algorithm not in ALGORITHM_DELAY_STEPS:
+        raise ValueError(f"algorithm = {algorithm!r}: one of {', '.join(ALGORITHM_DELAY_STEPS)}")
+    if algorithm == "jacobi":
+        h_act, h_sen = 0.5, 0.5
+    elif tuple(order)[0] == "plant":
+        h_act, h_sen = 0.5, -0.5
+    else:
+        h_act, h_sen = -0.5, 0.5
+    w = _convolve(line_weights(actuator_delay_steps, coupling, h_act),
+                  line_weights(sensor_delay_steps, coupling, h_sen))
+    m0 = ALGORITHM_DELAY_STEPS[algorithm]
+    return {k + m0: v for k, v in sorted(w.items())}
+
+
+def closed_loop_matrix(Ad: np.ndarray, Bd: np.ndarray, C: np.ndarray, gain: float,
+                       weights: Mapping[int, float], lag: float = 0.0) -> np.ndarray:
+    """Matrix of the sampled closed loop on ``z_k = [x_k, G_{k-1}, ..., G_{k-D}]``.
+
+    Parameters
+    ----------
+    Ad, Bd : numpy.ndarray
+        Discrete plant, shapes (N, N) and (N, M).
+    C : numpy.ndarray, shape (M, N)
+        Sensor matrix (strains per state unit).
+    gain : float
+        Controller gain K: ``G = K s`` (positive feedback sign as in
+        :class:`controller.StrainController`, ``F = gain * strain``).
+    weights : mapping int -> float
+        From :func:`loop_weights`.
+    lag : float
+        Controller lag factor ``a = exp(-H / T)`` in [0, 1) (0: no lag).
+
+    Returns
+    -------
+    numpy.ndarray, shape (N + D M, N + D M)
+    """
+    n, m = Bd.shape
+    d = max([j for j, w in weights.items() if w != 0.0] + [1 if lag else 0])
+    w0 = weights.get(0, 0.0)
+    kc = gain * (1.0 - lag) * C          # G_k = lag G_{k-1} + kc x_k
+    if d == 0:
+        return Ad + w0 * Bd @ kc
+    size = n + d * m
+    M = np.zeros((size, size))
+    M[:n, :n] = Ad + w0 * Bd @ kc
+    if lag:
+        M[:n, n:n + m] += w0 * lag * Bd
+    for j in range(1, d + 1):
+        wj = weights.get(j, 0.0)
+        if wj:
+            M[:n, n + (j - 1) * m:n + j * m] += wj * Bd
+    # new G_k in slot 1
+    M[n:n + m, :n] = kc
+    if lag:
+        M[n:n + m, n:n + m] = lag * np.eye(m)
+    for j in range(1, d):
+        M[n + j * m:n + (j + 1) * m, n + (j - 1) * m:n + j * m] = np.eye(m)
+    return M
+
+
+def reduce_loop(A: np.ndarray, B: np.ndarray, C: np.ndarray, tol: float = 1e-10
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Drop the modes the loop cannot see or cannot move (exactly, up to ``tol``).
+
+    A mode with ``|w^T B| |C v|`` below ``tol`` times the largest one (``v``,
+    ``w`` right/left eigenvectors) is uncontrollable or unobservable: feedback
+    leaves its eigenvalue where it is. For the drillstring these are the axial and
+    torsional modes (decoupled from bending in the straight string): 360 -> 240
+    states, ~3x faster eigenvalues.
+
+    Parameters
+    ----------
+    A, B, C : numpy.ndarray
+        Continuous plant, shapes (N, N), (N, M), (M, N).
+    tol : float
+        Relative coupling threshold.
+
+    Returns
+    -------
+    Ar, Br, Cr : numpy.ndarray
+        Real reduced plant on the invariant subspace of the kept modes.
+    dropped : numpy.ndarray
+        Continuous eigenvalues of the dropped modes [1/s] (unchanged by feedback).
+    """
+    lam, V = scipy.linalg.eig(A)
+    W = np.linalg.inv(V)
+    score = np.linalg.norm(W @ B, axis=1) * np.linalg.norm(C @ V, axis=0)
+    keep = score > tol * score.max()
+    if keep.all():
+        return A, B, C, np.zeros(0, dtype=complex)
+
+    def real_basis(mask: np.ndarray) -> np.ndarray:
+        cols = []
+        for i in np.flatnonzero(mask):
+            v = V[:, i]
+            if abs(lam[i].imag) > 0 and lam[i].imag < 0:
+                continue                  # the conjugate gives the same real span
+            cols.append(v.real)
+            if abs(lam[i].imag) > 0:
+                cols.append(v.imag)
+        return np.array(cols).T
+
+    # keep conjugate pairs together
+    for i in np.flatnonzero(keep):
+        if lam[i].imag != 0:
+            j = int(np.argmin(np.abs(lam - lam[i].conj())))
+            keep[j] = True
+    qk, qd = real_basis(keep), real_basis(~keep)
+    T = np.hstack([qk, qd])
+    r = qk.shape[1]
+    Ti = np.linalg.inv(T)
+    At = Ti @ A @ T
+    return At[:r, :r], (Ti @ B)[:r], (C @ T)[:, :r], lam[~keep]
+
+
+def spectral_radius(M: np.ndarray) -> float:
+    """Largest eigenvalue modulus of ``M`` (stable iff < 1)."""
+    if M.size == 0:
+        return 0.0
+    return float(np.max(np.abs(scipy.linalg.eigvals(M, check_finite=False))))
+
+
+@dataclass
+class LoopModel:
+    """Sampled strain-feedback loop of a linearized plant; caches discretizations.
+
+    Parameters
+    ----------
+    A, B, C : numpy.ndarray
+        Continuous plant ``dx/dt = A x + B u``, ``s = C x``.
+    algorithm : {"gauss_seidel", "jacobi"}
+    order : tuple of str
+        Gauss-Seidel stepping order.
+    coupling : {"zoh", "linear"}
+    sensor_delay : float
+        Transport delay of the strains [s] (the sweeps vary the actuator delay).
+    lag_time_constant : float
+        Controller actuator lag T [s] (0: none).
+    method : {"zoh", "rk4"}
+        Plant discretization (see :func:`discretize`).
+    max_step : float, optional
+        Internal RK4 step of the plant [s] (``method="rk4"``).
+    dropped : numpy.ndarray
+        Continuous eigenvalues [1/s] of modes removed by :func:`reduce_loop`
+        (they count in the spectral radius, feedback does not move them).
+
+    Examples
+    --------
+    >>> lm = LoopModel.from_scene("paper_closed_loop")          # doctest: +SKIP
+    >>> lm.growth_rate(gain=1e9, delay=0.0, step=2.5e-4) < 0    # doctest: +SKIP
+    True
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    algorithm: str = "gauss_seidel"
+    order: tuple[str, ...] = ("plant", "controller")
+    coupling: str = "zoh"
+    sensor_delay: float = 0.0
+    lag_time_constant: float = 0.0
+    method: str = "zoh"
+    max_step: float | None = None
+    dropped: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=complex))
+    _cache: dict[float, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict,
+                                                               repr=False)
+
+    @classmethod
+    def from_scene(cls, scene: str | Any = "paper_closed_loop",
+                   overrides: Mapping[str, Any] | None = None, **kwargs: Any) -> LoopModel:
+        """Linearize a scene's plant and take the loop timing from its ``[cosim]``.
+
+        Parameters
+        ----------
+        scene : str or Scene
+            Scene name/path or a loaded :class:`plant.scene.Scene`.
+        overrides : mapping, optional
+            Nested overrides for :func:`plant.scene.load_scene`.
+        **kwargs
+            Override any field (e.g. ``algorithm="jacobi"``, ``method="rk4"``).
+        """
+        from plant.linearize import linearize
+        from plant.scene import load_scene
+
+        from .scene_system import controller_parameters, cosim_settings
+
+        sc = load_scene(scene, overrides=dict(overrides) if overrides else None) \
+            if isinstance(scene, (str, bytes)) or hasattr(scene, "__fspath__") else scene
+        st = cosim_settings(sc)
+        if st.controller_sample_ticks != 1:
+            raise ValueError("LoopModel: only controller_sample_period = step is modelled")
+        lin = linearize(sc.plant, "full3d")
+        A, B, C, dropped = reduce_loop(lin.A, lin.B, lin.C)
+        opts: dict[str, Any] = {
+            "algorithm": st.algorithm, "order": tuple(st.order), "coupling": st.coupling,
+            "sensor_delay": st.sensor_delay,
+            "lag_time_constant": float(controller_parameters(sc)["lag_time_constant"]),
+        }
+        if kwargs.get("method") == "rk4" and "max_step" not in kwargs:
+            kwargs["max_step"] = lin.model.stable_step()
+        opts.update(kwargs)
+        return cls(A, B, C, dropped=dropped, **opts)
+
+    # -- pieces ------------------------------------------------------------------
+    def discrete(self, step: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(Ad, Bd)`` for communication step ``step`` [s] (cached)."""
+        key = float(step)
+        if key not in self._cache:
+            self._cache[key] = discretize(self.A, self.B, key, self.method, self.max_step)
+        return self._cache[key]
+
+    def matrix(self, gain: float, delay: float, step: float) -> np.ndarray:
+        """Closed-loop matrix for gain K [N/strain], actuator delay [s], step H [s]."""
+        if not (delay >= 0 and math.isfinite(delay)):
+            raise ValueError(f"delay: a finite number >= 0 [s], got {delay!r}")
+        Ad, Bd = self.discrete(step)
+        w = loop_weights(delay / step, self.sensor_delay / step, self.algorithm, self.order,
+                         self.coupling)
+        lag = math.exp(-step / self.lag_time_constant) if self.lag_time_constant > 0 else 0.0
+        return closed_loop_matrix(Ad, Bd, self.C, gain, w, lag)
+
+    def spectral_radius(self, gain: float, delay: float, step: float) -> float:
+        """Spectral radius of the closed loop (stable iff < 1)."""
+        rho = spectral_radius(self.matrix(gain, delay, step))
+        if self.dropped.size:
+            rho = max(rho, float(np.max(np.abs(_scalar_map(self.dropped, step, self.method,
+                                                           self.max_step)))))
+        return rho
+
+    def growth_rate(self, gain: float, delay: float, step: float) -> float:
+        """``ln(rho) / H`` [1/s]: > 0 unstable (e-folding rate of the worst mode)."""
+        rho = self.spectral_radius(gain, delay, step)
+        return math.log(rho) / step if rho > 0 else -math.inf
+
+    def is_stable(self, gain: float, delay: float, step: float) -> bool:
+        """True iff the spectral radius is < 1."""
+        return self.spectral_radius(gain, delay, step) < 1.0
+
+    # -- boundaries --------------------------------------------------------------
+    def critical_gain(self, step: float, delay: float = 0.0, gain_min: float = 1e3,
+                      gain_max: float = 1e13, per_decade: int = 4, rtol: float = 1e-3
+                      ) -> float:
+        """Smallest gain [N/strain] at which the loop turns unstable.
+
+        Scans log-spaced gains from ``gain_min`` (``per_decade`` a decade) for the
+        first unstable one, then bisects (geometrically) to ``rtol``.
+
+        Returns
+        -------
+        float
+            ``inf`` if stable up to ``gain_max``; ``0`` if unstable at ``gain_min``.
+        """
+        def unstable(k: float) -> bool:
+            return not self.is_stable(k, delay, step)
+
+        return _first_crossing(unstable, gain_min, gain_max, per_decade, rtol, log=True)
+
+    def critical_delay(self, gain: float, step: float, delay_max: float | None = None,
+                       per_step: int = 4, atol: float | None = None) -> float:
+        """Smallest actuator delay [s] at which the loop turns unstable.
+
+        Scans delays ``0, H/per_step, 2 H/per_step, ...`` up to ``delay_max``
+        (default ``40 H``) for the first unstable one, then bisects to ``atol``
+        (default ``H / 1000``).
+
+        Returns
+        -------
+        float
+            ``inf`` if stable up to ``delay_max``; ``0`` if unstable without delay.
+        """
+        delay_max = 40 * step if delay_max is None else delay_max
+        atol = step * 1e-3 if atol is None else atol
+
+        def unstable(tau: float) -> bool:
+            return not self.is_stable(gain, tau, step)
+
+        if unstable(0.0):
+            return 0.0
+        n = max(1, math.ceil(delay_max / step * per_step))
+        grid = np.linspace(0.0, delay_max, n + 1)
+        lo = 0.0
+        for tau in grid[1:]:
+            if unstable(float(tau)):
+                return _bisect(unstable, lo, float(tau), atol, log=False)
+            lo = float(tau)
+        return math.inf
+
+
+def _bisect(unstable, lo: float, hi: float, tol: float, log: bool) -> float:
+    """Bisect between stable ``lo`` and unstable ``hi``; returns the midpoint."""
+    while (hi / lo - 1.0 if log else hi - lo) > tol:
+        mid = math.sqrt(lo * hi) if log else 0.5 * (lo + hi)
+        if unstable(mid):
+            hi = mid
+        else:
+            lo = mid
+    return math.sqrt(lo * hi) if log else 0.5 * (lo + hi)
+
+
+def _first_crossing(unstable, x_min: float, x_max: float, per_decade: int, rtol: float,
+                    log: bool) -> float:
+    if unstable(x_min):
+        return 0.0
+    n = max(1, math.ceil(math.log10(x_max / x_min) * per_decade))
+    lo = x_min
+    for x in np.geomspace(x_min, x_max, n + 1)[1:]:
+        if unstable(float(x)):
+            return _bisect(unstable, lo, float(x), rtol, log)
+        lo = float(x)
+    return math.inf
