@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import guards
+from .guards import check_state
 from .integrators import stable_step
 from .model import FIXED_STEP_METHODS, DrillstringModel
 
@@ -23,6 +25,7 @@ __all__ = ["PlantSimulator", "StepResult", "simulate"]
 MAX_LATERAL = 1.0  # m, lateral position of any mass centre
 MAX_TILT = 0.5  # rad, Cardan tilt angles theta, phi
 MAX_SPEED = 1e4  # m/s or rad/s
+MAX_STRAIN = 5e-3  # bending strain at the outer wall: 2.5x the yield strain of collar steel
 
 
 @dataclass(frozen=True)
@@ -75,6 +78,7 @@ class PlantSimulator:
         self.y = model.initial_state()
         self.u = np.zeros(2 * model.n_sites)
         self._names = self._state_names()
+        self._strain_factor = 0.5 * model.params.pipe.outer_diameter / model.derived.dx
 
     def _state_names(self) -> list[str]:
         m = self.model
@@ -90,32 +94,26 @@ class PlantSimulator:
         self.u[:] = u
 
     def check(self) -> StepResult:
-        """Is the state finite and inside the model's range of validity?"""
-        y = self.y
-        bad = ~np.isfinite(y)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            return self._fail(f"{self._names[i]} is not finite", self._names[i], float(y[i]))
+        """Is the state finite and inside the model's range of validity? (compiled check)"""
         m = self.model
-        n = m.n
-        if m.kind == "full3d":
-            lat = np.hypot(y[0:3 * n:3], y[1:3 * n:3])
-            k = int(np.argmax(lat))
-            if lat[k] > MAX_LATERAL:
-                return self._fail(f"lateral deflection of body{k + 1} = {lat[k]:.3g} m exceeds "
-                                  f"{MAX_LATERAL} m", f"body{k + 1}.radial", float(lat[k]))
-            tilt = np.abs(y[3 * n:6 * n].reshape(n, 3)[:, 1:])
-            k = int(np.argmax(tilt.max(axis=1)))
-            if tilt[k].max() > MAX_TILT:
-                return self._fail(f"tilt of body{k + 1} = {tilt[k].max():.3g} rad exceeds "
-                                  f"{MAX_TILT} rad", f"body{k + 1}.tilt", float(tilt[k].max()))
-        v = np.abs(y[m.n_state // 2:])
-        i = int(np.argmax(v))
-        if v[i] > MAX_SPEED:
-            j = m.n_state // 2 + i
-            return self._fail(f"{self._names[j]} = {y[j]:.3g} exceeds {MAX_SPEED:g}",
-                              self._names[j], float(y[j]))
-        return StepResult(True)
+        code, i, val = check_state(m.kind == "full3d", m.n, self.y, MAX_LATERAL, MAX_TILT,
+                                   MAX_SPEED, MAX_STRAIN, self._strain_factor, m.wR)
+        if code == guards.OK:
+            return StepResult(True)
+        if code == guards.NOT_FINITE:
+            return self._fail(f"{self._names[i]} is not finite", self._names[i], float(val))
+        if code == guards.SPEED:
+            return self._fail(f"{self._names[i]} = {val:.3g} exceeds {MAX_SPEED:g}",
+                              self._names[i], float(val))
+        if code == guards.LATERAL:
+            return self._fail(f"lateral deflection of body{i + 1} = {val:.3g} m exceeds "
+                              f"{MAX_LATERAL} m", f"body{i + 1}.radial", float(val))
+        if code == guards.TILT:
+            return self._fail(f"tilt of body{i + 1} = {val:.3g} rad exceeds {MAX_TILT} rad",
+                              f"body{i + 1}.tilt", float(val))
+        return self._fail(f"bending strain at the joint below body{i + 1} = {val:.3g} exceeds "
+                          f"{MAX_STRAIN:g} (beyond the elastic range)", f"joint{i + 1}.strain",
+                          float(val))
 
     def _fail(self, what: str, quantity: str, value: float) -> StepResult:
         return StepResult(False, f"diverged at t = {self.time:.6g} s: {what}", self.time,
