@@ -293,7 +293,7 @@ def advance_verlet(model, t0, y, n_steps, dt, lam, p, ip, fp, u, wR, wF, wM, f, 
 # (the Jacobian at the static equilibrium), g = f - A y the forcing and nonlinear remainder.
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, fastmath=True)
 def _matvec_add(M, x, out, c):
     """out += c * M @ x for a dense square (or row-block) M."""
     R, C = M.shape
