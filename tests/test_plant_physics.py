@@ -151,6 +151,20 @@ def single_span(tension: float = 0.0, n: int = 20) -> PlantParams:
     )
 
 
+def test_beam_fe_reference_matches_closed_forms_and_converges():
+    """The lateral reference (Hermite beam elements) is itself checked against the formulas."""
+    from plant.beam_fe import pinned_beam_frequencies
+
+    w1 = pinned_beam_frequencies(53.33, [0.0, 53.33], EI, RHO_A, n_elements=48, count=2)
+    assert w1[0] == pytest.approx(pinned_pinned(53.33), rel=1e-6)
+    assert w1[1] == pytest.approx(4 * pinned_pinned(53.33), rel=1e-5)
+    w = [pinned_beam_frequencies(80.0, [0.0, 53.33, 80.0], EI, RHO_A, n_elements=ne,
+                                 count=1)[0] for ne in (12, 24, 48, 96)]
+    assert w[-1] == pytest.approx(1.2815 * pinned_pinned(53.33), rel=1e-4)
+    err = [abs(x - w[-1]) for x in w[:-1]]
+    assert err[0] > err[1] > err[2]
+
+
 def test_lateral_pinned_pinned_span_within_2_percent():
     fm = first_modes(DrillstringModel(single_span()))
     assert fm["lateral"].frequency_rad_s == pytest.approx(pinned_pinned(53.33), rel=0.02)
