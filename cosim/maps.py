@@ -1,0 +1,184 @@
+"""Maps of a sweep: stability and control benefit over (actuator delay, gain), one panel
+per communication step, with the linear prediction's boundary overlaid.
+
+* ``stability_map.png``: each point a marker (stable / unstable: growing envelope /
+  diverged / error); the predicted critical gain ``K_c(tau)`` of
+  :class:`cosim.stability.LoopModel` as a line (unstable above it).
+* ``benefit_map.png``: the long span's control benefit ``1 - RMS/RMS_open`` (colour),
+  unstable points crossed out, same boundary.
+
+The predicted boundary is cached in ``prediction.json`` next to the table.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["plot_maps", "predicted_boundary"]
+
+
+def predicted_boundary(scene: str, steps: Sequence[float], delays: Sequence[float],
+                       gain_range: tuple[float, float], overrides: dict | None = None,
+                       rtol: float = 0.02) -> dict[float, list[tuple[float, float]]]:
+    """Critical gain [N/strain] vs actuator delay [s] for each step [s].
+
+    Returns
+    -------
+    dict
+        ``{step: [(delay, critical_gain), ...]}``; ``inf`` where stable over the range,
+        ``0`` where unstable at its low end.
+    """
+    from .stability import LoopModel
+
+    lm = LoopModel.from_scene(scene, overrides=overrides)
+    lo, hi = gain_range
+    out: dict[float, list[tuple[float, float]]] = {}
+    for h in steps:
+        out[float(h)] = [(float(d), lm.critical_gain(h, float(d), gain_min=lo, gain_max=hi,
+                                                     per_decade=2, rtol=rtol))
+                         for d in delays]
+    return out
+
+
+def _cached_boundary(folder: Path, scene: str, steps: list[float], delays: list[float],
+                     gain_range: tuple[float, float], overrides: dict | None
+                     ) -> dict[float, list[tuple[float, float]]]:
+    path = folder / "prediction.json"
+    ident = {"scene": scene, "steps": steps, "delays": delays, "gain_range": list(gain_range),
+             "overrides": overrides or {}}
+    if path.exists():
+        try:
+            saved = json.loads(path.read_text())
+            if saved.get("ident") == ident:
+                return {float(k): [tuple(p) for p in v] for k, v in saved["boundary"].items()}
+        except (ValueError, KeyError):
+            pass
+    b = predicted_boundary(scene, steps, delays, gain_range, overrides)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps({"ident": ident, "boundary": {repr(k): v for k, v in b.items()}},
+                              default=lambda x: None if not math.isfinite(x) else x))
+    os.replace(tmp, path)
+    return b
+
+
+def _boundary_line(ax, pts: list[tuple[float, float]], gmin: float, gmax: float) -> None:
+    d = np.array([p[0] for p in pts]) * 1e3
+    k = np.array([math.inf if p[1] is None else p[1] for p in pts], dtype=float)
+    k = np.clip(k, gmin, gmax)
+    ax.plot(d, k, "k-", lw=1.8, label="predicted boundary (linear, $\\rho = 1$)")
+    ax.fill_between(d, k, gmax, color="0.85", zorder=0, label="predicted unstable")
+
+
+def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
+    """Write ``stability_map.png`` and ``benefit_map.png`` for a sweep folder.
+
+    Parameters
+    ----------
+    folder : path-like
+        A :func:`cosim.sweep.run_sweep` output folder.
+    predict : bool
+        Overlay the linear prediction (computed once, cached in ``prediction.json``).
+
+    Returns
+    -------
+    list of Path
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import TwoSlopeNorm
+
+    from .sweep_table import read_table
+
+    folder = Path(folder)
+    rows = [r for r in read_table(folder) if r["kind"] == "closed_loop"]
+    if not rows:
+        raise ValueError(f"{folder}: no closed-loop points to map")
+    meta: dict[str, Any] = {}
+    if (folder / "sweep.json").exists():
+        meta = json.loads((folder / "sweep.json").read_text()).get("spec", {})
+    steps = sorted({r["step"] for r in rows})
+    delays = sorted({r["delay"] for r in rows})
+    gains = sorted({r["gain"] for r in rows if r["gain"] > 0}) or [1.0]
+    gmin, gmax = gains[0] / 10, gains[-1] * 10
+    scene = rows[0]["scene"]
+    boundary = None
+    if predict:
+        fine = sorted(set(np.linspace(0.0, max(delays), 13).tolist()) | set(delays))
+        boundary = _cached_boundary(folder, scene, steps, fine, (gmin, gmax),
+                                    meta.get("overrides") or None)
+    engine = rows[0]["engine"]
+    stop = rows[0]["stop_time"]
+    n = len(steps)
+    paths = []
+    for what in ("stability", "benefit"):
+        fig, axes = plt.subplots(1, n, figsize=(4.6 * n + 1.2, 4.4), squeeze=False,
+                                 sharey=True, constrained_layout=True)
+        sc_handle = None
+        for ax, h in zip(axes[0], steps):
+            sel = [r for r in rows if r["step"] == h]
+            d = np.array([r["delay"] for r in sel]) * 1e3
+            k = np.array([max(r["gain"], gmin) for r in sel])
+            if boundary is not None:
+                _boundary_line(ax, boundary[h], gmin, gmax)
+            if what == "stability":
+                styles = [("ok", 1.0, "o", "tab:green", "stable"),
+                          ("ok", 0.0, "^", "tab:orange", "unstable (envelope grows)"),
+                          ("diverged", None, "X", "tab:red", "diverged"),
+                          ("error", None, "s", "0.4", "error")]
+                for status, stable, mk, col, lab in styles:
+                    m = np.array([r["status"] == status and (stable is None or
+                                                            r["stable"] == stable)
+                                  for r in sel], dtype=bool)
+                    if m.any():
+                        ax.scatter(d[m], k[m], marker=mk, c=col, s=60, label=lab, zorder=3,
+                                   edgecolors="k", linewidths=0.5)
+            else:
+                b = np.array([r["benefit_long"] for r in sel], dtype=float)
+                ok = np.isfinite(b) & np.array([r["stable"] == 1.0 for r in sel])
+                sc_handle = ax.scatter(d[ok], k[ok], c=np.clip(b[ok], -1, 1), cmap="RdYlGn",
+                                       norm=TwoSlopeNorm(0.0, -1.0, 1.0), s=140, marker="s",
+                                       edgecolors="k", linewidths=0.5, zorder=3)
+                for x, y, v in zip(d[ok], k[ok], b[ok]):
+                    ax.annotate(f"{v:.2f}", (x, y), textcoords="offset points", xytext=(0, 9),
+                                ha="center", fontsize=7)
+                if (~ok).any():
+                    ax.scatter(d[~ok], k[~ok], marker="x", c="tab:red", s=50, zorder=3,
+                               label="unstable / no benefit")
+            ax.set_yscale("log")
+            ax.set_ylim(gmin, gmax)
+            pad = 0.05 * max(max(delays) * 1e3, h * 1e3)
+            ax.set_xlim(-pad, max(delays) * 1e3 + pad)
+            ax.set_xlabel("actuator delay $\\tau$ [ms]")
+            ax.set_title(f"communication step H = {h * 1e3:g} ms")
+            ax.grid(True, which="major", alpha=0.3)
+        axes[0][0].set_ylabel("controller gain K [N per unit strain]")
+        handles, labels = [], []
+        for ax in axes[0]:
+            for hd, lb in zip(*ax.get_legend_handles_labels()):
+                if lb not in labels:
+                    handles.append(hd)
+                    labels.append(lb)
+        if handles:
+            axes[0][-1].legend(handles, labels, loc="lower right", fontsize=8, framealpha=0.9)
+        if what == "benefit" and sc_handle is not None:
+            fig.colorbar(sc_handle, ax=axes[0].tolist(),
+                         label="long-span benefit 1 - RMS/RMS$_{open}$")
+        title = {"stability": "Stability of the strain-feedback loop",
+                 "benefit": "Control benefit (long span radial deflection)"}[what]
+        fig.suptitle(f"{title} - {scene}, engine {engine}, {stop:g} s runs")
+        path = folder / f"{what}_map.png"
+        tmp = path.with_name(f".{path.stem}.tmp.png")
+        fig.savefig(tmp, dpi=110)
+        plt.close(fig)
+        os.replace(tmp, path)
+        paths.append(path)
+    return paths

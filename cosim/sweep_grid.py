@@ -1,0 +1,201 @@
+"""Sweep grids: value lists from the command line and the points of a sweep.
+
+A LIST is one of
+
+* comma-separated values: ``1e6,1e7,1e9``;
+* ``start:stop:count`` (linear, both ends included): ``0:2e-3:5``;
+* ``log:start:stop:count`` (log spacing, both ends included): ``log:1e6:1e10:9``.
+
+Items can be mixed with commas: ``0,log:1e-4:1e-2:3``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Point", "SweepSpec", "parse_list", "point_key"]
+
+KINDS = ("closed_loop", "open_loop")
+
+
+def _number(text: str, what: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        raise ValueError(f"{what}: {text!r} is not a number") from None
+    if not math.isfinite(x):
+        raise ValueError(f"{what}: {text!r} is not finite")
+    return x
+
+
+def _range(item: str, what: str) -> list[float]:
+    log = item.startswith("log:")
+    parts = item[4:].split(":") if log else item.split(":")
+    if len(parts) != 3:
+        raise ValueError(f"{what}: {item!r}: use start:stop:count or log:start:stop:count")
+    a, b = _number(parts[0], what), _number(parts[1], what)
+    try:
+        n = int(parts[2])
+    except ValueError:
+        raise ValueError(f"{what}: {item!r}: count {parts[2]!r} is not an integer") from None
+    if n < 1:
+        raise ValueError(f"{what}: {item!r}: count must be >= 1")
+    if log:
+        if a <= 0 or b <= 0:
+            raise ValueError(f"{what}: {item!r}: log spacing needs start, stop > 0")
+        return [float(x) for x in np.geomspace(a, b, n)]
+    return [float(x) for x in np.linspace(a, b, n)]
+
+
+def parse_list(text: str, what: str = "list", minimum: float | None = None,
+               positive: bool = False) -> list[float]:
+    """Parse a LIST (see the module docstring) into sorted unique floats.
+
+    Parameters
+    ----------
+    text : str
+    what : str
+        Name used in error messages (e.g. ``"--gain"``).
+    minimum : float, optional
+        Smallest allowed value (inclusive).
+    positive : bool
+        Values must be > 0.
+
+    Returns
+    -------
+    list of float
+
+    Raises
+    ------
+    ValueError
+        One line naming ``what`` and the offending item.
+    """
+    values: list[float] = []
+    for item in (s.strip() for s in text.split(",")):
+        if not item:
+            continue
+        values += _range(item, what) if ":" in item else [_number(item, what)]
+    if not values:
+        raise ValueError(f"{what}: no values in {text!r}")
+    for v in values:
+        if positive and v <= 0:
+            raise ValueError(f"{what}: {v!r} must be > 0")
+        if minimum is not None and v < minimum:
+            raise ValueError(f"{what}: {v!r} must be >= {minimum}")
+    # round to 12 significant digits so 1e-3 from a range equals a typed 0.001
+    return sorted({float(f"{v:.12g}") for v in values})
+
+
+def point_key(scene: str, engine: str, kind: str, gain: float, delay: float, step: float,
+              stop_time: float, extra: str = "") -> str:
+    """Identity of a point in the results table (resuming skips known keys)."""
+    return (f"{scene}|{engine}|{kind}|{gain:.12g}|{delay:.12g}|{step:.12g}|{stop_time:.12g}"
+            + (f"|{extra}" if extra else ""))
+
+
+@dataclass(frozen=True)
+class Point:
+    """One co-simulation of a sweep (all the arguments of a point runner).
+
+    Attributes
+    ----------
+    scene : str
+        Scene name or path.
+    gain : float
+        Controller gain [N per unit strain] (0 for open loop).
+    delay : float
+        Actuator delay [s].
+    step : float
+        Communication step [s].
+    stop_time : float
+        [s].
+    engine : {"fmu", "python"}
+    kind : {"closed_loop", "open_loop"}
+    overrides : str
+        JSON of extra scene overrides (nested dict), "" for none.
+    options : tuple of (str, float)
+        Metric options for the runner (see :class:`cosim.sweep_point.PointOptions`).
+    """
+
+    scene: str
+    gain: float
+    delay: float
+    step: float
+    stop_time: float
+    engine: str = "fmu"
+    kind: str = "closed_loop"
+    overrides: str = ""
+    options: tuple[tuple[str, float], ...] = ()
+
+    @property
+    def key(self) -> str:
+        """See :func:`point_key`."""
+        return point_key(self.scene, self.engine, self.kind, self.gain, self.delay, self.step,
+                         self.stop_time, self.overrides)
+
+    def kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of :func:`cosim.sweep_point.run_point`."""
+        return {"scene": self.scene, "gain": self.gain, "delay": self.delay, "step": self.step,
+                "stop_time": self.stop_time, "engine": self.engine,
+                "open_loop": self.kind == "open_loop",
+                "overrides": json.loads(self.overrides) if self.overrides else None,
+                **dict(self.options)}
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A full-factorial sweep over gain x delay x step, plus open-loop references.
+
+    Attributes
+    ----------
+    scene : str
+    gains : sequence of float
+        [N per unit strain], >= 0.
+    delays : sequence of float
+        Actuator delays [s], >= 0.
+    steps : sequence of float
+        Communication steps [s], > 0.
+    stop_time : float
+        [s].
+    engine : {"fmu", "python"}
+    overrides : mapping
+        Extra scene overrides (nested dict, e.g. ``{"cosim": {"algorithm": "jacobi"}}``).
+    open_loop : bool
+        Also run one open-loop reference per step (needed for the control benefit).
+    options : mapping of str -> float
+        Metric options (:class:`cosim.sweep_point.PointOptions` fields).
+    """
+
+    scene: str
+    gains: Sequence[float]
+    delays: Sequence[float]
+    steps: Sequence[float]
+    stop_time: float
+    engine: str = "fmu"
+    overrides: Mapping[str, Any] = field(default_factory=dict)
+    open_loop: bool = True
+    options: Mapping[str, float] = field(default_factory=dict)
+
+    def points(self) -> list[Point]:
+        """Open-loop references first (one per step), then gain x delay x step."""
+        if self.engine not in ("fmu", "python"):
+            raise ValueError(f"engine = {self.engine!r}: 'fmu' or 'python'")
+        if not (self.stop_time > 0 and math.isfinite(self.stop_time)):
+            raise ValueError(f"stop time: a finite number > 0 [s], got {self.stop_time!r}")
+        over = json.dumps(dict(self.overrides), sort_keys=True) if self.overrides else ""
+        opts = tuple(sorted((k, float(v)) for k, v in self.options.items()))
+        common = {"stop_time": float(self.stop_time), "engine": self.engine,
+                  "overrides": over, "options": opts}
+        pts = []
+        if self.open_loop:
+            pts += [Point(self.scene, 0.0, 0.0, float(h), kind="open_loop", **common)
+                    for h in self.steps]
+        pts += [Point(self.scene, float(k), float(d), float(h), **common)
+                for h in self.steps for k in self.gains for d in self.delays]
+        return pts
