@@ -2,7 +2,8 @@
 
 Sub-commands: ``modes`` (modal analysis next to the analytic values and the paper's Table 1),
 ``scenes`` (list the shipped scenes), ``build`` (write the FMUs), ``run`` (co-simulate a scene:
-results.csv, summary.json, plots). Bad input ends with a one-line message on stderr and exit
+results.csv, summary.json, plots), ``sweep`` (gain x delay x step stability/benefit table).
+Bad input ends with a one-line message on stderr and exit
 code 2, never a traceback; a run that diverges ends with a one-line report and exit code 1.
 """
 
@@ -109,6 +110,27 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return outcome.exit_code
 
 
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from .run import parse_set
+    from .sweep import run_sweep, sweep_from_args
+
+    spec = sweep_from_args(args.scene, args.gain, args.delay, args.step, args.stop_time,
+                           args.engine, parse_set(args.set))
+    out = args.out or f"out/sweep_{spec.scene.rsplit('/', 1)[-1].removesuffix('.toml')}"
+    res = run_sweep(spec, out, workers=args.workers, scheduler=args.scheduler,
+                    progress=False if args.no_progress else None,
+                    retry_errors=args.retry_errors)
+    print(f"sweep: {res.n_points} points ({res.n_skipped} already done, {res.n_run} run, "
+          f"{res.n_unstable} unstable, {res.n_errors} errors) in {res.wall_time:.1f} s; "
+          f"table {res.folder / 'results.csv'} and results.parquet")
+    if args.maps:
+        from .maps import plot_maps
+
+        for path in plot_maps(res.folder, predict=not args.no_prediction):
+            print(path)
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="drillcosim", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True)
@@ -142,6 +164,35 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.set_defaults(func=_cmd_run)
+    p = sub.add_parser("sweep", help="stability/benefit sweep over gain x delay x step",
+                       description="LIST: comma-separated values, start:stop:count, or "
+                                   "log:start:stop:count (e.g. log:1e6:1e10:5).")
+    p.add_argument("scene", nargs="?", default="paper_closed_loop",
+                   help="scene name from scenes/ or a path (default: paper_closed_loop)")
+    p.add_argument("--gain", default="1e9", metavar="LIST",
+                   help="controller gains [N per unit strain] (default 1e9)")
+    p.add_argument("--delay", default="0", metavar="LIST", help="actuator delays [s] (default 0)")
+    p.add_argument("--step", default="2.5e-4", metavar="LIST",
+                   help="communication steps [s] (default 2.5e-4)")
+    p.add_argument("--stop-time", type=float, metavar="S",
+                   help="stop time [s] (default: the scene's)")
+    p.add_argument("--engine", choices=("fmu", "python"), default="fmu",
+                   help="fmu: plant + controller FMUs in the master (default); python: the same "
+                        "loop in-process without FMI (faster)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="local worker processes (default: all cores; 0: in this process)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="submit to this dask.distributed scheduler instead")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene key for every point, e.g. cosim.algorithm='jacobi'")
+    p.add_argument("--out", metavar="DIR", help="results folder (default out/sweep_<scene>); "
+                   "re-running into it skips finished points")
+    p.add_argument("--retry-errors", action="store_true", help="re-run points recorded as errors")
+    p.add_argument("--maps", action="store_true", help="also write the stability/benefit maps")
+    p.add_argument("--no-prediction", action="store_true",
+                   help="maps without the linear prediction overlay")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_sweep)
     return ap
 
 
