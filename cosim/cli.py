@@ -131,6 +131,19 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench(args: argparse.Namespace) -> int:
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "run_all.py"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: the benchmarks need a source checkout")
+    spec = importlib.util.spec_from_file_location("drillcosim_bench_run_all", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod.main(["--quick"] if args.quick else [])
+
+
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="drillcosim", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True)
@@ -148,6 +161,9 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("build", help="build the FMUs")
     p.add_argument("--out", default="build/fmus", help="output folder (default build/fmus)")
     p.set_defaults(func=_cmd_build)
+    p = sub.add_parser("bench", help="plant work-precision benchmarks -> BENCHMARKS.md")
+    p.add_argument("--quick", action="store_true", help="short horizons (< 3 min)")
+    p.set_defaults(func=_cmd_bench)
     p = sub.add_parser("run", help="co-simulate a scene (plant FMU + controller FMU)")
     p.add_argument("scene", nargs="?", default="paper_closed_loop",
                    help="scene name from scenes/ or a path (default: paper_closed_loop)")
