@@ -59,7 +59,7 @@ def real_time(quick: bool) -> dict:
     ma = scene_model("table1_axial_pulse")
     Ta = 3.0
     best: dict[str, float] = {}
-    for _ in range(1 if quick else 2):
+    for _ in range(2 if quick else 3):
         for key, fn in (
             ("3d rk4", lambda: run_plant(m3, T3, "rk4").wall),
             ("at rk4", lambda: run_plant(ma, Ta, "rk4").wall),
