@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import guards
+from .batch import run_record_rk4
 from .guards import check_state
 from .integrators import stable_step
 from .model import FIXED_STEP_METHODS, DrillstringModel
@@ -98,6 +99,10 @@ class PlantSimulator:
         m = self.model
         code, i, val = check_state(m.kind == "full3d", m.n, self.y, MAX_LATERAL, MAX_TILT,
                                    MAX_SPEED, MAX_STRAIN, self._strain_factor, m.wR)
+        return self._report(code, i, val)
+
+    def _report(self, code: int, i: int, val: float) -> StepResult:
+        """Turn a :func:`plant.guards.check_state` result into a :class:`StepResult`."""
         if code == guards.OK:
             return StepResult(True)
         if code == guards.NOT_FINITE:
@@ -114,6 +119,29 @@ class PlantSimulator:
         return self._fail(f"bending strain at the joint below body{i + 1} = {val:.3g} exceeds "
                           f"{MAX_STRAIN:g} (beyond the elastic range)", f"joint{i + 1}.strain",
                           float(val))
+
+    def run_record(self, h: float, n_out: int, idx: np.ndarray) -> tuple[np.ndarray, StepResult]:
+        """``n_out`` RK4 output steps of ``h`` [s] in one compiled loop, recording outputs.
+
+        Equals ``n_out`` calls of :meth:`do_step` + :meth:`outputs` bit for bit.
+
+        Returns
+        -------
+        rec : numpy.ndarray, shape (completed + 1, len(idx))
+            Outputs ``idx`` at the start and after each completed step.
+        result : StepResult
+        """
+        m = self.model
+        n_sub = max(1, math.ceil(h / self.max_step - 1e-9))
+        rec = np.empty((n_out + 1, len(idx)))
+        k1, k2, k3, k4, yt = m._scratch
+        limits = np.array([MAX_LATERAL, MAX_TILT, MAX_SPEED, MAX_STRAIN])
+        done, code, i, val = run_record_rk4(
+            m.model_id, self.time, h, n_out, n_sub, self.y, m.p, m.ip, m.fp, self.u, m.wR, m.wF,
+            m.wM, k1, k2, k3, k4, yt, m._zbit_ref, m._out, np.asarray(idx, dtype=np.int64), rec,
+            limits, self._strain_factor)
+        self.time = self.time + done * h
+        return rec[:done + 1], self._report(code, i, val)
 
     def _fail(self, what: str, quantity: str, value: float) -> StepResult:
         return StepResult(False, f"diverged at t = {self.time:.6g} s: {what}", self.time,
@@ -177,6 +205,10 @@ def simulate(model: DrillstringModel, stop_time: float, output_interval: float,
     names = outputs or model.output_names
     idx = [model.output_names.index(n) for n in names]
     n_out = int(round(stop_time / output_interval))
+    if method == "rk4":  # compiled loop, same numbers as the loop below
+        arr, res = sim.run_record(output_interval, n_out, np.array(idx))
+        ts = np.arange(arr.shape[0]) * output_interval
+        return ts, {n: arr[:, i] for i, n in enumerate(names)}, res
     ts = [0.0]
     rows = [sim.outputs()[idx].copy()]
     res = StepResult(True)
