@@ -120,8 +120,8 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
     n = len(steps)
     paths = []
     for what in ("stability", "benefit"):
-        fig, axes = plt.subplots(1, n, figsize=(4.6 * n + 1.2, 4.4), squeeze=False,
-                                 sharey=True, constrained_layout=True)
+        fig, axes = plt.subplots(1, n, figsize=(4.6 * n + 2.8, 4.8), squeeze=False,
+                                 sharey=True, layout="constrained")
         sc_handle = None
         for ax, h in zip(axes[0], steps):
             sel = [r for r in rows if r["step"] == h]
@@ -147,7 +147,8 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
                 sc_handle = ax.scatter(d[ok], k[ok], c=np.clip(b[ok], -1, 1), cmap="RdYlGn",
                                        norm=TwoSlopeNorm(0.0, -1.0, 1.0), s=140, marker="s",
                                        edgecolors="k", linewidths=0.5, zorder=3)
-                for x, y, v in zip(d[ok], k[ok], b[ok]):
+                labelled = len(set(d[ok])) <= 6     # values as text only if legible
+                for x, y, v in zip(d[ok], k[ok], b[ok]) if labelled else ():
                     ax.annotate(f"{v:.2f}", (x, y), textcoords="offset points", xytext=(0, 9),
                                 ha="center", fontsize=7)
                 if (~ok).any():
@@ -168,13 +169,14 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
                     handles.append(hd)
                     labels.append(lb)
         if handles:
-            axes[0][-1].legend(handles, labels, loc="lower right", fontsize=8, framealpha=0.9)
+            fig.legend(handles, labels, loc="outside lower center", ncol=min(4, len(handles)),
+                       fontsize=8)
         if what == "benefit" and sc_handle is not None:
             fig.colorbar(sc_handle, ax=axes[0].tolist(),
                          label="long-span benefit 1 - RMS/RMS$_{open}$")
         title = {"stability": "Stability of the strain-feedback loop",
                  "benefit": "Control benefit (long span radial deflection)"}[what]
-        fig.suptitle(f"{title} - {scene}, engine {engine}, {stop:g} s runs")
+        fig.suptitle(f"{title}\n{scene}, engine '{engine}', {stop:g} s runs", fontsize=11)
         path = folder / f"{what}_map.png"
         tmp = path.with_name(f".{path.stem}.tmp.png")
         fig.savefig(tmp, dpi=110)

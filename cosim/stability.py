@@ -519,3 +519,36 @@ def _first_crossing(unstable, x_min: float, x_max: float, per_decade: int, rtol:
             return _bisect(unstable, lo, float(x), rtol, log)
         lo = float(x)
     return math.inf
+
+
+def _boundary_report(scene: str = "paper_closed_loop") -> list[str]:
+    """The numbers of ``docs/delay_study.md`` (``python -m cosim.stability [SCENE]``)."""
+    lm = LoopModel.from_scene(scene)
+    lines = [f"scene {scene}: loop {lm.algorithm} (inherent delay "
+             f"{ALGORITHM_DELAY_STEPS[lm.algorithm]} step), coupling {lm.coupling}, "
+             f"{lm.A.shape[0]} coupled states ({lm.dropped.size} decoupled modes dropped)"]
+    for h in (1e-4, 2.5e-4):
+        tau = lm.critical_delay(1e9, h, delay_max=1e-3, per_step=2)
+        lines.append(f"critical delay at K = 1e9, H = {h * 1e3:g} ms: {tau * 1e6:.1f} us")
+    for tau in (0.0, 1e-4, 2e-4, 5e-4, 1e-3, 2e-3):
+        kc = lm.critical_gain(2.5e-4, tau, gain_min=1e5, gain_max=1e11, per_decade=2,
+                              rtol=0.01)
+        lines.append(f"critical gain at H = 0.25 ms, tau = {tau * 1e3:g} ms: {kc:.3g} N/strain")
+    for h in (1e-4, 2.5e-4, 3.5e-4, 4e-4, 4.5e-4, 5e-4, 7.5e-4, 1e-3):
+        lines.append(f"K = 1e9, tau = 0, H = {h * 1e3:g} ms: growth rate "
+                     f"{lm.growth_rate(1e9, 0.0, h):+.3f} 1/s")
+    for k, tau, h in ((1e9, 1e-4, 2.5e-4), (1e9, 2e-4, 2.5e-4), (1e9, 5e-4, 2.5e-4),
+                      (1e9, 1e-3, 2.5e-4), (1e6, 2e-3, 2.5e-4), (1e6, 0.0, 1e-3)):
+        M = lm.matrix(k, tau, h)
+        ev = scipy.linalg.eigvals(M)
+        z = ev[np.argmax(np.abs(ev))]
+        s = np.log(z) / h
+        lines.append(f"K = {k:g}, tau = {tau * 1e3:g} ms, H = {h * 1e3:g} ms: growth "
+                     f"{s.real:+.3f} 1/s at {abs(s.imag):.0f} rad/s")
+    return lines
+
+
+if __name__ == "__main__":  # pragma: no cover
+    import sys
+
+    print("\n".join(_boundary_report(*sys.argv[1:2])))

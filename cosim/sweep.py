@@ -181,6 +181,8 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int | Non
     wall0 = time.perf_counter()
     points = spec.points()
     table = ResultTable(out_dir)
+    lock = table.lock()
+    table.rows = table.load()        # re-read under the lock
     done = table.keys(include_errors=not retry_errors)
     todo = [p for p in points if p.key not in done]
     meta = {"spec": {k: (list(v) if isinstance(v, (list, tuple)) else v)
@@ -204,6 +206,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int | Non
             bar.update(1)
     finally:
         bar.close()
+        lock.close()
     return SweepOutcome(Path(out_dir), len(points), len(points) - len(todo), len(todo),
                         n_err, n_unst, time.perf_counter() - wall0)
 

@@ -180,10 +180,29 @@ class ResultTable:
             except ValueError:
                 bad = True
                 continue
+            if any(r["key"] == rows[-1]["key"] for r in rows[:-1]):
+                rows = [r for r in rows[:-1] if r["key"] != rows[-1]["key"]] + rows[-1:]
+                bad = True      # a duplicate key: keep the newest row
             kept.append(line)
         if bad:
+            kept = [header] + [_line(r) for r in rows]
             atomic_write_bytes(self.csv_path, "".join(kept).encode())
         return rows
+
+    def lock(self):
+        """Exclusive lock of the folder for one writing sweep (``OSError`` if taken).
+
+        Returns the open lock file; closing it releases the lock.
+        """
+        import fcntl
+
+        fh = open(self.folder / ".sweep.lock", "w")
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            fh.close()
+            raise OSError(f"{self.folder}: another sweep is writing to this folder") from None
+        return fh
 
     def keys(self, include_errors: bool = True) -> set[str]:
         """Keys of the finished points (optionally without the ``error`` rows)."""

@@ -83,6 +83,22 @@ def test_table_drops_a_half_written_row(tmp_path):
     assert t.csv_path.read_text().count("\n") == 2       # header + 1 row, repaired
 
 
+def test_duplicate_rows_keep_the_newest_and_the_folder_is_locked(tmp_path):
+    t = ResultTable(tmp_path)
+    p = Point(SCENE, 1e9, 0.0, 1e-3, 1.0, "python")
+    row = execute_point(p, fake_runner)
+    t.append(row)
+    with open(t.csv_path, "a") as fh:           # what two concurrent writers would leave
+        fh.write(t.csv_path.read_text().splitlines(keepends=True)[1])
+    assert len(ResultTable(tmp_path).rows) == 1
+    held = t.lock()
+    try:
+        with pytest.raises(OSError, match="another sweep"):
+            ResultTable(tmp_path).lock()
+    finally:
+        held.close()
+
+
 def test_benefit_from_the_open_loop_row(tmp_path):
     spec = SweepSpec(SCENE, [1.0], [0.0], [1e-3], 1.0, "python")
     run_sweep(spec, tmp_path, workers=0, runner=fake_runner, progress=False)
@@ -153,7 +169,8 @@ def test_small_sweep_on_a_dask_local_cluster(tmp_path):
     LocalCluster with one worker process; then the maps."""
     from distributed import Client, LocalCluster
 
-    spec = SweepSpec(SCENE, [1e8, 1e9], [0.0, 1e-3], [1e-3], 1.2, "python", FAST)
+    spec = SweepSpec(SCENE, [1e8, 1e9], [0.0, 1e-3], [1e-3], 1.2, "python", FAST,
+                     options={"force_cap": 1e5})
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
                       dashboard_address=None) as cluster, Client(cluster) as client:
         out = run_sweep(spec, tmp_path, scheduler=client.scheduler.address, progress=False)
