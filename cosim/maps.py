@@ -110,25 +110,38 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
     gains = sorted({r["gain"] for r in rows if r["gain"] > 0}) or [1.0]
     gmin, gmax = gains[0] / 10, gains[-1] * 10
     scene = rows[0]["scene"]
-    boundary = None
-    if predict:
-        fine = sorted(set(np.linspace(0.0, max(delays), 13).tolist()) | set(delays))
-        boundary = _cached_boundary(folder, scene, steps, fine, (gmin, gmax),
-                                    meta.get("overrides") or None)
+    by_step = len(delays) == 1 and len(steps) > 1   # map over (H, K) in one panel
+    over = meta.get("overrides") or None
+    if by_step:
+        d0 = delays[0]
+        fine_h = sorted(set(np.linspace(min(steps), max(steps), 13).tolist()) | set(steps))
+        panels = [(f"actuator delay = {d0 * 1e3:g} ms", rows,
+                   lambda r: r["step"], "communication step H [ms]")]
+        if predict:
+            b = _cached_boundary(folder, scene, fine_h, [d0], (gmin, gmax), over)
+            bounds = [[(h, v[0][1]) for h, v in sorted(b.items())]]
+        xs_all = steps
+    else:
+        panels = [(f"communication step H = {h * 1e3:g} ms", [r for r in rows if r["step"] == h],
+                   lambda r: r["delay"], "actuator delay $\\tau$ [ms]") for h in steps]
+        if predict:
+            fine = sorted(set(np.linspace(0.0, max(delays), 13).tolist()) | set(delays))
+            b = _cached_boundary(folder, scene, steps, fine, (gmin, gmax), over)
+            bounds = [b[h] for h in steps]
+        xs_all = delays
     engine = rows[0]["engine"]
     stop = rows[0]["stop_time"]
-    n = len(steps)
+    n = len(panels)
     paths = []
     for what in ("stability", "benefit"):
         fig, axes = plt.subplots(1, n, figsize=(4.6 * n + 2.8, 4.8), squeeze=False,
                                  sharey=True, layout="constrained")
         sc_handle = None
-        for ax, h in zip(axes[0], steps):
-            sel = [r for r in rows if r["step"] == h]
-            d = np.array([r["delay"] for r in sel]) * 1e3
+        for i, (ax, (title, sel, xof, xlabel)) in enumerate(zip(axes[0], panels)):
+            d = np.array([xof(r) for r in sel]) * 1e3
             k = np.array([max(r["gain"], gmin) for r in sel])
-            if boundary is not None:
-                _boundary_line(ax, boundary[h], gmin, gmax)
+            if predict:
+                _boundary_line(ax, bounds[i], gmin, gmax)
             if what == "stability":
                 styles = [("ok", 1.0, "o", "tab:green", "stable"),
                           ("ok", 0.0, "^", "tab:orange", "unstable (envelope grows)"),
@@ -156,10 +169,11 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
                                label="unstable / no benefit")
             ax.set_yscale("log")
             ax.set_ylim(gmin, gmax)
-            pad = 0.05 * max(max(delays) * 1e3, h * 1e3)
-            ax.set_xlim(-pad, max(delays) * 1e3 + pad)
-            ax.set_xlabel("actuator delay $\\tau$ [ms]")
-            ax.set_title(f"communication step H = {h * 1e3:g} ms")
+            lo, hi = (min(xs_all) if by_step else 0.0) * 1e3, max(xs_all) * 1e3
+            pad = 0.05 * max(hi - lo, 1e-3)
+            ax.set_xlim(lo - pad, hi + pad)
+            ax.set_xlabel(xlabel)
+            ax.set_title(title)
             ax.grid(True, which="major", alpha=0.3)
         axes[0][0].set_ylabel("controller gain K [N per unit strain]")
         handles, labels = [], []
