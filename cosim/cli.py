@@ -10,6 +10,7 @@ code 2, never a traceback; a run that diverges ends with a one-line report and e
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import math
 import sys
@@ -221,6 +222,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (UsageError, ValueError, FileNotFoundError, PermissionError) as exc:
         print(f"drillcosim {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except OSError as exc:  # read-only folder: bad input (2); disk full, I/O error: failure (1)
+        print(f"drillcosim {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE if exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM) else 1
     except KeyboardInterrupt:
         print(f"drillcosim {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -246,10 +246,12 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
         result = exc.result
         if result is None or not math.isfinite(result.end_time) or \
                 result.end_time <= ss.system.start_time:
-            staging.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):  # keep the real error visible
+                staging.unlink(missing_ok=True)
             raise
     except BaseException:
-        staging.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):
+            staging.unlink(missing_ok=True)
         raise
     csv = out / "results.csv"
     if staging.exists():

@@ -103,6 +103,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib
+import json
 import math
 import os
 import shutil
@@ -138,6 +139,9 @@ INPUTS: tuple[str, ...] = (
 
 _COMPLETE = "COMPLETE"  # marker written last into a stable copy
 _SIM_KEY = "__dcs_plant_sim__"
+# A doStep may take at most this many internal steps (~10 s of wall time): a huge step size
+# must not hang the importer.
+MAX_SUBSTEPS = 2_000_000
 _MODE_KEY = "__dcs_mode__"
 _ERRORS_KEY = "__dcs_errors__"
 
@@ -528,6 +532,14 @@ class DrillstringPlant(Fmi2Slave):
             return self._error(f"step size {h!r} s at t = {t!r} s is not allowed: must be > 0 "
                                f"and finite; step rejected (state unchanged)")
         sim = self._sim
+        if not (math.isfinite(t) and abs(t - sim.time) <= 1e-9 * max(1.0, abs(t))):
+            return self._error(f"communication point t = {t!r} s is not the FMU's time "
+                               f"{sim.time!r} s; step rejected (state unchanged)")
+        n_sub = math.ceil(h / sim.max_step)
+        if n_sub > MAX_SUBSTEPS:
+            return self._error(f"step size h = {h!r} s needs {n_sub:.3g} internal steps of "
+                               f"{sim.max_step:.3g} s, more than {MAX_SUBSTEPS:g} allowed per "
+                               f"doStep; step rejected (state unchanged)")
         sim.set_inputs(u)
         result = sim.do_step(t, h)
         if not result.ok:
@@ -629,3 +641,12 @@ class DrillstringPlant(Fmi2Slave):
         except Exception as exc:  # noqa: BLE001 - never let an exception reach pythonfmu
             self._call_error = f"fmi2SetFMUstate: invalid state: {exc!r}"
             self._error(self._call_error)
+
+    @staticmethod
+    def _fmu_state_from_bytes(state: bytes) -> dict[str, Any]:
+        """Decode a serialized state; bytes that are none give a marker _set_fmu_state rejects."""
+        try:
+            out = json.loads(state.decode("utf-8"))
+            return out if isinstance(out, dict) else {"__invalid_state__": repr(out)[:80]}
+        except Exception as exc:  # noqa: BLE001 - an exception would be fmi2Fatal + crash
+            return {"__invalid_state__": repr(exc)}

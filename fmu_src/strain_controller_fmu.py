@@ -61,6 +61,7 @@ Python floats, so serialisation round-trips bit for bit).
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any, ClassVar
 
@@ -308,14 +309,29 @@ class StrainController(Fmi2Slave):
         return state
 
     def _set_fmu_state(self, state: dict[str, Any]) -> None:
-        state = dict(state)  # the importer may set the same state again: do not mutate it
-        law_state = state.pop(_STATE_KEY)
-        initialized = state.pop(_INIT_KEY)
-        self._init_error = state.pop(_INIT_ERROR_KEY)
-        super()._set_fmu_state(state)
-        self._law.set_state(np.array(law_state, dtype=float))
+        try:
+            state = dict(state)  # the importer may set the same state again: do not mutate it
+            law_state = np.array(state.pop(_STATE_KEY), dtype=float)
+            initialized = state.pop(_INIT_KEY)
+            init_error = state.pop(_INIT_ERROR_KEY)
+            super()._set_fmu_state(state)
+            self._law.set_state(law_state)
+        except Exception as exc:  # noqa: BLE001 - an exception would be fmi2Fatal + crash
+            self._call_error = f"fmi2SetFMUstate: not a state of this FMU ({exc!r})"
+            self._error(self._call_error)
+            return
+        self._init_error = init_error
         self._initialized = bool(initialized)
         # the parameters came back with the registered variables: take the fixed ones
         # as the reference and make the next doStep re-validate and apply all of them
         self._fixed_values = self._snapshot(FIXED)
         self._tunable_values = None
+
+    @staticmethod
+    def _fmu_state_from_bytes(state: bytes) -> dict[str, Any]:
+        """Decode a serialized state; bytes that are none give a marker _set_fmu_state rejects."""
+        try:
+            out = json.loads(state.decode("utf-8"))
+            return out if isinstance(out, dict) else {"__invalid_state__": repr(out)[:80]}
+        except Exception as exc:  # noqa: BLE001 - an exception would be fmi2Fatal + crash
+            return {"__invalid_state__": repr(exc)}

@@ -51,14 +51,19 @@ def _check_range(
     lo_open: bool = False,
     hi_open: bool = False,
     unit: str = "",
+    allow_inf: bool = False,
 ) -> None:
-    _check_finite(owner, name, value, allow_inf=hi is None and not hi_open)
-    bad = (lo is not None and (value < lo or (lo_open and value == lo))) or (
-        hi is not None and (value > hi or (hi_open and value == hi))
-    )
+    """Raise a one-line ValueError unless lo <= value <= hi (inf only where ``allow_inf``)."""
+    _check_finite(owner, name, value, allow_inf=allow_inf)
+    if hi is None and not allow_inf and isinstance(value, (int, float)) and math.isinf(value):
+        bad = True
+    else:
+        bad = (lo is not None and (value < lo or (lo_open and value == lo))) or (
+            hi is not None and (value > hi or (hi_open and value == hi))
+        )
     if bad:
         left = "(" if lo_open else "["
-        right = ")" if hi_open else "]"
+        right = ")" if hi_open or (hi is None and not allow_inf) else "]"
         lo_s = "-inf" if lo is None else f"{lo:g}"
         hi_s = "inf" if hi is None else f"{hi:g}"
         u = f" {unit}" if unit else ""
@@ -235,7 +240,8 @@ class TopDriveParams:
         _validate_types(self)
         o = self.OWNER
         for name in ("axial_stiffness", "lateral_stiffness", "torsional_stiffness"):
-            _check_range(o, name, getattr(self, name), 0.0, None)
+            _check_range(o, name, getattr(self, name), 0.0, None, unit="N/m or N m/rad",
+                         allow_inf=True)
         _check_range(o, "rotary_speed", self.rotary_speed, -1e3, 1e3, unit="rad/s")
         _check_range(o, "ramp_time", self.ramp_time, 0.0, 1e6, unit="s")
 
@@ -368,7 +374,8 @@ class LoadParams:
         _check_range(o, "body", self.body, 1, None)
         _check_range(o, "magnitude", self.magnitude, -1e9, 1e9)
         _check_range(o, "start", self.start, 0.0, 1e9, unit="s")
-        _check_range(o, "duration", self.duration, 0.0, None, lo_open=True, unit="s")
+        _check_range(o, "duration", self.duration, 0.0, None, lo_open=True, unit="s",
+                     allow_inf=True)
 
     @property
     def is_lateral(self) -> bool:
@@ -395,6 +402,8 @@ class PlantParams:
     def __post_init__(self) -> None:
         n = self.pipe.n_segments
         L = self.pipe.length
+        if isinstance(self.gravity, bool) or not isinstance(self.gravity, (int, float)):
+            raise ValueError(f"gravity = {self.gravity!r} is not allowed: must be a number (m/s^2)")
         _check_range("plant", "gravity", self.gravity, -100.0, 100.0, unit="m/s^2")
         for h in self.stabilizers.heights:
             if h > L:

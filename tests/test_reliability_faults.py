@@ -296,11 +296,6 @@ def test_unwritable_output_folder_fails_before_running(fmus, tmp_path):  # noqa:
 
 
 # ------------------------------------------------------- drillcosim run (CLI)
-@pytest.mark.xfail(strict=True, reason=(
-    "bug: cosim/run.py run_system: the `except BaseException` handler calls "
-    "staging.unlink() unguarded; in a read-only folder it raises EROFS, masking the "
-    "recorder's 'cannot write results to ...' error, and cosim/cli.py main() does not catch "
-    "OSError: traceback, exit 1 (should be one line, exit 2)"))
 def test_cli_run_into_read_only_folder_exits_2_with_one_line(tmp_path: Path) -> None:
     with read_only_dir(tmp_path / "ro") as ro:
         proc = subprocess.run(
@@ -311,11 +306,6 @@ def test_cli_run_into_read_only_folder_exits_2_with_one_line(tmp_path: Path) -> 
         assert len(proc.stderr.strip().splitlines()) == 1
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "bug: cosim/run.py run_system writes summary.json (cosim/summary.py write_json) and the "
-    "plots after the results without handling OSError, and cosim/cli.py main() catches only "
-    "ValueError/FileNotFoundError/PermissionError: a disk that fills up after results.csv "
-    "gives a traceback instead of a one-line report"))
 def test_cli_run_disk_full_while_writing_summary_gives_one_line(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
     import cosim.summary

@@ -145,10 +145,6 @@ BAD_BLOBS = {"garbage": b"garbage", "truncated_json": b'{"gain": 1', "empty": b"
              "not_utf8": b"\xff\xfe\x00"}
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "bug: pythonfmu's default Fmi2Slave._fmu_state_from_bytes (json.loads) raises on bytes "
-    "that are not a serialized state -> fmi2Fatal (instance unusable, pythonfmu double "
-    "release on free); adapters should override it and report Error/Discard"))
 @pytest.mark.parametrize("name", ["StrainController", "DrillstringPlant"])
 def test_deserializing_invalid_bytes_is_not_fatal(fmu_paths: dict[str, Path], tmp_path: Path,
                                                   name: str) -> None:
@@ -166,10 +162,7 @@ def test_deserializing_invalid_bytes_is_not_fatal(fmu_paths: dict[str, Path], tm
 
 
 @pytest.mark.parametrize("name", [
-    pytest.param("StrainController", marks=pytest.mark.xfail(strict=True, reason=(
-        "bug: StrainController._set_fmu_state (fmu_src/strain_controller_fmu.py) pops its "
-        "private keys without a try/except: a decodable state of another shape (e.g. '{}' "
-        "or the plant's state) raises KeyError -> fmi2Fatal"))),
+    "StrainController",
     "DrillstringPlant"])
 def test_setting_a_foreign_state_is_not_fatal_and_instance_recovers(
         fmu_paths: dict[str, Path], tmp_path: Path, name: str) -> None:
@@ -188,11 +181,6 @@ def test_setting_a_foreign_state_is_not_fatal_and_instance_recovers(
     assert out["step"] == 2 and out["next"] == 0
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "bug: DrillstringPlant._do_step (fmu_src/drillstring_plant_fmu.py) checks h but not the "
-    "communication point t: t = nan/inf is integrated (state becomes NaN, instance halted as "
-    "'diverged'), and an out-of-order t (not the FMU's time) is accepted and changes the "
-    "time-dependent excitation; should be fmi2Discard with the state unchanged"))
 def test_plant_rejects_non_finite_and_out_of_order_time_with_state_unchanged(
         fmu_paths: dict[str, Path], tmp_path: Path) -> None:
     out = _snippet(fmu_paths["DrillstringPlant"], tmp_path, """
@@ -223,10 +211,6 @@ def test_controller_rejects_non_finite_time(fmu_paths: dict[str, Path],
     assert out == [2, 2, 2, 2, 2, 2, 0]
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "bug: DrillstringPlant doStep has no bound on the number of internal RK4 steps: "
-    "h = 1e6 s needs ~4e9 substeps (hours, the host hangs); h >= ~1e19 overflows and is "
-    "discarded. Should discard steps needing more than a documented number of substeps"))
 def test_plant_huge_step_returns_within_seconds(fmu_paths: dict[str, Path],
                                                tmp_path: Path) -> None:
     out = _snippet(fmu_paths["DrillstringPlant"], tmp_path, """
