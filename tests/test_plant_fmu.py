@@ -501,15 +501,19 @@ MISUSE_SCRIPT = textwrap.dedent("""
     elif case == "unknown_vr":
         out["value"] = repr(s.getReal([99999])[0])
     out["steps"] = []
-    for k in range(1, 400):
-        status = call(s.doStep, k * 1e-3, 1e-3)
+    # FMI 2.0: a discarded step leaves the FMU's time unchanged, so t advances on OK only
+    t = 1e-3 if case == "nan_input" else 0.0
+    for _ in range(1, 400):
+        status = call(s.doStep, t, 1e-3)
         out["steps"].append(status)
+        if status == 0:
+            t += 1e-3
         if len([x for x in out["steps"] if x != 0]) == 2 or len(out["steps"]) == 3 and (
                 case == "unknown_vr"):
             break
     if case == "nan_input":  # a valid input again: the instance is usable
         s.setReal([vr["actuator1_force_E"]], [0.0])
-        out["retry"] = call(s.doStep, len(out["steps"]) * 1e-3, 1e-3)
+        out["retry"] = call(s.doStep, t, 1e-3)
     out["messages"] = messages
     s.terminate()
     s.freeInstance()
