@@ -6,6 +6,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -66,7 +67,8 @@ class CoSimulation:
 
     def run(self, stop_time: float | None = None, outputs: Sequence[str] = (),
             output_interval: float | None = None, progress: bool | None = False,
-            csv_path: str | Path | None = None, flush_every: int = 1000) -> Result:
+            csv_path: str | Path | None = None, flush_every: int = 1000,
+            observers: Sequence[Any] = (), manipulators: Sequence[Any] = ()) -> Result:
         """Simulate from the start time to ``stop_time``.
 
         Parameters
@@ -85,6 +87,11 @@ class CoSimulation:
             :mod:`cosim.recorder`).
         flush_every : int
             Rows per CSV write.
+        observers : sequence
+            Extra read-only observers (``on_step(execution)``, optional ``on_start``), added
+            before the recorder.
+        manipulators : sequence
+            Manipulators (``before_step(execution)``): scenario events, fault injection.
 
         Returns
         -------
@@ -114,6 +121,10 @@ class CoSimulation:
         diverged = None
         try:
             execution = Execution(system, read_outputs=outputs)
+            for obs in observers:
+                execution.add_observer(obs)
+            for man in manipulators:
+                execution.add_manipulator(man)
             execution.add_observer(recorder)
             if progress is not False:
                 execution.add_observer(ProgressObserver(stop, disable=None if progress

@@ -24,7 +24,6 @@ import io
 import math
 import os
 import sys
-import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,11 +34,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-from .errors import CosimError, DivergenceError
-from .execution import Execution
-from .master import CoSimulation, Divergence, Result
-from .progress import ProgressObserver
-from .recorder import Recorder
+from .errors import CosimError
+from .master import CoSimulation, Result
 
 __all__ = ["EXIT_DIVERGED", "EXIT_OK", "RunOutcome", "parse_set", "run_scene", "run_system"]
 
@@ -167,35 +163,11 @@ class _FmuLogging:
 
 
 def _simulate(ss, stop: float, progress: bool | None, csv_path: Path) -> Result:
-    """:meth:`CoSimulation.run` with the FMU-logging observer added.
-
-    Same steps as the facade (whose ``_finish`` finalises the CSV and closes the
-    FMUs); only the extra observer differs.
-    """
+    """:meth:`CoSimulation.run` with the FMU-logging observer added."""
     H = ss.system.base_step
-    recorder = Recorder(ss.outputs, max(1, round(ss.output_interval / H)), csv_path)
-    execution = None
-    wall0 = time.perf_counter()
-    diverged = None
-    try:
-        execution = Execution(ss.system, read_outputs=ss.outputs)
-        execution.add_observer(_FmuLogging())
-        execution.add_observer(recorder)
-        if progress is not False:
-            execution.add_observer(ProgressObserver(stop, disable=None if progress is None
-                                                    else not progress))
-        execution.initialize()
-        wall0 = time.perf_counter()
-        execution.simulate_until(stop)
-    except DivergenceError as exc:
-        diverged = Divergence(exc.time, exc.quantity, exc.value)
-    except CosimError as exc:
-        exc.result = CoSimulation._finish(recorder, execution, wall0, None)
-        raise
-    except BaseException:
-        CoSimulation._finish(recorder, execution, wall0, None)
-        raise
-    return CoSimulation._finish(recorder, execution, wall0, diverged)
+    return CoSimulation(ss.system).run(
+        stop_time=stop, outputs=ss.outputs, output_interval=max(1, round(ss.output_interval / H))
+        * H, progress=progress, csv_path=csv_path, observers=[_FmuLogging()])
 
 
 def run_system(ss, out_dir: str | Path, stop_time: float | None = None,

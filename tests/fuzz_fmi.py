@@ -29,7 +29,6 @@ function, statuses per function, fatal count, healthy check.
 from __future__ import annotations
 
 import argparse
-import ctypes
 import json
 import math
 import sys
@@ -40,17 +39,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import fmpy
 import hypothesis
 import numpy as np
+from fmi_logging import RecordingCallbacks
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (
     FMU2Slave,
-    fmi2CallbackAllocateMemoryTYPE,
-    fmi2CallbackFreeMemoryTYPE,
-    fmi2CallbackFunctions,
-    fmi2CallbackLoggerTYPE,
 )
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -110,19 +105,10 @@ class Harness:
                         if v.causality == "output"]
         self.is_plant = self.ident == "DrillstringPlant"
         self._count = 0
-        self.messages: list[tuple[int, str]] = []
-        self._callbacks = fmi2CallbackFunctions()
-        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
-        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy.free)
-        from fmpy.logging import addLoggerProxy
-
-        addLoggerProxy(ctypes.byref(self._callbacks))
+        self._recording = RecordingCallbacks(keep_last=50)
+        self.messages = self._recording.messages
+        self._callbacks = self._recording.callbacks
         self.leaked: list[FMU2Slave] = []
-
-    def _log(self, env, instance, status, category, message) -> None:
-        self.messages.append((int(status), message.decode(errors="replace")))
-        del self.messages[:-50]
 
     def new(self, logging_on: bool = True) -> FMU2Slave:
         """A fresh, instantiated slave."""

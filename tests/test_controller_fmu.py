@@ -16,7 +16,6 @@ escape: it logs it with status fmi2Error and reports fmi2Discard from doStep:
 
 from __future__ import annotations
 
-import ctypes
 import importlib.util
 import json
 import math
@@ -27,17 +26,13 @@ import textwrap
 from collections.abc import Iterator
 from pathlib import Path
 
-import fmpy
 import numpy as np
 import pytest
+from fmi_logging import RecordingCallbacks
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (
     FMU2Slave,
-    fmi2CallbackAllocateMemoryTYPE,
-    fmi2CallbackFreeMemoryTYPE,
-    fmi2CallbackFunctions,
-    fmi2CallbackLoggerTYPE,
 )
 from fmpy.validation import validate_fmu
 
@@ -79,21 +74,13 @@ class Instance:
 
     def __init__(self, md, unzipdir: str) -> None:
         Instance._count += 1
-        self.messages: list[tuple[int, str]] = []
-        self._callbacks = fmi2CallbackFunctions()
-        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
-        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy.free)
-        from fmpy.logging import addLoggerProxy
-
-        addLoggerProxy(ctypes.byref(self._callbacks))
+        self._recording = RecordingCallbacks()
+        self.messages = self._recording.messages
+        self._callbacks = self._recording.callbacks
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir,
                              modelIdentifier=md.coSimulation.modelIdentifier,
                              instanceName=f"ctl{Instance._count}")
         self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
-
-    def _log(self, env, instance, status, category, message) -> None:
-        self.messages.append((int(status), message.decode()))
 
     def initialize(self, reals: dict[int, float] | None = None,
                    integers: dict[int, int] | None = None) -> None:

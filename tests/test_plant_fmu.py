@@ -18,7 +18,6 @@ Misuse cases run in subprocesses so that a crash would show as a failed exit cod
 
 from __future__ import annotations
 
-import ctypes
 import importlib.util
 import json
 import os
@@ -28,16 +27,12 @@ import textwrap
 from collections.abc import Iterator
 from pathlib import Path
 
-import fmpy
 import numpy as np
 import pytest
+from fmi_logging import RecordingCallbacks
 from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi2 import (
     FMU2Slave,
-    fmi2CallbackAllocateMemoryTYPE,
-    fmi2CallbackFreeMemoryTYPE,
-    fmi2CallbackFunctions,
-    fmi2CallbackLoggerTYPE,
 )
 from fmpy.validation import validate_fmu
 
@@ -106,23 +101,15 @@ class Instance:
 
     def __init__(self, md, unzipdir: str) -> None:
         Instance._count += 1
-        self.messages: list[tuple[int, str]] = []
-        self._callbacks = fmi2CallbackFunctions()
-        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
-        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy.free)
-        from fmpy.logging import addLoggerProxy
-
-        addLoggerProxy(ctypes.byref(self._callbacks))
+        self._recording = RecordingCallbacks()
+        self.messages = self._recording.messages
+        self._callbacks = self._recording.callbacks
         self.vr = {v.name: v.valueReference for v in md.modelVariables}
         self.outs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir,
                              modelIdentifier=md.coSimulation.modelIdentifier,
                              instanceName=f"plant{Instance._count}")
         self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
-
-    def _log(self, env, instance, status, category, message) -> None:
-        self.messages.append((int(status), message.decode()))
 
     def initialize(self, **values) -> None:
         self.fmu.setupExperiment(startTime=0.0)
