@@ -410,6 +410,10 @@ class DrillstringPlant(Fmi2Slave):
                 getter=getter, setter=setter), nested=False)
         if _IMPORT_WARNING:
             self.log(f"{self.instance_name}: {_IMPORT_WARNING}", status=Fmi2Status.warning)
+        # fast paths of get_real/set_real in step mode (the hot loop of an importer)
+        self._real_vrs = frozenset(vr for vr, v in self.vars.items() if isinstance(v, Real))
+        self._input_vrs = frozenset(vr for vr, v in self.vars.items()
+                                    if isinstance(v, Real) and v.causality == Fmi2Causality.input)
 
     # ------------------------------------------------------------------ helpers
     def _error(self, msg: str, status: Fmi2Status = Fmi2Status.error) -> bool:
@@ -577,6 +581,9 @@ class DrillstringPlant(Fmi2Slave):
         return False
 
     def get_real(self, vrs: list[int]) -> list[float]:
+        if self._mode == "step" and self._real_vrs.issuperset(vrs):  # every check passes
+            v = self.vars
+            return [float(v[vr].getter()) for vr in vrs]
         return [float(self.vars[vr].getter()) if self._accessible(vr, Real, "getReal")
                 else math.nan for vr in vrs]
 
@@ -593,6 +600,11 @@ class DrillstringPlant(Fmi2Slave):
                 else "" for vr in vrs]
 
     def set_real(self, vrs: list[int], values: list[float]) -> None:
+        if self._mode == "step" and self._input_vrs.issuperset(vrs):  # every check passes
+            v = self.vars
+            for vr, value in zip(vrs, values):
+                v[vr].setter(float(value))
+            return
         for vr, value in zip(vrs, values):
             if self._accessible(vr, Real, "setReal"):
                 self.vars[vr].setter(float(value))
