@@ -29,6 +29,16 @@ class attribute ``DIRECT_FEEDTHROUGH`` (output name -> input names; an output no
 listed gets no ``dependencies`` attribute, meaning "depends on all"), and
 ``<InitialUnknowns>`` for outputs whose ``initial`` is not ``exact``.
 
+FMI wrapper (``--wrapper``)
+---------------------------
+``pythonfmu`` (the default) ships pythonfmu's prebuilt C++ wrapper as
+``binaries/linux64/<name>.so``. ``native`` replaces it by our C wrapper
+(:mod:`fmu_src.wrapper`, compiled here against the running Python), which
+returns fmi2Error for exceptions and for statuses the adapter reports, and
+survives exceptions; see that module for the status convention. The default
+can be switched for a process with ``$DRILLCOSIM_FMU_WRAPPER`` (used by the
+tests to run the FMU test files against native-wrapped FMUs).
+
 Registering the plant FMU
 -------------------------
 Add (or edit) one entry in :data:`REGISTRY`, e.g.::
@@ -59,6 +69,7 @@ from xml.etree import ElementTree as ET
 
 __all__ = [
     "DEFAULT_OUT",
+    "WRAPPERS",
     "REGISTRY",
     "ROOT",
     "UNIT_DEFINITIONS",
@@ -96,6 +107,18 @@ UNIT_DEFINITIONS: dict[str, dict[str, int]] = {
     "W": {"kg": 1, "m": 2, "s": -3},
     "J": {"kg": 1, "m": 2, "s": -2},
 }
+
+#: FMI wrappers ``build_one`` can ship; the first is the default.
+WRAPPERS: tuple[str, ...] = ("pythonfmu", "native")
+
+
+def _wrapper(wrapper: str | None) -> str:
+    """The wrapper to use: ``wrapper``, else ``$DRILLCOSIM_FMU_WRAPPER``, else pythonfmu."""
+    chosen = wrapper or os.environ.get("DRILLCOSIM_FMU_WRAPPER") or WRAPPERS[0]
+    if chosen not in WRAPPERS:
+        raise ValueError(f"wrapper {chosen!r} is not one of {', '.join(WRAPPERS)}")
+    return chosen
+
 
 _DEFAULT_OPTIONS: tuple[tuple[str, bool], ...] = (
     ("canGetAndSetFMUstate", True),
@@ -270,7 +293,7 @@ def _rewrite_zip_member(fmu: Path, member: str, data: bytes) -> None:
 
 
 # -------------------------------------------------------------------------- worker
-def _build_in_this_process(spec: FmuSpec, workdir: Path) -> Path:
+def _build_in_this_process(spec: FmuSpec, workdir: Path, wrapper: str = "pythonfmu") -> Path:
     """Build one FMU into ``workdir/out`` (run in a dedicated subprocess)."""
     from pythonfmu import FmuBuilder
 
@@ -311,11 +334,17 @@ def _build_in_this_process(spec: FmuSpec, workdir: Path) -> Path:
             raise RuntimeError(f"{fmu.name}: resources/{vname}/ missing")
         if any(n.startswith(f"resources/{package}/") for n in names):
             raise RuntimeError(f"{fmu.name}: unversioned resources/{package}/ would shadow")
+    if wrapper == "native":
+        from fmu_src.wrapper import compile_wrapper, install_native_wrapper
+
+        library = compile_wrapper(workdir / "dcs_fmi2_native.so")
+        install_native_wrapper(fmu, spec.name, library)
     return fmu
 
 
 # ------------------------------------------------------------------------- public
-def build_one(spec: FmuSpec, out_dir: Path | str = DEFAULT_OUT) -> Path:
+def build_one(spec: FmuSpec, out_dir: Path | str = DEFAULT_OUT,
+              wrapper: str | None = None) -> Path:
     """Build one FMU atomically into ``out_dir``.
 
     Parameters
@@ -324,6 +353,9 @@ def build_one(spec: FmuSpec, out_dir: Path | str = DEFAULT_OUT) -> Path:
         What to build.
     out_dir : path-like
         Target folder (created if missing).
+    wrapper : {"pythonfmu", "native"}, optional
+        FMI wrapper (see the module docstring); default ``$DRILLCOSIM_FMU_WRAPPER``
+        or "pythonfmu".
 
     Returns
     -------
@@ -335,6 +367,7 @@ def build_one(spec: FmuSpec, out_dir: Path | str = DEFAULT_OUT) -> Path:
     RuntimeError
         If the build subprocess fails (its output is included).
     """
+    wrapper = _wrapper(wrapper)
     out_dir = Path(out_dir).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
     target = out_dir / f"{spec.name}.fmu"
@@ -345,7 +378,7 @@ def build_one(spec: FmuSpec, out_dir: Path | str = DEFAULT_OUT) -> Path:
             [str(ROOT)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
         env["PYTHONDONTWRITEBYTECODE"] = "1"
         cmd = [sys.executable, "-m", "fmu_src.build", "--worker-spec",
-               json.dumps(asdict(spec)), "--workdir", str(workdir)]
+               json.dumps(asdict(spec)), "--workdir", str(workdir), "--wrapper", wrapper]
         proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
         if proc.returncode != 0:
             raise RuntimeError(f"building {spec.name} failed (exit {proc.returncode}):\n"
@@ -357,7 +390,7 @@ def build_one(spec: FmuSpec, out_dir: Path | str = DEFAULT_OUT) -> Path:
 
 
 def build_all(out_dir: Path | str = DEFAULT_OUT,
-              specs: Sequence[FmuSpec] = REGISTRY) -> list[Path]:
+              specs: Sequence[FmuSpec] = REGISTRY, wrapper: str | None = None) -> list[Path]:
     """Build every FMU of ``specs`` whose adapter script exists.
 
     Parameters
@@ -366,6 +399,8 @@ def build_all(out_dir: Path | str = DEFAULT_OUT,
         Target folder, default ``build/fmus/`` in the repository.
     specs : sequence of FmuSpec
         Default :data:`REGISTRY`.
+    wrapper : {"pythonfmu", "native"}, optional
+        FMI wrapper, see :func:`build_one`.
 
     Returns
     -------
@@ -377,7 +412,7 @@ def build_all(out_dir: Path | str = DEFAULT_OUT,
         if not spec.script_path.is_file():
             print(f"note: skipping {spec.name}: adapter {spec.script} does not exist yet")
             continue
-        built.append(build_one(spec, out_dir))
+        built.append(build_one(spec, out_dir, wrapper))
         print(f"built {built[-1]}")
     return built
 
@@ -400,11 +435,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help=f"output folder (default {DEFAULT_OUT})")
     parser.add_argument("--only", action="append", default=None, metavar="NAME",
                         help="build only this FMU (repeatable)")
+    parser.add_argument("--wrapper", choices=WRAPPERS, default=None,
+                        help="FMI wrapper: pythonfmu (default, or $DRILLCOSIM_FMU_WRAPPER) "
+                             "or native (our C wrapper: fmi2Error for errors)")
     parser.add_argument("--worker-spec", help=argparse.SUPPRESS)
     parser.add_argument("--workdir", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker_spec is not None:
-        _build_in_this_process(_spec_from_json(args.worker_spec), args.workdir)
+        _build_in_this_process(_spec_from_json(args.worker_spec), args.workdir,
+                               _wrapper(args.wrapper))
         return 0
     specs = REGISTRY
     if args.only:
@@ -413,7 +452,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             parser.error(f"unknown FMU(s) {sorted(unknown)}; registered: "
                          f"{[s.name for s in REGISTRY]}")
         specs = tuple(s for s in REGISTRY if s.name in args.only)
-    build_all(args.out, specs)
+    build_all(args.out, specs, args.wrapper)
     return 0
 
 
