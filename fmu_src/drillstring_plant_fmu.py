@@ -93,6 +93,26 @@ logStatusError) naming the cause and reported through fmi2Discard:
   after initialization: logged; a get returns NaN / 0 / false / "" for it, a set
   ignores it, and the next ``fmi2DoStep`` returns fmi2Discard naming the call.
 
+With the native wrapper (``python -m fmu_src.build --wrapper native``, see
+``fmu_src/wrapper``) the same code returns the FMI 2.0 statuses directly: every
+message logged through ``_error`` also sets ``self._fmi2_status`` (the highest
+status of the call), which that wrapper turns into the call's status and resets
+(pythonfmu never reads it), and ``exit_initialization_mode`` returns
+``Fmi2Status.error`` when the model cannot be built (pythonfmu ignores the return
+value). ``do_step`` keeps returning a bool: pythonfmu maps any truthy value to
+fmi2OK, so an int status there would be misread. Under the native wrapper
+(``self._fmi2_wrapper == "native"``, set by it) therefore:
+
+* invalid parameter: fmi2ExitInitializationMode -> fmi2Error with the message
+  naming it; every doStep then -> fmi2Error;
+* non-finite input, non-positive step, wrong communication point -> fmi2Error from
+  that doStep, state unchanged; doStep before initialization -> fmi2Error
+  (checked by the wrapper itself);
+* divergence -> fmi2Discard (as above, until a saved state is restored);
+* unknown value reference, wrong type, setting an output or a fixed parameter after
+  initialization -> fmi2Error from that get/set call itself (no deferred discard);
+* an unexpected exception -> fmi2Error, the instance stays usable.
+
 FMU state: ``_get_fmu_state`` / ``_set_fmu_state`` add the simulator's time, state
 vector and held inputs (JSON-safe floats, so serialisation is bit-exact) to
 pythonfmu's registered variables; restoring a state whose parameters differ
@@ -354,10 +374,16 @@ class DrillstringPlant(Fmi2Slave):
     #: Outputs change only in doStep: no output depends directly on an input.
     DIRECT_FEEDTHROUGH: ClassVar[dict[str, tuple[str, ...]]] = dict.fromkeys(OUTPUTS, ())
 
+    #: Set to "native" on the instance by our native wrapper (``fmu_src/wrapper``).
+    _fmi2_wrapper: ClassVar[str] = "pythonfmu"
+
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=30.0,
                                                     step_size=1e-3)
+        #: Highest status reported during the current call; read and reset by the
+        #: native wrapper, ignored by pythonfmu.
+        self._fmi2_status: int | None = None
         for name in INPUTS + OUTPUTS:
             setattr(self, name, 0.0)
         self.scene = DEFAULT_SCENE
@@ -418,6 +444,7 @@ class DrillstringPlant(Fmi2Slave):
     # ------------------------------------------------------------------ helpers
     def _error(self, msg: str, status: Fmi2Status = Fmi2Status.error) -> bool:
         self.log(f"{self.instance_name}: {msg}", status=status)
+        self._fmi2_status = max(self._fmi2_status or 0, int(status))
         return False
 
     def _key(self) -> tuple[Any, ...]:
@@ -501,9 +528,11 @@ class DrillstringPlant(Fmi2Slave):
     def enter_initialization_mode(self) -> None:
         self._mode = "initialization"
 
-    def exit_initialization_mode(self) -> None:
+    def exit_initialization_mode(self) -> Fmi2Status:
         self._mode = "step"
         self._build()  # logs a failure; see "Error handling" in the module docstring
+        # pythonfmu ignores the return value, the native wrapper returns it
+        return Fmi2Status.ok if self._init_error is None else Fmi2Status.error
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         try:
@@ -576,8 +605,9 @@ class DrillstringPlant(Fmi2Slave):
                     and var.causality == Fmi2Causality.output):
                 self._build()  # initial unknowns: computed from the parameters set so far
             return True
-        self._call_error = f"{call}: {problem}"
-        self._error(self._call_error)
+        if self._fmi2_wrapper != "native":  # the native wrapper fails this call itself
+            self._call_error = f"{call}: {problem}"
+        self._error(f"{call}: {problem}")
         return False
 
     def get_real(self, vrs: list[int]) -> list[float]:

@@ -53,6 +53,25 @@ message naming the cause) and reported through fmi2Discard:
 
 Genuine bugs still raise, i.e. fmi2Fatal.
 
+With the native wrapper (``python -m fmu_src.build --wrapper native``, see
+``fmu_src/wrapper``) the same code returns the FMI 2.0 statuses directly: every
+message logged through ``_error`` also sets ``self._fmi2_status`` (the highest
+status of the call), which that wrapper turns into the call's status and resets
+(pythonfmu never reads it), and ``exit_initialization_mode`` returns
+``Fmi2Status.error`` for invalid parameters (pythonfmu ignores the return value).
+``do_step`` keeps returning a bool: pythonfmu maps any truthy value to fmi2OK, so an
+int status there would be misread. Under the native wrapper (``self._fmi2_wrapper ==
+"native"``, set by it) therefore:
+
+* parameter out of range: fmi2ExitInitializationMode -> fmi2Error naming it;
+  doStep then -> fmi2Error;
+* non-finite input, invalid tunable parameter, fixed parameter changed, negative
+  step -> fmi2Error from that doStep (state unchanged); doStep before
+  initialization -> fmi2Error (checked by the wrapper itself);
+* unknown value reference, wrong type, setting an output -> fmi2Error from that
+  get/set call itself (no deferred discard of the next doStep);
+* an unexpected exception -> fmi2Error, the instance stays usable.
+
 FMU state (``fmi2Get/SetFMUstate``, serialisable): pythonfmu's default saves the
 registered variables only; ``_get_fmu_state`` / ``_set_fmu_state`` are overridden
 to add the lag state of the controller and the initialization flag (JSON-safe
@@ -122,10 +141,16 @@ class StrainController(Fmi2Slave):
     #: point): none for every output, they change only in doStep.
     DIRECT_FEEDTHROUGH: ClassVar[dict[str, tuple[str, ...]]] = dict.fromkeys(OUTPUTS, ())
 
+    #: Set to "native" on the instance by our native wrapper (``fmu_src/wrapper``).
+    _fmi2_wrapper: ClassVar[str] = "pythonfmu"
+
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=30.0,
                                                     step_size=1e-3)
+        #: Highest status reported during the current call; read and reset by the
+        #: native wrapper, ignored by pythonfmu.
+        self._fmi2_status: int | None = None
         defaults = ControllerParams()
         for name in INPUTS + OUTPUTS:
             setattr(self, name, 0.0)
@@ -198,12 +223,13 @@ class StrainController(Fmi2Slave):
     def _snapshot(self, names: tuple[str, ...]) -> tuple[Any, ...]:
         return tuple(getattr(self, n) for n in names)
 
-    def _error(self, msg: str) -> bool:
-        self.log(f"{self.instance_name}: {msg}", status=Fmi2Status.error)
+    def _error(self, msg: str, status: Fmi2Status = Fmi2Status.error) -> bool:
+        self.log(f"{self.instance_name}: {msg}", status=status)
+        self._fmi2_status = max(self._fmi2_status or 0, int(status))
         return False
 
     # ---------------------------------------------------------------- FMI calls
-    def exit_initialization_mode(self) -> None:
+    def exit_initialization_mode(self) -> Fmi2Status:
         try:
             params = self._params_from_variables()
         except ValueError as exc:
@@ -211,13 +237,14 @@ class StrainController(Fmi2Slave):
             self._init_error = f"invalid parameter: {exc}"
             self._initialized = False
             self._error(f"fmi2ExitInitializationMode: {self._init_error}; every doStep "
-                        f"will be discarded (reset or re-instantiate with valid parameters)")
-            return
+                        f"will be rejected (reset or re-instantiate with valid parameters)")
+            return Fmi2Status.error  # pythonfmu ignores it, the native wrapper returns it
         self._init_error = None
         self._law = StrainLaw(params)
         self._fixed_values = self._snapshot(FIXED)
         self._tunable_values = self._snapshot(TUNABLE)
         self._initialized = True
+        return Fmi2Status.ok
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         if self._call_error is not None:
@@ -260,8 +287,9 @@ class StrainController(Fmi2Slave):
             problem = f"{var.name} (value reference {vr}) is an {var.causality.name}: not settable"
         else:
             return True
-        self._call_error = f"{call}: {problem}"
-        self._error(self._call_error)
+        if self._fmi2_wrapper != "native":  # the native wrapper fails this call itself
+            self._call_error = f"{call}: {problem}"
+        self._error(f"{call}: {problem}")
         return False
 
     def get_real(self, vrs: list[int]) -> list[float]:
