@@ -286,17 +286,16 @@ static int ensure_python(void)
         }
     }
     if (rc == 0) {
-        const char *v = p_Py_GetVersion();
+        const char *v = p_Py_GetVersion(); /* usable before initialisation */
         char want[16];
         snprintf(want, sizeof want, "%d.%d.", PY_MAJOR_VERSION, PY_MINOR_VERSION);
-        if (!p_Py_IsInitialized())
-            rc = start_python();
-        v = p_Py_GetVersion();
-        if (rc == 0 && strncmp(v, want, strlen(want)) != 0) {
+        if (strncmp(v, want, strlen(want)) != 0) {
             snprintf(g_init_error, sizeof g_init_error,
                      "the process runs Python %.20s but this FMU was built for %s",
                      v, PY_VERSION);
             rc = -1;
+        } else if (!p_Py_IsInitialized()) {
+            rc = start_python();
         }
     }
     if (rc == 0)
@@ -761,14 +760,16 @@ static char *uri_to_path(const char *uri)
 /* Import the slave module with resources first on sys.path (only during the import). */
 static PyObject *import_class(Inst *in, const char *module, const char *cls_name)
 {
-    PyObject *path = p_PySys_GetObject("path"); /* borrowed */
+    PyObject *path = p_PySys_GetObject("path"); /* borrowed: held while importing */
     PyObject *entry = p_PyUnicode_DecodeFSDefault(in->resources);
     PyObject *mod = NULL, *cls = NULL, *cname;
     int inserted = 0;
     if (entry == NULL)
         return NULL;
     if (path != NULL && PyList_Check(path)) {
+        dcs_incref(path); /* the module may rebind sys.path */
         if (p_PyList_Insert(path, 0, entry) != 0) {
+            dcs_decref(path);
             dcs_decref(entry);
             return NULL;
         }
@@ -787,6 +788,7 @@ static PyObject *import_class(Inst *in, const char *module, const char *cls_name
             }
         }
         p_PyErr_Restore(type, value, tb);
+        dcs_decref(path);
     }
     dcs_decref(entry);
     if (mod == NULL)
