@@ -29,8 +29,11 @@ e.g. ``Fmi2Status.error``
 
 After every call (get/set included) the wrapper reads ``slave._fmi2_status``: if it
 is an int above the status found so far, it becomes the status; the wrapper then
-resets it to None. This lets a ``get_real`` that meets an unknown value reference, or
-a ``do_step`` that must keep returning a bool for pythonfmu, report fmi2Error. Right
+resets it to None (opt-in: the attribute must exist right after the slave is
+constructed, e.g. ``self._fmi2_status = None`` in ``__init__``; otherwise it is never
+read, which saves a failed attribute lookup per call). This lets a ``get_real`` that
+meets an unknown value reference, or a ``do_step`` that must keep returning a bool for
+pythonfmu, report fmi2Error. Right
 after constructing the slave the wrapper sets ``slave._fmi2_wrapper = "native"``,
 so an adapter can tell which wrapper runs it (pythonfmu never sets it).
 

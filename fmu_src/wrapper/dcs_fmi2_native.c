@@ -29,7 +29,8 @@
  *     return an int 0..4 (not bool)   -> that fmi2Status
  *     anything else                   -> do_step: truthy OK / falsy Discard; else OK
  *   then, if the slave has a non-None attribute ``_fmi2_status`` (int 0..4), the
- *   status is raised to it and the attribute is reset to None. fmi2Fatal only when
+ *   status is raised to it and the attribute is reset to None (only for slaves that
+ *   have the attribute right after construction: a missing one costs an exception). fmi2Fatal only when
  *   Python itself cannot be used (initialisation failed, exception text unreadable).
  * - The wrapper sets ``slave._fmi2_wrapper = "native"`` after construction.
  * - A small FMI state machine is enforced: doStep only after
@@ -336,6 +337,7 @@ typedef struct {
     PyObject *str_keep; /* bytes objects behind the last fmi2GetString */
     Mode mode;
     int broken;         /* fatal: only fmi2FreeInstance is allowed */
+    int has_status;     /* the slave defines _fmi2_status (read after every call) */
     double last_ok_time;
     Msg *msgs;
     size_t nmsgs, capmsgs;
@@ -549,6 +551,8 @@ static fmi2Status status_of(Inst *in, PyObject *res, int is_step, const char *fn
         status = t ? fmi2OK : fmi2Discard;
     }
     dcs_decref(res);
+    if (!in->has_status)
+        return status;
     extra = p_PyObject_GetAttr(in->slave, n_fmi2_status);
     if (extra == NULL) {
         p_PyErr_Clear();
@@ -670,6 +674,11 @@ static int create_slave(Inst *in)
     }
     if (q == NULL)
         goto done;
+    tmp = p_PyObject_GetAttr(slave, n_fmi2_status);
+    in->has_status = tmp != NULL;
+    if (tmp == NULL)
+        p_PyErr_Clear();
+    dcs_decref(tmp);
     dcs_decref(in->slave);
     dcs_decref(in->log_queue);
     in->slave = slave;
