@@ -66,52 +66,47 @@ of them (``model = "auto"`` or ``"axial_torsional"`` resolving to the
 axial-torsional chain, contact disabled, other contact bodies), initialization
 fails with an error naming the missing outputs; they are never silently zero.
 
-Error handling (pythonfmu 0.7.0, checked in its C++ source)
-------------------------------------------------------------
-``PySlaveInstance`` ignores the return values of ``setup_experiment``,
-``enter_initialization_mode`` and ``exit_initialization_mode`` (it only checks for
-an exception) and maps ``do_step``'s return value through ``PyObject_IsTrue`` to
-fmi2OK / fmi2Discard. Any Python exception becomes ``cppfmu::FatalError``, i.e.
-fmi2Fatal, after ``cleanPyObject()`` released the instance's Python objects, which
-``fmi2FreeInstance`` releases again (heap corruption, later segfault). fmi2Error
-and fmi2Warning cannot be returned from Python at all. Hence no exception
-escapes any callback of this class (unexpected ones are caught too and reported
-as an internal error); each problem is logged with status fmi2Error (category
-logStatusError) naming the cause and reported through fmi2Discard:
+Error handling
+--------------
+The FMU is built by default with the native FMI wrapper (``fmu_src/wrapper``,
+``python -m fmu_src.build``), which returns the FMI 2.0 statuses directly: every
+message logged through ``_error`` (status fmi2Error, category logStatusError,
+naming the cause; divergence: fmi2Discard, logStatusDiscard) also sets
+``self._fmi2_status`` (the highest status of the call), which that wrapper turns
+into the call's status and resets, and ``exit_initialization_mode`` returns
+``Fmi2Status.error`` when the model cannot be built. Under the native wrapper
+(``self._fmi2_wrapper == "native"``, set by it):
 
 * invalid parameter (out of range, wrong ``scene`` / ``model``, missing outputs):
-  logged when the model is built, at ``fmi2ExitInitializationMode`` (which still
-  returns fmi2OK: nothing safer exists); every ``fmi2DoStep`` returns fmi2Discard
-  repeating the message. Re-instantiate (or ``fmi2Reset``) with valid parameters;
-* non-finite input, non-positive step, ``fmi2DoStep`` before initialization:
-  fmi2Discard, state unchanged (the importer may correct the cause and retry);
+  fmi2ExitInitializationMode -> fmi2Error with the message naming it; a doStep
+  after that -> fmi2Error. Free (or ``fmi2Reset``) and use valid parameters;
+* non-finite input, non-positive or too large step, wrong communication point ->
+  fmi2Error from that doStep, state unchanged; doStep before initialization ->
+  fmi2Error (checked by the wrapper itself);
 * divergence (non-finite state, lateral deflection > 1 m, tilt > 0.5 rad, speed >
-  1e4): logged with status fmi2Discard (category logStatusDiscard) naming time,
-  quantity and value; fmi2Discard now and for every later ``fmi2DoStep`` until an
-  FMU state saved before is restored (``fmi2SetFMUstate``) or the FMU is reset;
-* unknown value reference, wrong type, setting an output or a fixed parameter
-  after initialization: logged; a get returns NaN / 0 / false / "" for it, a set
-  ignores it, and the next ``fmi2DoStep`` returns fmi2Discard naming the call.
-
-With the native wrapper (``python -m fmu_src.build --wrapper native``, see
-``fmu_src/wrapper``) the same code returns the FMI 2.0 statuses directly: every
-message logged through ``_error`` also sets ``self._fmi2_status`` (the highest
-status of the call), which that wrapper turns into the call's status and resets
-(pythonfmu never reads it), and ``exit_initialization_mode`` returns
-``Fmi2Status.error`` when the model cannot be built (pythonfmu ignores the return
-value). ``do_step`` keeps returning a bool: pythonfmu maps any truthy value to
-fmi2OK, so an int status there would be misread. Under the native wrapper
-(``self._fmi2_wrapper == "native"``, set by it) therefore:
-
-* invalid parameter: fmi2ExitInitializationMode -> fmi2Error with the message
-  naming it; every doStep then -> fmi2Error;
-* non-finite input, non-positive step, wrong communication point -> fmi2Error from
-  that doStep, state unchanged; doStep before initialization -> fmi2Error
-  (checked by the wrapper itself);
-* divergence -> fmi2Discard (as above, until a saved state is restored);
+  1e4) -> fmi2Discard naming time, quantity and value, now and for every later
+  doStep until an FMU state saved before is restored (``fmi2SetFMUstate``) or the
+  FMU is reset;
 * unknown value reference, wrong type, setting an output or a fixed parameter after
-  initialization -> fmi2Error from that get/set call itself (no deferred discard);
+  initialization, an invalid FMU state -> fmi2Error from that get/set/setFMUstate
+  call itself (a get returns NaN / 0 / false / "" for it, a set ignores it);
 * an unexpected exception -> fmi2Error, the instance stays usable.
+
+Fallback ``--wrapper pythonfmu`` (pythonfmu 0.7.0's prebuilt binary, checked in its
+C++ source): ``PySlaveInstance`` ignores the return values of
+``setup_experiment``, ``enter_initialization_mode`` and
+``exit_initialization_mode`` and maps ``do_step``'s return value through
+``PyObject_IsTrue`` to fmi2OK / fmi2Discard (so ``do_step`` keeps returning a bool:
+an int status would be misread). Any Python exception becomes fmi2Fatal after
+``cleanPyObject()`` released the instance's Python objects, which
+``fmi2FreeInstance`` releases again (heap corruption, later segfault); fmi2Error
+cannot be returned at all. Hence no exception escapes any callback of this class
+(unexpected ones are caught and reported as an internal error), and under
+pythonfmu each problem above is reported through fmi2Discard: an invalid parameter
+is logged at fmi2ExitInitializationMode (which returns fmi2OK) and every doStep
+returns fmi2Discard repeating it; bad inputs / steps give fmi2Discard, state
+unchanged; a failed get/set/setFMUstate is logged and the next doStep returns
+fmi2Discard naming the call.
 
 FMU state: ``_get_fmu_state`` / ``_set_fmu_state`` add the simulator's time, state
 vector and held inputs (JSON-safe floats, so serialisation is bit-exact) to
@@ -511,7 +506,7 @@ class DrillstringPlant(Fmi2Slave):
                                 f"({traceback.format_exc(limit=-1).strip().splitlines()[-1]})")
         if self._init_error is not None:
             self._error(f"initialization failed: {self._init_error}; every doStep will be "
-                        f"discarded (re-instantiate or reset with valid parameters)")
+                        f"rejected (re-instantiate or reset with valid parameters)")
         else:
             self._write_outputs()
 
@@ -681,8 +676,10 @@ class DrillstringPlant(Fmi2Slave):
                     t, y, u = sim
                     self._sim.set_state((t, np.array(y, dtype=float), np.array(u, dtype=float)))
         except Exception as exc:  # noqa: BLE001 - never let an exception reach pythonfmu
-            self._call_error = f"fmi2SetFMUstate: invalid state: {exc!r}"
-            self._error(self._call_error)
+            problem = f"fmi2SetFMUstate: invalid state: {exc!r}"
+            if self._fmi2_wrapper != "native":  # the native wrapper fails this call itself
+                self._call_error = problem
+            self._error(problem)
 
     @staticmethod
     def _fmu_state_from_bytes(state: bytes) -> dict[str, Any]:

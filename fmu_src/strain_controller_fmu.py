@@ -29,48 +29,39 @@ unsupported, and pythonfmu cannot declare an Enumeration.
 
 Error handling
 --------------
-pythonfmu 0.7.0 can return only two non-OK statuses: fmi2Discard (``do_step``
-returns False) and fmi2Fatal (any Python exception escaping a callback). It cannot
-return fmi2Error. Worse, after an exception its C++ wrapper releases the Python
-objects of the instance once in the error handler and again in
-``fmi2FreeInstance`` (``cleanPyObject`` does not null its pointers): freeing an
-instance that went fatal corrupts the interpreter's heap and segfaults the host
-later (reproduced with fmpy). Therefore no *anticipated* error escapes as an
-exception here; each is logged with status fmi2Error (category logStatusError,
-message naming the cause) and reported through fmi2Discard:
+The FMU is built by default with the native FMI wrapper (``fmu_src/wrapper``,
+``python -m fmu_src.build``), which returns the FMI 2.0 statuses directly: every
+message logged through ``_error`` (status fmi2Error, category logStatusError,
+naming the cause) also sets ``self._fmi2_status`` (the highest status of the
+call), which that wrapper turns into the call's status and resets, and
+``exit_initialization_mode`` returns ``Fmi2Status.error`` for invalid parameters.
+Under the native wrapper (``self._fmi2_wrapper == "native"``, set by it):
 
-* parameter out of range at ``fmi2ExitInitializationMode``: logged there (the call
-  itself returns fmi2OK, pythonfmu offers nothing else that is safe); the instance
-  stays uninitialised and every ``fmi2DoStep`` returns fmi2Discard repeating the
-  message. Use ``fmi2Reset`` or a new instance with valid parameters;
-* non-finite input, invalid tunable parameter set between steps, fixed parameter
-  changed after initialization, ``fmi2DoStep`` before initialization, negative
-  step: ``fmi2DoStep`` returns fmi2Discard and leaves the state unchanged, so the
-  importer may correct the cause (or restore a saved state) and retry;
-* unknown value reference, wrong type, setting an output: logged; a get returns
-  NaN / 0 / false for that reference, a set ignores it, and the next
-  ``fmi2DoStep`` returns fmi2Discard naming the failed call (then the flag clears).
-
-Genuine bugs still raise, i.e. fmi2Fatal.
-
-With the native wrapper (``python -m fmu_src.build --wrapper native``, see
-``fmu_src/wrapper``) the same code returns the FMI 2.0 statuses directly: every
-message logged through ``_error`` also sets ``self._fmi2_status`` (the highest
-status of the call), which that wrapper turns into the call's status and resets
-(pythonfmu never reads it), and ``exit_initialization_mode`` returns
-``Fmi2Status.error`` for invalid parameters (pythonfmu ignores the return value).
-``do_step`` keeps returning a bool: pythonfmu maps any truthy value to fmi2OK, so an
-int status there would be misread. Under the native wrapper (``self._fmi2_wrapper ==
-"native"``, set by it) therefore:
-
-* parameter out of range: fmi2ExitInitializationMode -> fmi2Error naming it;
-  doStep then -> fmi2Error;
-* non-finite input, invalid tunable parameter, fixed parameter changed, negative
-  step -> fmi2Error from that doStep (state unchanged); doStep before
-  initialization -> fmi2Error (checked by the wrapper itself);
-* unknown value reference, wrong type, setting an output -> fmi2Error from that
-  get/set call itself (no deferred discard of the next doStep);
+* parameter out of range: fmi2ExitInitializationMode -> fmi2Error naming it; a
+  doStep after that -> fmi2Error. Use ``fmi2Reset`` or a new instance;
+* non-finite input or time, invalid tunable parameter, fixed parameter changed,
+  negative step -> fmi2Error from that doStep (state unchanged, the importer may
+  correct the cause and retry); doStep before initialization -> fmi2Error
+  (checked by the wrapper itself);
+* unknown value reference, wrong type, setting an output, a state that is not one
+  of this FMU -> fmi2Error from that get/set/setFMUstate call itself (a get
+  returns NaN / 0 / false for that reference, a set ignores it);
 * an unexpected exception -> fmi2Error, the instance stays usable.
+
+Fallback ``--wrapper pythonfmu``: pythonfmu 0.7.0 can return only two non-OK
+statuses, fmi2Discard (``do_step`` returns False; so ``do_step`` keeps returning a
+bool, an int status would be misread) and fmi2Fatal (any Python exception
+escaping a callback), and it ignores the return value of
+``exit_initialization_mode``. Worse, after an exception its C++ wrapper releases the
+Python objects of the instance once in the error handler and again in
+``fmi2FreeInstance``: freeing an instance that went fatal corrupts the heap and
+segfaults the host later (reproduced with fmpy). Therefore no *anticipated* error
+escapes as an exception here, and under pythonfmu each problem above is reported
+through fmi2Discard: an invalid parameter is logged at fmi2ExitInitializationMode
+(which returns fmi2OK) and every doStep returns fmi2Discard repeating it; bad
+inputs / steps give fmi2Discard, state unchanged; a failed get/set/setFMUstate is
+logged and the next doStep returns fmi2Discard naming it (then the flag clears).
+Genuine bugs still raise, i.e. fmi2Fatal under pythonfmu.
 
 FMU state (``fmi2Get/SetFMUstate``, serialisable): pythonfmu's default saves the
 registered variables only; ``_get_fmu_state`` / ``_set_fmu_state`` are overridden
@@ -345,9 +336,12 @@ class StrainController(Fmi2Slave):
             super()._set_fmu_state(state)
             self._law.set_state(law_state)
         except Exception as exc:  # noqa: BLE001 - an exception would be fmi2Fatal + crash
-            self._call_error = f"fmi2SetFMUstate: not a state of this FMU ({exc!r})"
-            self._error(self._call_error)
+            problem = f"fmi2SetFMUstate: not a state of this FMU ({exc!r})"
+            if self._fmi2_wrapper != "native":  # the native wrapper fails this call itself
+                self._call_error = problem
+            self._error(problem)
             return
+        self._call_error = None  # a restored state: nothing earlier is pending
         self._init_error = init_error
         self._initialized = bool(initialized)
         # the parameters came back with the registered variables: take the fixed ones
