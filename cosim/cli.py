@@ -96,7 +96,7 @@ def _cmd_build(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .errors import CosimError
+    from .errors import FMI2_ERROR, CosimError
     from .run import run_scene
 
     try:
@@ -105,6 +105,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
                             fmu_dir=args.fmu_dir, progress=False if args.no_progress else None,
                             plots=not args.no_plots)
     except CosimError as exc:  # failed before the first step: earlier files are kept
+        if exc.call == "fmi2ExitInitializationMode" and exc.status == FMI2_ERROR:
+            # the FMU rejected its parameters (its message names them): bad input
+            print(f"drillcosim run: error: {exc}", file=sys.stderr)
+            return EXIT_USAGE
         print(f"drillcosim run: failed: {exc}", file=sys.stderr)
         return 1
     print(outcome.message, file=sys.stderr if outcome.exit_code else sys.stdout)

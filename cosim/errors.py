@@ -15,6 +15,7 @@ FMI2_STATUS_NAMES = ("fmi2OK", "fmi2Warning", "fmi2Discard", "fmi2Error", "fmi2F
                      "fmi2Pending")
 FMI2_WARNING = 1
 FMI2_DISCARD = 2
+FMI2_ERROR = 3
 FMI2_FATAL = 4
 
 

@@ -13,8 +13,11 @@ Used by ``drillcosim run`` (:mod:`cosim.cli`). The output folder (default
 A run that fails while stepping (divergence: a non-finite output, or the plant
 discarding a step) keeps the rows recorded so far, writes the summary (with
 ``diverged`` set) and the plots, and reports one line; exit code 1. A run that
-fails before the first step leaves earlier files of the folder untouched. Bad
-input raises ``ValueError`` (exit code 2 in the CLI).
+fails before the first step leaves earlier files of the folder untouched and
+raises :class:`CosimError` whose message ends with the FMU's own log line (e.g.
+the plant naming an out-of-range parameter at ``fmi2ExitInitializationMode``).
+Bad input raises ``ValueError`` (exit code 2 in the CLI; so does an FMU
+rejecting its parameters with fmi2Error at initialization).
 """
 
 from __future__ import annotations
@@ -113,12 +116,21 @@ def _merge(base: dict[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
 
 
 class _FmuLog(io.TextIOBase):
-    """stdout pass-through remembering FMU log lines (fmpy prints them as ``[STATUS] msg``)."""
+    """stdout pass-through remembering FMU log lines (fmpy prints them as ``[STATUS] msg``).
+
+    A message holding a Python traceback (the native FMI wrapper logs exceptions as
+    ``name: Python exception in fmi2X: Traceback ...``) is remembered with the
+    traceback's last line (the exception) in place of ``Traceback ...``.
+    """
+
+    _TRACEBACK = "Traceback (most recent call last):"
 
     def __init__(self, target):
         self.target = target
         self.problems: list[str] = []
         self._buf = ""
+        self._in_traceback = False
+        self._head = ""
 
     def write(self, s: str) -> int:
         self.target.write(s)
@@ -127,7 +139,19 @@ class _FmuLog(io.TextIOBase):
         for ln in lines:
             if ln.startswith(("[DISCARD]", "[ERROR]", "[FATAL]")):
                 self.problems.append(ln)
+                self._in_traceback = ln.endswith(self._TRACEBACK)
+                self._head = ln[: -len(self._TRACEBACK)]
+            elif ln.startswith("["):
+                self._in_traceback = False
+            elif self._in_traceback and ln.strip() and not ln.startswith(" "):
+                self.problems[-1] = self._head + ln.strip()
         return len(s)
+
+    def detail(self, fmu_name: str) -> str | None:
+        """The last problem line of FMU instance ``fmu_name`` (else any), without the label."""
+        texts = [p.split("] ", 1)[-1] for p in self.problems]
+        own = [t for t in texts if t.startswith(f"{fmu_name}:")]
+        return (own or texts or [None])[-1]
 
     def flush(self) -> None:
         self.target.flush()
@@ -140,7 +164,7 @@ def _failure(err: CosimError | None, result: Result, log: _FmuLog) -> dict[str, 
                 "message": f"non-finite {d.quantity} = {d.value!r} at t = {d.time:.6g} s"}
     if err is None:
         return None
-    detail = log.problems[-1].split("] ", 1)[-1] if log.problems else err.message
+    detail = log.detail(err.fmu_name) or err.message
     return {"time_s": err.time, "quantity": f"{err.fmu_name}.{err.call}", "value": None,
             "message": f"FMU '{err.fmu_name}' {err.call} failed at t = {err.time:.6g} s: "
                        f"{detail}"}
@@ -220,7 +244,13 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
                 result.end_time <= ss.system.start_time:
             with contextlib.suppress(OSError):  # keep the real error visible
                 staging.unlink(missing_ok=True)
-            raise
+            detail = log.detail(exc.fmu_name)
+            if detail is None:
+                raise
+            full = CosimError(exc.fmu_name, exc.call, exc.time, f"{exc.message}: {detail}",
+                              status=exc.status)
+            full.result = exc.result
+            raise full from exc
     except BaseException:
         with contextlib.suppress(OSError):
             staging.unlink(missing_ok=True)

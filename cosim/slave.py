@@ -20,7 +20,7 @@ from pathlib import Path
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from .errors import FMI2_FATAL, CosimError, raise_for_status
+from .errors import FMI2_ERROR, FMI2_FATAL, CosimError, raise_for_status
 from .system import FmuSpec, ParameterValue, _did_you_mean
 
 _C_DOUBLE_P = ctypes.POINTER(ctypes.c_double)
@@ -67,6 +67,11 @@ class Slave:
         self.component = None
         self.dead = False
         self.instantiated = False
+        #: fmi2ExitInitializationMode succeeded (fmi2Terminate is allowed only then)
+        self.initialized = False
+        #: a call returned fmi2Error: FMI 2.0 then allows only fmi2FreeInstance,
+        #: fmi2Reset or fmi2SetFMUstate (a successful one clears the flag)
+        self.errored = False
 
     # -- variables -------------------------------------------------------------
     def variable(self, name: str, causality: Sequence[str] | None = None):
@@ -97,6 +102,7 @@ class Slave:
         fmu = self.fmu
         fmu.instantiate()
         self.instantiated = True
+        self.initialized = self.errored = False
         self.component = fmu.component
         self._call("fmi2SetupExperiment", start_time,
                    lambda: fmu.fmi2SetupExperiment(self.component, 0, 0.0, start_time,
@@ -106,6 +112,7 @@ class Slave:
                    lambda: fmu.fmi2EnterInitializationMode(self.component))
         self._call("fmi2ExitInitializationMode", start_time,
                    lambda: fmu.fmi2ExitInitializationMode(self.component))
+        self.initialized = True
 
     def set_values(self, values: dict[str, ParameterValue], time: float) -> None:
         """Set variables by name with the setter matching their FMI type."""
@@ -157,6 +164,7 @@ class Slave:
         """Restore a state from :meth:`get_state` (``fmi2SetFMUstate``)."""
         self._call("fmi2SetFMUstate", time,
                    lambda: self.fmu.fmi2SetFMUstate(self.component, state))
+        self.errored = False
 
     def free_state(self, state) -> None:
         """Release a state handle (errors ignored)."""
@@ -169,11 +177,13 @@ class Slave:
     def close(self, terminate: bool = True) -> None:
         """Terminate and free the instance, then delete the extracted files it owns.
 
-        After ``fmi2Fatal`` nothing is called on the instance any more.
+        After ``fmi2Fatal`` nothing is called on the instance any more. ``fmi2Terminate``
+        is called only after a successful initialization and not after ``fmi2Error``
+        (FMI 2.0's state machine: then only ``fmi2FreeInstance``).
         """
         if self.instantiated and not self.dead:
             try:
-                if terminate:
+                if terminate and self.initialized and not self.errored:
                     self.fmu.fmi2Terminate(self.component)
             except Exception:  # noqa: BLE001
                 pass
@@ -181,13 +191,15 @@ class Slave:
                 self.fmu.freeInstance()
             except Exception:  # noqa: BLE001
                 pass
-        self.instantiated = False
+        self.instantiated = self.initialized = False
         if self._own_dir:
             shutil.rmtree(self.unzip_dir, ignore_errors=True)
 
     # -- helpers ---------------------------------------------------------------
     def fail(self, status: int, call: str, time: float) -> None:
-        """Record a failed status (marking the instance dead on fmi2Fatal) and raise."""
+        """Record a failed status (errored on fmi2Error, dead on fmi2Fatal) and raise."""
+        if status >= FMI2_ERROR:
+            self.errored = True
         if status >= FMI2_FATAL:
             self.dead = True
         raise_for_status(status, self.name, call, time)
