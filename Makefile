@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 FMUS := build/fmus/DrillstringPlant.fmu build/fmus/StrainController.fmu
-SRC := $(shell find plant controller fmu_src -name '*.py' 2>/dev/null)
+SRC := $(shell find plant controller fmu_src -name '*.py' -o -name '*.c' 2>/dev/null)
 
 .PHONY: all install fmus run test lint bench clean
 

@@ -31,13 +31,16 @@ listed gets no ``dependencies`` attribute, meaning "depends on all"), and
 
 FMI wrapper (``--wrapper``)
 ---------------------------
-``pythonfmu`` (the default) ships pythonfmu's prebuilt C++ wrapper as
-``binaries/linux64/<name>.so``. ``native`` replaces it by our C wrapper
-(:mod:`fmu_src.wrapper`, compiled here against the running Python), which
-returns fmi2Error for exceptions and for statuses the adapter reports, and
-survives exceptions; see that module for the status convention. The default
-can be switched for a process with ``$DRILLCOSIM_FMU_WRAPPER`` (used by the
-tests to run the FMU test files against native-wrapped FMUs).
+``native`` (the default) replaces pythonfmu's prebuilt C++ wrapper
+``binaries/linux64/<name>.so`` by our C wrapper (:mod:`fmu_src.wrapper`,
+compiled here against the running Python: needs a C compiler, ``$CC`` or
+``gcc``, and a shared libpython; linux64 only), which returns fmi2Error for
+exceptions and for statuses the adapter reports, and survives exceptions; see
+that module for the status convention. ``pythonfmu`` (the fallback) keeps
+pythonfmu's binary, which can report errors only as fmi2Discard (or fmi2Fatal).
+Choose with ``--wrapper``, ``build_one(..., wrapper=...)`` or, for a process,
+``$DRILLCOSIM_FMU_WRAPPER``. Without a C compiler the native build stops with a
+one-line message naming the fallback.
 
 Registering the plant FMU
 -------------------------
@@ -74,10 +77,13 @@ __all__ = [
     "ROOT",
     "UNIT_DEFINITIONS",
     "FmuSpec",
+    "WrapperUnavailableError",
     "build_all",
     "build_one",
+    "default_wrapper",
     "finalize_model_description",
     "main",
+    "wrapper_of",
 ]
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -109,15 +115,47 @@ UNIT_DEFINITIONS: dict[str, dict[str, int]] = {
 }
 
 #: FMI wrappers ``build_one`` can ship; the first is the default.
-WRAPPERS: tuple[str, ...] = ("pythonfmu", "native")
+WRAPPERS: tuple[str, ...] = ("native", "pythonfmu")
+
+
+class WrapperUnavailableError(RuntimeError):
+    """The native wrapper cannot be built here (no C compiler or no shared libpython)."""
 
 
 def _wrapper(wrapper: str | None) -> str:
-    """The wrapper to use: ``wrapper``, else ``$DRILLCOSIM_FMU_WRAPPER``, else pythonfmu."""
+    """The wrapper to use: ``wrapper``, else ``$DRILLCOSIM_FMU_WRAPPER``, else native."""
     chosen = wrapper or os.environ.get("DRILLCOSIM_FMU_WRAPPER") or WRAPPERS[0]
     if chosen not in WRAPPERS:
         raise ValueError(f"wrapper {chosen!r} is not one of {', '.join(WRAPPERS)}")
     return chosen
+
+
+def default_wrapper() -> str:
+    """The wrapper a build without ``wrapper=`` uses (``$DRILLCOSIM_FMU_WRAPPER`` or native)."""
+    return _wrapper(None)
+
+
+def wrapper_of(fmu: Path | str) -> str:
+    """The wrapper an FMU was built with: "native" if it ships ``resources/slaveclass.txt``."""
+    with zipfile.ZipFile(fmu) as zf:
+        return "native" if "resources/slaveclass.txt" in zf.namelist() else "pythonfmu"
+
+
+def _check_native_prerequisites() -> None:
+    """Raise :class:`WrapperUnavailableError` (one line) if the native wrapper cannot be built."""
+    from fmu_src.wrapper import libpython_path
+
+    cc = os.environ.get("CC") or "gcc"
+    fallback = ("build with --wrapper pythonfmu (or DRILLCOSIM_FMU_WRAPPER=pythonfmu) "
+                "for pythonfmu's prebuilt binary")
+    if shutil.which(cc) is None:
+        raise WrapperUnavailableError(f"the native FMI wrapper needs a C compiler and {cc!r} "
+                                 f"(from $CC or the default gcc) was not found; install "
+                                 f"one or {fallback}")
+    try:
+        libpython_path()
+    except RuntimeError as exc:
+        raise WrapperUnavailableError(f"{exc}; {fallback}") from None
 
 
 _DEFAULT_OPTIONS: tuple[tuple[str, bool], ...] = (
@@ -293,7 +331,7 @@ def _rewrite_zip_member(fmu: Path, member: str, data: bytes) -> None:
 
 
 # -------------------------------------------------------------------------- worker
-def _build_in_this_process(spec: FmuSpec, workdir: Path, wrapper: str = "pythonfmu") -> Path:
+def _build_in_this_process(spec: FmuSpec, workdir: Path, wrapper: str = "native") -> Path:
     """Build one FMU into ``workdir/out`` (run in a dedicated subprocess)."""
     from pythonfmu import FmuBuilder
 
@@ -355,7 +393,7 @@ def build_one(spec: FmuSpec, out_dir: Path | str = DEFAULT_OUT,
         Target folder (created if missing).
     wrapper : {"pythonfmu", "native"}, optional
         FMI wrapper (see the module docstring); default ``$DRILLCOSIM_FMU_WRAPPER``
-        or "pythonfmu".
+        or "native".
 
     Returns
     -------
@@ -364,10 +402,15 @@ def build_one(spec: FmuSpec, out_dir: Path | str = DEFAULT_OUT,
 
     Raises
     ------
+    WrapperUnavailableError
+        ``wrapper="native"`` without a C compiler or a shared libpython (one line,
+        naming the ``pythonfmu`` fallback).
     RuntimeError
         If the build subprocess fails (its output is included).
     """
     wrapper = _wrapper(wrapper)
+    if wrapper == "native":
+        _check_native_prerequisites()
     out_dir = Path(out_dir).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
     target = out_dir / f"{spec.name}.fmu"
@@ -436,8 +479,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--only", action="append", default=None, metavar="NAME",
                         help="build only this FMU (repeatable)")
     parser.add_argument("--wrapper", choices=WRAPPERS, default=None,
-                        help="FMI wrapper: pythonfmu (default, or $DRILLCOSIM_FMU_WRAPPER) "
-                             "or native (our C wrapper: fmi2Error for errors)")
+                        help="FMI wrapper: native (default, or $DRILLCOSIM_FMU_WRAPPER; "
+                             "our C wrapper, fmi2Error for errors, needs a C compiler) or "
+                             "pythonfmu (fallback: errors reported as fmi2Discard)")
     parser.add_argument("--worker-spec", help=argparse.SUPPRESS)
     parser.add_argument("--workdir", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -452,7 +496,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             parser.error(f"unknown FMU(s) {sorted(unknown)}; registered: "
                          f"{[s.name for s in REGISTRY]}")
         specs = tuple(s for s in REGISTRY if s.name in args.only)
-    build_all(args.out, specs, args.wrapper)
+    try:
+        build_all(args.out, specs, args.wrapper)
+    except WrapperUnavailableError as exc:
+        print(f"python -m fmu_src.build: {exc}", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -19,9 +19,12 @@ from fmu_src.build import (
     ROOT,
     UNIT_DEFINITIONS,
     FmuSpec,
+    WrapperUnavailableError,
     build_all,
     build_one,
+    default_wrapper,
     finalize_model_description,
+    wrapper_of,
 )
 
 
@@ -108,11 +111,36 @@ def test_cli(tmp_path: Path) -> None:
                            "--only", "StrainController"], cwd=ROOT, capture_output=True,
                           text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
-    assert (tmp_path / "StrainController.fmu").is_file()
+    assert wrapper_of(tmp_path / "StrainController.fmu") == "native"  # the default
     bad = subprocess.run([sys.executable, "-m", "fmu_src.build", "--out", str(tmp_path),
                           "--only", "Nope"], cwd=ROOT, capture_output=True, text=True,
                          timeout=300)
     assert bad.returncode == 2 and "unknown FMU" in bad.stderr
+
+
+def test_default_wrapper_is_native_and_pythonfmu_is_the_fallback(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("DRILLCOSIM_FMU_WRAPPER", raising=False)
+    assert default_wrapper() == "native"
+    fmu = build_one(REGISTRY[0], tmp_path / "pythonfmu", wrapper="pythonfmu")
+    assert wrapper_of(fmu) == "pythonfmu" and validate_fmu(str(fmu)) == []
+    monkeypatch.setenv("DRILLCOSIM_FMU_WRAPPER", "pythonfmu")
+    assert default_wrapper() == "pythonfmu"
+
+
+def test_native_build_without_a_compiler_fails_in_one_line_naming_the_fallback(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("DRILLCOSIM_FMU_WRAPPER", raising=False)
+    monkeypatch.setenv("CC", "no-such-compiler-dcs")
+    with pytest.raises(WrapperUnavailableError, match="--wrapper pythonfmu"):
+        build_one(REGISTRY[0], tmp_path)
+    proc = subprocess.run([sys.executable, "-m", "fmu_src.build", "--out", str(tmp_path),
+                           "--only", "StrainController"], cwd=ROOT, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 1
+    assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert "no-such-compiler-dcs" in proc.stderr and "--wrapper pythonfmu" in proc.stderr
+    assert not list(tmp_path.iterdir())  # nothing written
 
 
 # ------------------------------------------------------- registering one more FMU

@@ -106,7 +106,7 @@ def test_bad_input_exits_2_in_one_line_and_keeps_files(good_run, capsys) -> None
     assert _snapshot(out) == before
 
 
-def test_failure_before_the_first_step_keeps_earlier_files(good_run, fmu_dir) -> None:
+def test_failure_before_the_first_step_keeps_earlier_files(good_run, fmu_dir, capsys) -> None:
     out, _ = good_run
     before = _snapshot(out)
     sc = dataclasses.replace(load_scene("paper_closed_loop"), cosim={"step": 1e-3})
@@ -115,8 +115,56 @@ def test_failure_before_the_first_step_keeps_earlier_files(good_run, fmu_dir) ->
     bad = dataclasses.replace(plant, parameters={**plant.parameters, "pipe.length": -1.0})
     ss = dataclasses.replace(ss, system=dataclasses.replace(
         ss.system, fmus=[bad, ss.system.fmu("controller")]))
-    with pytest.raises(CosimError, match="fmi2DoStep"):
+    with pytest.raises(CosimError) as info:
         run_system(ss, out, stop_time=0.1, progress=False)
+    err = info.value
+    # the plant FMU (native wrapper) refuses the parameter at initialization with fmi2Error;
+    # the error names FMU and call and ends with the FMU's own message naming the parameter
+    assert (err.fmu_name, err.call, err.status) == ("plant", "fmi2ExitInitializationMode", 3)
+    assert "pipe.length = -1.0 is out of range" in str(err) and "\n" not in str(err), str(err)
+    assert "fmi2Terminate" not in capsys.readouterr().out  # FMI 2.0: no terminate after Error
+    assert _snapshot(out) == before
+
+
+def test_bad_plant_parameter_from_the_cli_exits_2_naming_it(good_run, capsys) -> None:
+    out, _ = good_run
+    before = _snapshot(out)
+    capsys.readouterr()
+    code = main(["run", "paper_closed_loop", "--out", str(out), *COSIM,
+                 "--set", "contact.stiffness=-1"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert "contact.stiffness = -1 is out of range" in err, err
+    assert _snapshot(out) == before
+
+
+def test_parameter_refused_by_the_fmu_at_initialization_exits_2_naming_it(
+        good_run, fmu_dir, capsys, monkeypatch) -> None:
+    """The FMU's own check (not the scene's) rejects a parameter: one line, exit 2."""
+    import cosim.scene_system as scene_system_module
+
+    out, _ = good_run
+    before = _snapshot(out)
+    real = scene_system_module.scene_system
+
+    def with_bad_plant_parameter(*args, **kwargs):
+        ss = real(*args, **kwargs)
+        plant = ss.system.fmu("plant")
+        bad = dataclasses.replace(plant, parameters={**plant.parameters,
+                                                     "contact.stiffness": -1.0})
+        return dataclasses.replace(ss, system=dataclasses.replace(
+            ss.system, fmus=[bad, ss.system.fmu("controller")]))
+
+    monkeypatch.setattr(scene_system_module, "scene_system", with_bad_plant_parameter)
+    capsys.readouterr()
+    code = main(["run", "paper_closed_loop", "--out", str(out), *COSIM])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith("drillcosim run: error: FMU 'plant': fmi2ExitInitializationMode "
+                          "failed"), err
+    assert "contact.stiffness = -1.0 is out of range" in err, err
     assert _snapshot(out) == before
 
 
