@@ -1,7 +1,7 @@
 """The native C FMI wrapper (``fmu_src/wrapper``): statuses, safety, equality with pythonfmu.
 
-Both project FMUs are built once per session with ``wrapper="native"`` and once with
-the default pythonfmu wrapper. Runs that compare the two wrappers, misuse and the
+Both project FMUs are built once per session with ``wrapper="native"`` (the default)
+and once with the ``wrapper="pythonfmu"`` fallback. Runs that compare the two wrappers, misuse and the
 heap check run in subprocesses (a crash shows as a failed exit code, and the two
 wrappers never share a process).
 
