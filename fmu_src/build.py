@@ -209,12 +209,14 @@ REGISTRY: tuple[FmuSpec, ...] = (
     FmuSpec(
         name="StrainController",
         script="fmu_src/strain_controller_fmu.py",
-        vendored=(("controller", "_dcs_controller_0_1_0"),),
+        vendored=(("controller", "_dcs_controller_0_1_0"),
+                  ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
     ),
     FmuSpec(
         name="DrillstringPlant",
         script="fmu_src/drillstring_plant_fmu.py",
-        vendored=(("plant", "_dcs_plant_0_1_0"),),
+        vendored=(("plant", "_dcs_plant_0_1_0"),
+                  ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
         extra_files=("scenes",),
     ),
 )

@@ -131,6 +131,7 @@ from typing import Any, ClassVar
 from xml.etree.ElementTree import Element
 
 import numpy as np
+from _dcs_slave_support_0_1_0 import access_problem, guarded_access, reject
 from pythonfmu import (
     Boolean,
     DefaultExperiment,
@@ -353,6 +354,7 @@ class _Real(Real):
         return node
 
 
+@guarded_access
 class DrillstringPlant(Fmi2Slave):
     """FMI 2.0 co-simulation adapter of :class:`plant.simulator.PlantSimulator`."""
 
@@ -583,27 +585,18 @@ class DrillstringPlant(Fmi2Slave):
     # ------------------------------------------ get/set without exceptions
     def _accessible(self, vr: int, kind: type, call: str) -> bool:
         """Whether ``vr`` may be accessed by ``call``; log and flag the error if not."""
+        problem = access_problem(self, vr, kind, call)
         var = self.vars.get(vr)
-        if var is None:
-            problem = f"unknown value reference {vr} (valid: 0..{len(self.vars) - 1})"
-        elif not isinstance(var, kind):
-            problem = f"value reference {vr} ({var.name}) is not of type {kind.__name__}"
-        elif call.startswith("set") and var.causality not in (
-                Fmi2Causality.input, Fmi2Causality.parameter):
-            problem = f"{var.name} (value reference {vr}) is an {var.causality.name}: not settable"
-        elif (call.startswith("set") and var.causality == Fmi2Causality.parameter
-              and self._mode == "step"):
+        if problem is None and (call.startswith("set") and self._mode == "step"
+                                and var.causality == Fmi2Causality.parameter):
             problem = (f"{var.name} (value reference {vr}) is a fixed parameter: it cannot be "
                        f"set after initialization")
-        else:
-            if (call.startswith("get") and self._mode == "initialization"
-                    and var.causality == Fmi2Causality.output):
-                self._build()  # initial unknowns: computed from the parameters set so far
-            return True
-        if self._fmi2_wrapper != "native":  # the native wrapper fails this call itself
-            self._call_error = f"{call}: {problem}"
-        self._error(f"{call}: {problem}")
-        return False
+        if problem is not None:
+            return reject(self, call, problem)
+        if (call.startswith("get") and self._mode == "initialization"
+                and var.causality == Fmi2Causality.output):
+            self._build()  # initial unknowns: computed from the parameters set so far
+        return True
 
     def get_real(self, vrs: list[int]) -> list[float]:
         if self._mode == "step" and self._real_vrs.issuperset(vrs):  # every check passes
@@ -611,18 +604,6 @@ class DrillstringPlant(Fmi2Slave):
             return [float(v[vr].getter()) for vr in vrs]
         return [float(self.vars[vr].getter()) if self._accessible(vr, Real, "getReal")
                 else math.nan for vr in vrs]
-
-    def get_integer(self, vrs: list[int]) -> list[int]:
-        return [int(self.vars[vr].getter()) if self._accessible(vr, Integer, "getInteger")
-                else 0 for vr in vrs]
-
-    def get_boolean(self, vrs: list[int]) -> list[bool]:
-        return [bool(self.vars[vr].getter()) if self._accessible(vr, Boolean, "getBoolean")
-                else False for vr in vrs]
-
-    def get_string(self, vrs: list[int]) -> list[str]:
-        return [str(self.vars[vr].getter()) if self._accessible(vr, String, "getString")
-                else "" for vr in vrs]
 
     def set_real(self, vrs: list[int], values: list[float]) -> None:
         if self._mode == "step" and self._input_vrs.issuperset(vrs):  # every check passes
@@ -633,21 +614,6 @@ class DrillstringPlant(Fmi2Slave):
         for vr, value in zip(vrs, values):
             if self._accessible(vr, Real, "setReal"):
                 self.vars[vr].setter(float(value))
-
-    def set_integer(self, vrs: list[int], values: list[int]) -> None:
-        for vr, value in zip(vrs, values):
-            if self._accessible(vr, Integer, "setInteger"):
-                self.vars[vr].setter(int(value))
-
-    def set_boolean(self, vrs: list[int], values: list[bool]) -> None:
-        for vr, value in zip(vrs, values):
-            if self._accessible(vr, Boolean, "setBoolean"):
-                self.vars[vr].setter(bool(value))
-
-    def set_string(self, vrs: list[int], values: list[str]) -> None:
-        for vr, value in zip(vrs, values):
-            if self._accessible(vr, String, "setString"):
-                self.vars[vr].setter(str(value))
 
     # ------------------------------------------------------------- FMU state
     def _get_fmu_state(self) -> dict[str, Any]:

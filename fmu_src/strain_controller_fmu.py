@@ -72,12 +72,12 @@ Python floats, so serialisation round-trips bit for bit).
 from __future__ import annotations
 
 import json
-import math
 from typing import Any, ClassVar
 
 import numpy as np
 from _dcs_controller_0_1_0 import MODES, ControllerParams
 from _dcs_controller_0_1_0 import StrainController as StrainLaw
+from _dcs_slave_support_0_1_0 import access_problem, guarded_access, reject
 from pythonfmu import (
     Boolean,
     DefaultExperiment,
@@ -108,6 +108,7 @@ class _NoStrings:
     """Stand-in type: this FMU has no String variables."""
 
 
+@guarded_access
 class StrainController(Fmi2Slave):
     """FMI 2.0 co-simulation adapter of :class:`controller.StrainController`."""
 
@@ -268,52 +269,13 @@ class StrainController(Fmi2Slave):
     # ------------------------------------------ get/set without exceptions
     def _accessible(self, vr: int, kind: type, call: str) -> bool:
         """Whether ``vr`` may be accessed by ``call``; log and flag the error if not."""
-        var = self.vars.get(vr)
-        if var is None:
-            problem = f"unknown value reference {vr} (valid: 0..{len(self.vars) - 1})"
-        elif not isinstance(var, kind):
-            problem = f"value reference {vr} ({var.name}) is not of type {kind.__name__}"
-        elif call.startswith("set") and var.causality not in (
-                Fmi2Causality.input, Fmi2Causality.parameter):
-            problem = f"{var.name} (value reference {vr}) is an {var.causality.name}: not settable"
-        else:
-            return True
-        if self._fmi2_wrapper != "native":  # the native wrapper fails this call itself
-            self._call_error = f"{call}: {problem}"
-        self._error(f"{call}: {problem}")
-        return False
-
-    def get_real(self, vrs: list[int]) -> list[float]:
-        return [float(self.vars[vr].getter()) if self._accessible(vr, Real, "getReal")
-                else math.nan for vr in vrs]
-
-    def get_integer(self, vrs: list[int]) -> list[int]:
-        return [int(self.vars[vr].getter()) if self._accessible(vr, Integer, "getInteger")
-                else 0 for vr in vrs]
-
-    def get_boolean(self, vrs: list[int]) -> list[bool]:
-        return [bool(self.vars[vr].getter()) if self._accessible(vr, Boolean, "getBoolean")
-                else False for vr in vrs]
+        problem = access_problem(self, vr, kind, call)
+        return True if problem is None else reject(self, call, problem)
 
     def get_string(self, vrs: list[int]) -> list[str]:
         for vr in vrs:
             self._accessible(vr, _NoStrings, "getString")
         return ["" for _ in vrs]
-
-    def set_real(self, vrs: list[int], values: list[float]) -> None:
-        for vr, value in zip(vrs, values):
-            if self._accessible(vr, Real, "setReal"):
-                self.vars[vr].setter(float(value))
-
-    def set_integer(self, vrs: list[int], values: list[int]) -> None:
-        for vr, value in zip(vrs, values):
-            if self._accessible(vr, Integer, "setInteger"):
-                self.vars[vr].setter(int(value))
-
-    def set_boolean(self, vrs: list[int], values: list[bool]) -> None:
-        for vr, value in zip(vrs, values):
-            if self._accessible(vr, Boolean, "setBoolean"):
-                self.vars[vr].setter(bool(value))
 
     def set_string(self, vrs: list[int], values: list[str]) -> None:
         for vr in vrs:
