@@ -279,8 +279,10 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
         msg = (f"run stopped at t = {result.end_time:.6g} s of {stop:g} s: "
                f"{failure['message']}; partial results in {out}")
         return RunOutcome(EXIT_DIVERGED, msg, out, summary, tuple(files))
+    pngs = [Path(f).name for f in files if str(f).endswith(".png")]
+    where = f"results.csv, summary.json{' and plots ' + ', '.join(pngs) if pngs else ''} in {out}"
     msg = (f"{scene.name}: {result.end_time:g} s simulated in {result.wall_time:.1f} s "
-           f"(real-time factor {result.real_time_factor:.3g}); results in {out}")
+           f"(real-time factor {result.real_time_factor:.3g}); {where}")
     return RunOutcome(EXIT_OK, msg, out, summary, tuple(files))
 
 
