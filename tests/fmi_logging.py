@@ -46,3 +46,63 @@ class RecordingCallbacks:
         self.messages.append((int(status), message.decode(errors="replace")))
         if self._keep_last is not None:
             del self.messages[:-self._keep_last]
+
+
+class RecordingInstance:
+    """An fmpy ``FMU2Slave``, instantiated with logging on and its messages recorded.
+
+    Parameters
+    ----------
+    md : fmpy ModelDescription
+    unzipdir : str
+        Extracted FMU.
+    prefix : str
+        Instance names are ``<prefix><count>``.
+    """
+
+    _count = 0
+
+    def __init__(self, md, unzipdir: str, prefix: str) -> None:
+        from fmpy.fmi2 import FMU2Slave
+
+        RecordingInstance._count += 1
+        self._recording = RecordingCallbacks()
+        self.messages = self._recording.messages
+        self._callbacks = self._recording.callbacks
+        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir,
+                             modelIdentifier=md.coSimulation.modelIdentifier,
+                             instanceName=f"{prefix}{RecordingInstance._count}")
+        self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
+
+    def text(self) -> str:
+        """All recorded messages, one a line."""
+        return "\n".join(m for _, m in self.messages)
+
+
+def fmu_fixtures(spec):
+    """Session fixtures ``fmu_path``, ``md``, ``vr``, ``unzipdir`` for one FMU of the registry.
+
+    Assign them to module names of the same name in a test module.
+    """
+    import pytest
+    from fmpy import extract, read_model_description
+
+    from fmu_src.build import build_one
+
+    @pytest.fixture(scope="session", name="fmu_path")
+    def fmu_path(tmp_path_factory):
+        return build_one(spec, tmp_path_factory.mktemp("fmus"))
+
+    @pytest.fixture(scope="session", name="md")
+    def md(fmu_path):
+        return read_model_description(str(fmu_path))
+
+    @pytest.fixture(scope="session", name="vr")
+    def vr(md):
+        return {v.name: v.valueReference for v in md.modelVariables}
+
+    @pytest.fixture(scope="session", name="unzipdir")
+    def unzipdir(fmu_path, tmp_path_factory):
+        return extract(str(fmu_path), unzipdir=str(tmp_path_factory.mktemp("unzipped")))
+
+    return fmu_path, md, vr, unzipdir

@@ -30,12 +30,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmi_logging import RecordingCallbacks
-from fmpy import extract, read_model_description, simulate_fmu
+from fmi_logging import RecordingInstance, fmu_fixtures
+from fmpy import simulate_fmu
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import (
-    FMU2Slave,
-)
 from fmpy.validation import validate_fmu
 
 import controller
@@ -49,40 +46,14 @@ OUTPUTS = ["actuator1_force_C", "actuator1_force_E", "actuator2_force_C", "actua
 OK, DISCARD, ERROR, FATAL = 0, 2, 3, 4
 
 
-@pytest.fixture(scope="session")
-def fmu_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return build_one(SPEC, tmp_path_factory.mktemp("fmus"))
+fmu_path, md, vr, unzipdir = fmu_fixtures(SPEC)
 
 
-@pytest.fixture(scope="session")
-def md(fmu_path: Path):
-    return read_model_description(str(fmu_path))
-
-
-@pytest.fixture(scope="session")
-def vr(md) -> dict[str, int]:
-    return {v.name: v.valueReference for v in md.modelVariables}
-
-
-@pytest.fixture(scope="session")
-def unzipdir(fmu_path: Path, tmp_path_factory: pytest.TempPathFactory) -> str:
-    return extract(str(fmu_path), unzipdir=str(tmp_path_factory.mktemp("unzipped")))
-
-
-class Instance:
-    """An fmpy FMU2Slave with a logger callback that records messages."""
-
-    _count = 0
+class Instance(RecordingInstance):
+    """A recording FMU2Slave of this FMU."""
 
     def __init__(self, md, unzipdir: str) -> None:
-        Instance._count += 1
-        self._recording = RecordingCallbacks()
-        self.messages = self._recording.messages
-        self._callbacks = self._recording.callbacks
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir,
-                             modelIdentifier=md.coSimulation.modelIdentifier,
-                             instanceName=f"ctl{Instance._count}")
-        self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
+        super().__init__(md, unzipdir, "ctl")
 
     def initialize(self, reals: dict[int, float] | None = None,
                    integers: dict[int, int] | None = None) -> None:
@@ -93,9 +64,6 @@ class Instance:
         for vr_, value in (integers or {}).items():
             self.fmu.setInteger([vr_], [value])
         self.fmu.exitInitializationMode()
-
-    def text(self) -> str:
-        return "\n".join(m for _, m in self.messages)
 
 
 @pytest.fixture

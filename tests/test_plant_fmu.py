@@ -29,15 +29,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmi_logging import RecordingCallbacks
-from fmpy import extract, read_model_description, simulate_fmu
-from fmpy.fmi2 import (
-    FMU2Slave,
-)
+from fmi_logging import RecordingInstance, fmu_fixtures
+from fmpy import simulate_fmu
 from fmpy.validation import validate_fmu
 
 import plant
-from fmu_src.build import REGISTRY, build_one
+from fmu_src.build import REGISTRY
 from plant.model import DrillstringModel
 from plant.params import PlantParams
 from plant.scene import SECTIONS, load_scene
@@ -69,19 +66,7 @@ def reference(scene: str = "paper_open_loop", overrides: dict | None = None) -> 
     return PlantSimulator(DrillstringModel(sc.plant, sc.model))
 
 
-@pytest.fixture(scope="session")
-def fmu_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return build_one(SPEC, tmp_path_factory.mktemp("fmus"))
-
-
-@pytest.fixture(scope="session")
-def md(fmu_path: Path):
-    return read_model_description(str(fmu_path))
-
-
-@pytest.fixture(scope="session")
-def vr(md) -> dict[str, int]:
-    return {v.name: v.valueReference for v in md.modelVariables}
+fmu_path, md, vr, unzipdir = fmu_fixtures(SPEC)
 
 
 @pytest.fixture(scope="session")
@@ -89,27 +74,13 @@ def outputs(md) -> list[str]:
     return [v.name for v in md.modelVariables if v.causality == "output"]
 
 
-@pytest.fixture(scope="session")
-def unzipdir(fmu_path: Path, tmp_path_factory: pytest.TempPathFactory) -> str:
-    return extract(str(fmu_path), unzipdir=str(tmp_path_factory.mktemp("unzipped")))
-
-
-class Instance:
-    """An fmpy FMU2Slave with a logger callback that records messages."""
-
-    _count = 0
+class Instance(RecordingInstance):
+    """A recording FMU2Slave of this FMU."""
 
     def __init__(self, md, unzipdir: str) -> None:
-        Instance._count += 1
-        self._recording = RecordingCallbacks()
-        self.messages = self._recording.messages
-        self._callbacks = self._recording.callbacks
+        super().__init__(md, unzipdir, "plant")
         self.vr = {v.name: v.valueReference for v in md.modelVariables}
         self.outs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipdir,
-                             modelIdentifier=md.coSimulation.modelIdentifier,
-                             instanceName=f"plant{Instance._count}")
-        self.fmu.instantiate(callbacks=self._callbacks, loggingOn=True)
 
     def initialize(self, **values) -> None:
         self.fmu.setupExperiment(startTime=0.0)
