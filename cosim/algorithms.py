@@ -218,6 +218,25 @@ class _Algorithm:
         raise NotImplementedError
 
 
+    def _apply_inputs(self, f: list, tick: int, t: float) -> None:
+        """Write FMU plan ``f``'s inputs for ``tick`` (held / extrapolated / delayed values).
+
+        Direct connections copy the newest exchanged output; delayed or extrapolated ones ask
+        their line at the age of the newest sample (in source periods).
+        """
+        u = f[12]
+        y = self.y
+        newest = self.newest
+        for d, s in f[13]:
+            u[d] = y[s]
+        for d, line, src, half, inv_p in f[14]:
+            u[d] = line.value((tick + half - newest[src]) * inv_p)
+        if f[11]:
+            st = f[9](f[3], f[10], f[11], u)
+            if st > 1:
+                self.plans[f[0]].slave.fail(st, "fmi2SetReal", t)
+
+
 class JacobiAlgorithm(_Algorithm):
     """Parallel (Jacobi) fixed-step multirate algorithm; see module docstring."""
 
@@ -250,17 +269,8 @@ class JacobiAlgorithm(_Algorithm):
         if s - s != 0.0:
             self.check_finite()
         for f in self.flat:
-            if k1 % f[1]:
-                continue
-            u = f[12]
-            for d, s in f[13]:
-                u[d] = y[s]
-            for d, line, src, half, inv_p in f[14]:
-                u[d] = line.value((k1 + half - newest[src]) * inv_p)
-            if f[11]:
-                st = f[9](f[3], f[10], f[11], u)
-                if st > 1:
-                    self.plans[f[0]].slave.fail(st, "fmi2SetReal", time_of(k1))
+            if not k1 % f[1]:
+                self._apply_inputs(f, k1, time_of(k1))
 
 
 class GaussSeidelAlgorithm(_Algorithm):
@@ -278,15 +288,7 @@ class GaussSeidelAlgorithm(_Algorithm):
             p = f[1]
             if tick % p:
                 continue
-            u = f[12]
-            for d, s in f[13]:
-                u[d] = y[s]
-            for d, line, src, half, inv_p in f[14]:
-                u[d] = line.value((tick + half - newest[src]) * inv_p)
-            if f[11]:
-                st = f[9](f[3], f[10], f[11], u)
-                if st > 1:
-                    self.plans[f[0]].slave.fail(st, "fmi2SetReal", t)
+            self._apply_inputs(f, tick, t)
             st = f[4](f[3], t, f[2], _FMI_FALSE)
             if st > 1:
                 self.plans[f[0]].slave.fail(st, "fmi2DoStep", t)
