@@ -196,14 +196,17 @@ def timed_best(factories: list[tuple[str, Callable[[], Run]]], repeat: int) -> l
     return [best[k] for k, _ in factories]
 
 
-def work_precision_3d(quick: bool) -> dict:
-    """paper_open_loop (full 3D, n = 30): all candidates over the first T seconds."""
-    m = scene_model("paper_open_loop")
-    T = 0.5 if quick else 2.0
-    h0 = m.stable_step()
+def _setup(scene: str, T: float):
+    """Model, horizon [s], automatic step h* [s], reference run, its check and wall time [s]."""
+    m = scene_model(scene)
     t0 = time.perf_counter()
     ref, ref_check = reference(m, T)
-    ref_wall = time.perf_counter() - t0
+    return m, T, m.stable_step(), ref, ref_check, time.perf_counter() - t0
+
+
+def work_precision_3d(quick: bool) -> dict:
+    """paper_open_loop (full 3D, n = 30): all candidates over the first T seconds."""
+    m, T, h0, ref, ref_check, ref_wall = _setup("paper_open_loop", 0.5 if quick else 2.0)
     cands: list[tuple[str, Callable[[], Run]]] = [
         ("rk4 h*", lambda: run_plant(m, T, "rk4", label="rk4 (auto step h*)")),
         ("rk4 h*/2", lambda: run_plant(m, T, "rk4", h0 / 2, label="rk4 h*/2")),
@@ -246,12 +249,7 @@ def work_precision_3d(quick: bool) -> dict:
 
 def work_precision_at(quick: bool) -> dict:
     """table1_axial_pulse (axial-torsional, n = 30): RK4, Verlet, DOPRI5, exponential."""
-    m = scene_model("table1_axial_pulse")
-    T = 2.0 if quick else 3.0
-    h0 = m.stable_step()
-    t0 = time.perf_counter()
-    ref, ref_check = reference(m, T)
-    ref_wall = time.perf_counter() - t0
+    m, T, h0, ref, ref_check, ref_wall = _setup("table1_axial_pulse", 2.0 if quick else 3.0)
     cands: list[tuple[str, Callable[[], Run]]] = [
         ("rk4 h*", lambda: run_plant(m, T, "rk4", label="rk4 (auto step h*)")),
         ("rk4 h*/4", lambda: run_plant(m, T, "rk4", h0 / 4, label="rk4 h*/4")),
