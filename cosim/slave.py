@@ -143,13 +143,6 @@ class Slave:
                                                                 len(vrs), out))
         return list(out[: len(vrs)])
 
-    def set_reals(self, vrs: Sequence[int], values: Sequence[float], time: float) -> None:
-        """Write Real variables by value reference (slow path)."""
-        arr, _ = _vr_array(vrs)
-        buf = (ctypes.c_double * max(1, len(vrs)))(*values)
-        self._call("fmi2SetReal", time, lambda: self.c_set_real(self.component, arr,
-                                                                len(vrs), buf))
-
     def get_state(self, time: float):
         """FMU state handle (``fmi2GetFMUstate``); free with :meth:`free_state`."""
         if not self.can_get_set_state:

@@ -20,7 +20,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass
@@ -230,17 +230,3 @@ def sweep_from_args(scene: str, gain: str, delay: str, step: str, stop_time: flo
                      dict(sets or {}), True, dict(options or {}))
 
 
-def summary_lines(folder: str | os.PathLike, steps: Sequence[float] | None = None) -> list[str]:
-    """One line per closed-loop point: the table in a readable form."""
-    from .sweep_table import read_table
-
-    lines = []
-    for r in sorted(read_table(folder), key=lambda r: (r["kind"], r["step"], r["gain"],
-                                                     r["delay"])):
-        if steps is not None and r["step"] not in steps:
-            continue
-        lines.append(f"{r['kind']:<11} H={r['step']:<8.3g} K={r['gain']:<8.3g} "
-                     f"tau={r['delay']:<8.3g} {r['status']:<8} stable={r['stable']!s:<4} "
-                     f"growth={r['growth_rate']:+.3g}/s benefit_long={r['benefit_long']:.2f} "
-                     f"Fmax={r['peak_force']:.3g} N  {r['reason']}")
-    return lines

@@ -40,7 +40,7 @@ import math
 import time
 import traceback
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -425,6 +425,3 @@ def run_point(scene: str, gain: float, delay: float, step: float, stop_time: flo
     return row
 
 
-def default_options() -> dict[str, float]:
-    """The :class:`PointOptions` defaults as a dict."""
-    return asdict(PointOptions())

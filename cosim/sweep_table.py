@@ -22,7 +22,7 @@ import csv
 import io
 import math
 import os
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -247,11 +247,6 @@ class ResultTable:
         pq.write_table(pa.table(cols), buf)
         atomic_write_bytes(self.parquet_path, buf.getvalue().to_pybytes())
         return self.parquet_path
-
-    def extend(self, rows: Iterable[Mapping[str, Any]]) -> None:
-        """Append several rows."""
-        for r in rows:
-            self.append(r)
 
 
 def read_table(folder_or_file: str | os.PathLike) -> list[dict[str, Any]]:

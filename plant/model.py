@@ -283,19 +283,6 @@ class DrillstringModel:
         self.u = np.zeros(2 * self.n_sites)
 
     # ------------------------------------------------------------------ state layout
-    def slices(self) -> dict[str, slice]:
-        """Blocks of the state vector (each ``3 n`` long in 3D, ``n`` long axial-torsional)."""
-        n = self.n
-        if self.kind == "full3d":
-            return {
-                "position": slice(0, 3 * n),
-                "angles": slice(3 * n, 6 * n),
-                "velocity": slice(6 * n, 9 * n),
-                "omega": slice(9 * n, 12 * n),
-            }
-        return {"z": slice(0, n), "psi": slice(n, 2 * n), "vz": slice(2 * n, 3 * n),
-                "spin": slice(3 * n, 4 * n)}
-
     def _bit_end_z(self, y: np.ndarray) -> float:
         h = 0.5 * self.derived.dx
         if self.kind == "full3d":

@@ -102,11 +102,6 @@ class Scene:
     cosim: dict = field(default_factory=dict)
     source: str = "<dict>"
 
-    @property
-    def controller_enabled(self) -> bool:
-        """True when the scene's ``[controller]`` table has ``enabled = true``."""
-        return bool(self.controller.get("enabled", False))
-
 
 def scenes_dir() -> Path:
     """Folder of the shipped scenes: $DRILLCOSIM_SCENES, else ``scenes/`` beside the packages."""
