@@ -27,6 +27,9 @@ MAX_LATERAL = 1.0  # m, lateral position of any mass centre
 MAX_TILT = 0.5  # rad, Cardan tilt angles theta, phi
 MAX_SPEED = 1e4  # m/s or rad/s
 MAX_STRAIN = 5e-3  # bending strain at the outer wall: 2.5x the yield strain of collar steel
+# A step may take at most this many internal steps (~10 s of wall time): a huge step size must not
+# hang the caller (an FMU importer).
+MAX_SUBSTEPS = 2_000_000
 
 
 @dataclass(frozen=True)
@@ -79,6 +82,8 @@ class PlantSimulator:
         self.y = model.initial_state()
         self.u = np.zeros(2 * model.n_sites)
         self._names = self._state_names()
+        self.input_names = [f"actuator{s}_force_{a}" for s in range(1, model.n_sites + 1)
+                            for a in "CE"]
         self._strain_factor = 0.5 * model.params.pipe.outer_diameter / model.derived.dx
 
     def _state_names(self) -> list[str]:
@@ -150,12 +155,27 @@ class PlantSimulator:
     def do_step(self, t: float, h: float) -> StepResult:
         """Advance from ``t`` [s] by ``h`` [s] with the inputs held.
 
-        The step is split into ``ceil(h / max_step)`` equal RK4 steps.
+        The step is split into ``ceil(h / max_step)`` equal RK4 steps. Refused with the state
+        unchanged (a result without ``quantity``): a step size that is not finite and > 0, a
+        time ``t`` that is not the simulator's own (within 1e-9 relative), a non-finite input,
+        or a step that needs more than :data:`MAX_SUBSTEPS` internal steps.
         """
         if not (h > 0.0 and math.isfinite(h)):
-            return StepResult(False, f"step size h = {h!r} s is not allowed: must be > 0")
+            return StepResult(False, f"step size {h!r} s at t = {t!r} s is not allowed: must be "
+                                     f"> 0 and finite; step rejected (state unchanged)")
+        if not (math.isfinite(t) and abs(t - self.time) <= 1e-9 * max(1.0, abs(t))):
+            return StepResult(False, f"communication point t = {t!r} s is not the plant's time "
+                                     f"{self.time!r} s; step rejected (state unchanged)")
         if not np.all(np.isfinite(self.u)):
-            return StepResult(False, f"input is not finite at t = {t:.6g} s: {self.u.tolist()}")
+            bad = [f"{n} = {v!r}" for n, v in zip(self.input_names, self.u.tolist())
+                   if not math.isfinite(v)]
+            return StepResult(False, f"input {', '.join(bad)} is not finite at t = {t!r} s; "
+                                     f"step rejected (state unchanged)")
+        if self.method != "dopri5" and math.ceil(h / self.max_step) > MAX_SUBSTEPS:
+            return StepResult(False, f"step size h = {h!r} s needs {math.ceil(h / self.max_step):.3g}"
+                                     f" internal steps of {self.max_step:.3g} s, more than "
+                                     f"{MAX_SUBSTEPS:g} allowed per step; step rejected (state "
+                                     f"unchanged)")
         if self.method == "dopri5":
             code = self.model.advance_adaptive(t, t + h, self.y, self._hstate, self.rtol,
                                                self.atol, self.u)

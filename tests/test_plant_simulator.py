@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+import pytest
 
 from plant.model import DrillstringModel
 from plant.scene import load_scene
@@ -32,8 +35,27 @@ def test_non_finite_input_is_refused_without_touching_the_state():
     y0 = sim.y.copy()
     sim.set_inputs(np.array([np.nan, 0.0, 0.0, 0.0]))
     res = sim.do_step(0.0, 1e-3)
-    assert not res.ok and "not finite" in res.message
+    assert not res.ok and "actuator1_force_C = nan is not finite" in res.message
     assert np.array_equal(sim.y, y0)
+
+
+@pytest.mark.parametrize(("t", "h", "fragment"), [
+    (0.002, 1e-3, "is not the plant's time 0.001"),
+    (math.nan, 1e-3, "is not the plant's time"),
+    (0.001, 0.0, "must be > 0 and finite"),
+    (0.001, math.inf, "must be > 0 and finite"),
+    (0.001, 1e6, "internal steps"),
+])
+def test_bad_step_requests_are_refused_with_the_state_unchanged(t, h, fragment):
+    """Out-of-order or non-finite time, bad step size, too many internal steps: refused."""
+    sc = load_scene("paper_open_loop")
+    sim = PlantSimulator(DrillstringModel(sc.plant, sc.model))
+    assert sim.do_step(0.0, 1e-3).ok
+    y0, t0 = sim.y.copy(), sim.time
+    res = sim.do_step(t, h)
+    assert not res.ok and fragment in res.message and not res.quantity
+    assert np.array_equal(sim.y, y0) and sim.time == t0
+    assert sim.do_step(t0, 1e-3).ok  # a valid step continues
 
 
 def test_open_loop_scene_stays_inside_the_guards():
