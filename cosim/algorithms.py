@@ -152,16 +152,7 @@ class _Algorithm:
         self.newest[plan.index] = tick
 
     def _gather_set(self, plan: _FmuPlan, tick: int) -> None:
-        f = self.flat[plan.index]
-        u, y, newest = f[12], self.y, self.newest
-        for d, s in f[13]:
-            u[d] = y[s]
-        for d, line, src, half, inv_p in f[14]:
-            u[d] = line.value((tick + half - newest[src]) * inv_p)
-        if f[11]:
-            st = f[9](f[3], f[10], f[11], u)
-            if st > 1:
-                plan.slave.fail(st, "fmi2SetReal", self.time_of(tick))
+        self._apply_inputs(self.flat[plan.index], tick, self.time_of(tick))
 
     def initialize(self) -> None:
         """Read initial outputs, then feedthrough sweeps in stepping order.
