@@ -245,7 +245,8 @@ def _fmu_and_master_sections(quick: bool) -> list[str]:
     mo = _script(["benchmarks/bench_master_overhead.py", "--steps", steps], 1800)
     table = [ln for ln in mo.splitlines() if ln.startswith("|") or " steps of " in ln]
     red = _script(["benchmarks/bench_reduced.py", "--stop-time", "3" if quick else "10"], 900)
-    return [red, fm, "", "## Master overhead on tiny FMUs (benchmarks/bench_master_overhead.py)", "",
+    rms = "" if quick else _script(["benchmarks/bench_rms_sensitivity.py"], 1800)
+    return [red, rms, fm, "", "## Master overhead on tiny FMUs (benchmarks/bench_master_overhead.py)", "",
             f"Command: `python benchmarks/bench_master_overhead.py --steps {steps}` (target: "
             "our master within 1.3x of a hand-written raw fmpy loop).", "", *table, ""]
 
