@@ -45,8 +45,9 @@ parameters (all variability fixed: set before ``fmi2ExitInitializationMode``):
     ``scene`` (String, default "paper_open_loop"): a shipped scene name or a path
     to a scene TOML file (its ``extends`` names resolve among the shipped scenes);
     ``model`` (String "auto" | "full3d" | "axial_torsional", default "full3d":
-    "auto" keeps the scene's model); ``max_internal_step`` [s] (0 = the model's
-    stable RK4 step; larger values may diverge); and every scalar field of
+    "auto" keeps the scene's model); ``max_internal_step`` [s] (0 = automatic: the
+    model's stable RK4 step, or one exponential Euler step a communication step for a
+    linear time-invariant axial-torsional scene; larger values may diverge); and every scalar field of
     ``PlantParams`` flattened as ``section.field`` (``pipe.n_segments``,
     ``contact.stiffness``, ``gravity``, ...), Real/Integer/Boolean with the unit
     and description of the field metadata and start = the ``PlantParams`` default.
@@ -420,7 +421,9 @@ class DrillstringPlant(Fmi2Slave):
                          "(the scene's choice)")))
         self.register_variable(_Real(
             "max_internal_step", causality=param, variability=fixed,
-            description="Upper bound of the internal RK4 step; 0 = the model's stable step"))
+            description=("Upper bound of the internal step; 0 = automatic (RK4 at the model's "
+                         "stable step, or one exact exponential step for a linear "
+                         "time-invariant axial-torsional scene)")))
         for name, _sec, _field, default, unit, doc, integer in PARAMETERS:
             getter, setter = _accessors(self._values, name)
             kind = Boolean if isinstance(default, bool) else Integer if integer else _Real

@@ -2,7 +2,7 @@
 
 For plant-alone runs (benchmarks, studies) the Python cost of one ``PlantSimulator.do_step``
 (~5 us) is comparable to the physics of a 1 ms step of the axial-torsional chain; this loop does
-the same RK4 sub-steps, outputs and validity checks as ``PlantSimulator.do_step`` +
+the same internal steps, outputs and validity checks as ``PlantSimulator.do_step`` +
 ``outputs()`` in one compiled call, bit for bit.
 """
 
@@ -11,20 +11,27 @@ from __future__ import annotations
 from numba import njit
 
 from .guards import OK, check_state
-from .integrators import advance_rk4
+from .integrators import advance_expeuler, advance_rk4_span
 from .kernels import MODEL_FULL3D
 from .observables import outputs3d, outputs_at
 
+RECORD_RK4 = 0
+RECORD_EXPEULER = 1
+
 
 @njit(cache=True)
-def run_record_rk4(model, t0, h, n_out, n_sub, y, p, ip, fp, u, wR, wF, wM, k1, k2, k3, k4, yt,
-                   zbit_ref, out, idx, rec, limits, strain_factor):
-    """Advance ``n_out`` output steps of ``h`` [s] (each ``n_sub`` RK4 sub-steps), recording.
+def run_record(model, method, t0, h, n_out, max_dt, breakpoints, y, p, ip, fp, u, wR, wF, wM, k1,
+               k2, k3, k4, yt, op_idx, op_ioff, op_mats, op_moff, zbit_ref, out, idx, rec, limits,
+               strain_factor):
+    """Advance ``n_out`` output steps of ``h`` [s], recording the outputs ``idx``.
 
-    ``rec`` (n_out + 1, len(idx)) receives the selected outputs at t0 and after every step;
-    ``limits`` = (max_lateral, max_tilt, max_speed, max_strain). Returns
-    ``(completed output steps, guard code, index, value)``; on a violation the row of the failing
-    step is recorded and the loop stops.
+    ``method``: :data:`RECORD_RK4` (steps <= ``max_dt`` [s], split at ``breakpoints`` by
+    :func:`plant.integrators.advance_rk4_span`) or :data:`RECORD_EXPEULER` (one exponential
+    Euler step of ``h`` with the operator ``op_*`` for this ``h``; the caller ensures that no
+    breakpoint lies inside an output step). ``rec`` (n_out + 1, len(idx)) receives the outputs
+    at t0 and after every step; ``limits`` = (max_lateral, max_tilt, max_speed, max_strain).
+    Returns ``(completed output steps, guard code, index, value)``; on a violation the row of
+    the failing step is recorded and the loop stops.
     """
     full3d = model == MODEL_FULL3D
     n = ip[0]
@@ -34,10 +41,14 @@ def run_record_rk4(model, t0, h, n_out, n_sub, y, p, ip, fp, u, wR, wF, wM, k1, 
         outputs_at(t0, y, p, ip, fp, u, wR, zbit_ref, out)
     for j in range(idx.size):
         rec[0, j] = out[idx[j]]
-    dt = h / n_sub
     for k in range(n_out):
         t = t0 + k * h
-        advance_rk4(model, t, y, n_sub, dt, p, ip, fp, u, wR, wF, wM, k1, k2, k3, k4, yt)
+        if method == RECORD_EXPEULER:
+            advance_expeuler(model, t, y, 1, h, op_idx, op_ioff, op_mats, op_moff, p, ip, fp, u,
+                             wR, wF, wM, k1, k2)
+        else:
+            advance_rk4_span(model, t, t + h, max_dt, breakpoints, y, p, ip, fp, u, wR, wF, wM,
+                             k1, k2, k3, k4, yt)
         code, i, val = check_state(full3d, n, y, limits[0], limits[1], limits[2], limits[3],
                                    strain_factor, wR)
         if full3d:

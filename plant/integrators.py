@@ -4,6 +4,8 @@ Each ``advance_*`` function integrates ``y`` in place over ``n_steps`` steps of 
 ``t0`` [s], with the inputs ``u`` held, and returns the number of steps completed before a
 non-finite state appeared (``n_steps`` on success). Failure is *returned*, not raised (as in
 scipy's ``_ivp``): the caller decides how to report it. Time is ``t0 + s * dt`` (no drift).
+The step loads are switched once a step, at its midpoint (``kernels.set_load_modes``): a step
+must not straddle a switch time, which callers ensure with :func:`next_breakpoint`.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernels import rhs
+from .kernels import rhs, set_load_modes
 
 _CACHE = True
 
@@ -32,6 +34,7 @@ def advance_rk4(model, t0, y, n_steps, dt, p, ip, fp, u, wR, wF, wM, k1, k2, k3,
     N = y.size
     for s in range(n_steps):
         t = t0 + s * dt
+        set_load_modes(ip, fp, t + 0.5 * dt)
         rhs(model, t, y, k1, p, ip, fp, u, wR, wF, wM)
         for i in range(N):
             yt[i] = y[i] + 0.5 * dt * k1[i]
@@ -104,6 +107,44 @@ DP5_STEP_TOO_SMALL = -3
 
 
 @njit(cache=_CACHE)
+def next_breakpoint(t, t1, breakpoints):
+    """End [s] of the integration segment that starts at ``t`` and must end by ``t1``.
+
+    The first of the sorted ``breakpoints`` [s] strictly inside ``(t, t1)`` (by more than
+    1e-9 relative: a switch that falls on a communication point within rounding is not split),
+    else ``t1``. Stepping segment by segment, no integration step straddles a load switch.
+    """
+    tol = 1e-9 * max(1.0, abs(t1))
+    for b in breakpoints:
+        if b > t + tol:
+            if b < t1 - tol:
+                return b
+            return t1
+    return t1
+
+
+@njit(cache=_CACHE)
+def advance_rk4_span(model, t0, t1, max_dt, breakpoints, y, p, ip, fp, u, wR, wF, wM, k1, k2, k3,
+                     k4, yt):
+    """RK4 from ``t0`` to ``t1`` [s] in steps of at most ``max_dt`` [s], split at breakpoints.
+
+    Each segment between breakpoints gets ``ceil(length / max_dt)`` equal steps (one segment
+    without breakpoints: exactly the ``ceil(h / max_dt)`` equal steps of a plain call).
+    Returns the time [s] reached: ``t1``, or the end of the last finite step.
+    """
+    t = t0
+    while t < t1:
+        te = next_breakpoint(t, t1, breakpoints)
+        n = max(1, math.ceil((te - t) / max_dt - 1e-9))
+        dt = (te - t) / n
+        done = advance_rk4(model, t, y, n, dt, p, ip, fp, u, wR, wF, wM, k1, k2, k3, k4, yt)
+        if done < n:
+            return t + done * dt
+        t = te
+    return t1
+
+
+@njit(cache=_CACHE)
 def _dp5_stage(model, t, h, y, K, s, yt, p, ip, fp, u, wR, wF, wM):
     """yt = y + h * sum_j a[s][j] K[j]; K[s] = rhs(t + c_s h, yt)."""
     N = y.size
@@ -145,6 +186,7 @@ def advance_dopri5(model, t0, t1, y, hstate, stats, rtol, atol, max_steps, p, ip
     span = t1 - t0
     if span <= 0.0:
         return DP5_OK
+    set_load_modes(ip, fp, t0 + 0.5 * span)  # one load state over [t0, t1]: see module doc
     rhs(model, t, y, K[0], p, ip, fp, u, wR, wF, wM)
     stats[2] += 1
     h = hstate[0]
@@ -264,9 +306,12 @@ def advance_verlet(model, t0, y, n_steps, dt, lam, p, ip, fp, u, wR, wF, wM, f, 
     N = y.size
     H = N // 2
     n = ip[0]
+    set_load_modes(ip, fp, t0 + 0.5 * dt)
     rhs(model, t0, y, f, p, ip, fp, u, wR, wF, wM)
     for s in range(n_steps):
         t = t0 + s * dt
+        if set_load_modes(ip, fp, t + 0.5 * dt):  # a load switched at t: the FSAL force is stale
+            rhs(model, t, y, f, p, ip, fp, u, wR, wF, wM)
         for i in range(H):
             vh[i] = y[H + i] + 0.5 * dt * f[H + i]
         # midpoint configuration for the kinematic map
@@ -304,19 +349,64 @@ def _matvec_add(M, x, out, c):
         out[i] += c * acc
 
 
+def block_split(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A square matrix with exactly-zero couplings as dense diagonal blocks (for mat-vecs).
+
+    The blocks are the connected components of the graph ``i ~ j if M[i, j] != 0 or
+    M[j, i] != 0`` (the axial-torsional chain's ``P1`` is two blocks of 2 n: axial and torsional,
+    half the work of the dense product). Returns ``(idx, ioff, mats, moff)``: block ``b`` acts
+    on the indices ``idx[ioff[b]:ioff[b+1]]`` with the row-major matrix
+    ``mats[moff[b]:moff[b+1]]``; see :func:`block_matvec_add`.
+    """
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    M = np.asarray(M, dtype=float)
+    nb, label = connected_components(csr_matrix(M != 0.0), directed=True, connection="weak")
+    idx, ioff, mats, moff = [], [0], [], [0]
+    for b in range(nb):
+        ii = np.flatnonzero(label == b)
+        idx.append(ii)
+        ioff.append(ioff[-1] + ii.size)
+        mats.append(M[np.ix_(ii, ii)].ravel())
+        moff.append(moff[-1] + ii.size ** 2)
+    return (np.concatenate(idx).astype(np.int64), np.array(ioff, dtype=np.int64),
+            np.ascontiguousarray(np.concatenate(mats)), np.array(moff, dtype=np.int64))
+
+
+@njit(cache=_CACHE, fastmath=True)
+def block_matvec_add(idx, ioff, mats, moff, x, out, xb):
+    """out += M @ x for M in the block form of :func:`block_split`; ``xb`` scratch like x."""
+    for b in range(ioff.size - 1):
+        i0 = ioff[b]
+        m = ioff[b + 1] - i0
+        for j in range(m):
+            xb[j] = x[idx[i0 + j]]
+        base = moff[b]
+        for r in range(m):
+            acc = 0.0
+            row = base + r * m
+            for j in range(m):
+                acc += mats[row + j] * xb[j]
+            out[idx[i0 + r]] += acc
+
+
 @njit(cache=_CACHE)
-def advance_expeuler(model, t0, y, n_steps, dt, P1, p, ip, fp, u, wR, wF, wM, f):
+def advance_expeuler(model, t0, y, n_steps, dt, idx, ioff, mats, moff, p, ip, fp, u, wR, wF, wM,
+                     f, xb):
     """Exponential Euler ``y1 = y + dt phi1(dt A) f(t, y)``, ``P1 = dt phi1(dt A)`` precomputed.
 
     Exact for linear autonomous systems with constant forcing over the step (any ``dt``: no
     stability limit from the stiff, overdamped high modes); first order in the variation of the
-    forcing and the nonlinear remainder ``g = f - A y``. One rhs and one dense mat-vec a step.
-    ``P1`` must be computed for this ``dt``. Returns completed steps like :func:`advance_rk4`.
+    forcing and the nonlinear remainder ``g = f - A y``. One rhs and one block mat-vec a step
+    (``P1`` in the form of :func:`block_split`, computed for this ``dt``; ``f``, ``xb`` scratch
+    like ``y``). Returns completed steps like :func:`advance_rk4`.
     """
     for s in range(n_steps):
         t = t0 + s * dt
+        set_load_modes(ip, fp, t + 0.5 * dt)
         rhs(model, t, y, f, p, ip, fp, u, wR, wF, wM)
-        _matvec_add(P1, f, y, 1.0)
+        block_matvec_add(idx, ioff, mats, moff, f, y, xb)
         if (s & 63) == 63 and not _all_finite(y):
             return s
     if not _all_finite(y):
@@ -337,6 +427,7 @@ def advance_etd2(model, t0, y, n_steps, dt, P1, P2, Q, p, ip, fp, u, wR, wF, wM,
     N = y.size
     for s in range(n_steps):
         t = t0 + s * dt
+        set_load_modes(ip, fp, t + 0.5 * dt)
         rhs(model, t, y, f, p, ip, fp, u, wR, wF, wM)
         for i in range(N):
             ya[i] = y[i]

@@ -69,6 +69,7 @@ from .layout import (
     LD_DIR,
     LD_KIND,
     LD_MAG,
+    LD_ON,
     LD_T0,
     LD_T1,
     MASS,
@@ -166,8 +167,29 @@ def relative_rotation(Ra: np.ndarray, Rb: np.ndarray, Rrel: np.ndarray) -> None:
 
 
 @njit(cache=_CACHE)
-def _load_active(fp, row, t):
-    return fp[row + LD_T0] <= t < fp[row + LD_T1]
+def set_load_modes(ip, fp, t):
+    """Switch the step loads on or off for time ``t`` [s] (``start <= t < end``).
+
+    Loads are piecewise-constant inputs: the integrators call this once a step, at the step's
+    midpoint, so that the whole step sees one value (a stage at a switch time belongs to both
+    neighbouring steps and would otherwise see the wrong one: a first-order error); callers
+    split their steps at :attr:`DrillstringModel.breakpoints`. Point evaluations
+    (``DrillstringModel.rhs``) call it with their own ``t``. Returns whether any load switched.
+    """
+    ns = ip[IP_NS]
+    changed = False
+    for s in range(ip[IP_NL]):
+        row = ns + NLD * s
+        on = 1.0 if fp[row + LD_T0] <= t < fp[row + LD_T1] else 0.0
+        if fp[row + LD_ON] != on:
+            fp[row + LD_ON] = on
+            changed = True
+    return changed
+
+
+@njit(cache=_CACHE, inline="always")
+def _load_active(fp, row):
+    return fp[row + LD_ON] != 0.0
 
 
 @njit(cache=_CACHE)
@@ -403,7 +425,7 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
     o_ld = ns
     for s in range(nl):
         row = o_ld + NLD * s
-        if _load_active(fp, row, t):
+        if _load_active(fp, row):
             k = int(fp[row + LD_BODY])
             d = int(fp[row + LD_DIR])
             if fp[row + LD_KIND] == 0.0:
@@ -423,9 +445,38 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
         dy[oW + 3 * k + 2] = wM[k, 2] / jp
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, inline="always")
+def sin_small(x: float) -> float:
+    """``sin(x)``, fast for the small relative twist across a joint.
+
+    For ``|x| <= 1/32`` rad the Taylor series to ``x^7`` (truncation ``x^9 / 9! < 3e-18 |x|``,
+    below half an ulp; tested against ``math.sin``), else ``math.sin``. The library call was half
+    the cost of the axial-torsional right-hand side.
+    """
+    if abs(x) <= 0.03125:
+        x2 = x * x
+        return x + x * x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 - x2 * (1.0 / 5040.0)))
+    return math.sin(x)
+
+
+@njit(cache=_CACHE, inline="always")
+def one_minus_cos_small(x: float) -> float:
+    """``1 - cos(x)`` without cancellation for a small twist: Taylor to ``x^8`` for
+    ``|x| <= 1/32`` rad (truncation below half an ulp), else ``2 sin(x/2)^2``."""
+    x2 = x * x
+    if x2 <= 0.0009765625:
+        return x2 * (0.5 + x2 * (-1.0 / 24.0 + x2 * (1.0 / 720.0 - x2 * (1.0 / 40320.0))))
+    s = math.sin(0.5 * x)
+    return 2.0 * s * s
+
+
+@njit(cache=_CACHE, inline="always")
 def rhs_at(t, y, dy, p, ip, fp, u, wR, wF, wM):
-    """Axial-torsional right-hand side; writes dy (4 n). wF (n,3) is scratch."""
+    """Axial-torsional right-hand side; writes dy (4 n). Unused scratch kept for one signature.
+
+    One pass over the bodies: the force and torque of the joint above a body are carried from
+    the previous body (no scratch arrays), end springs and loads added afterwards.
+    """
     n = ip[IP_N]
     ns = ip[IP_NS]
     nl = ip[IP_NL]
@@ -437,42 +488,51 @@ def rhs_at(t, y, dy, p, ip, fp, u, wR, wF, wM):
     cax = p[C_AX]
     kt = p[G1]
     cto = p[C_TO]
-    g = p[GRAV]
-    for k in range(n):
-        dy[k] = y[2 * n + k]
-        dy[n + k] = y[3 * n + k]
-        wF[k, 0] = m * g  # axial force
-        wF[k, 1] = 0.0  # torque
-    for a in range(n - 1):
-        b = a + 1
-        d = y[b] - y[a] - dx
-        f = -(kax * d + cax * (y[2 * n + b] - y[2 * n + a]))
-        wF[b, 0] += f
-        wF[a, 0] -= f
-        tq = -(kt * math.sin(y[n + b] - y[n + a]) + cto * (y[3 * n + b] - y[3 * n + a]))
-        wF[b, 1] += tq
-        wF[a, 1] -= tq
-    ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
-    wF[0, 0] += -(p[KT_AX] * (y[0] - h) + p[CT_AX] * y[2 * n])
-    if p[KT_TO] > 0.0:
-        wF[0, 1] += -(p[KT_TO] * math.sin(y[n] - ang) + p[CT_TO] * (y[3 * n] - om))
+    mg = m * p[GRAV]
+    oV = 2 * n
+    oW = 3 * n
+    f_up = 0.0  # force [N] / torque [N m] of the joint above body k, acting on body k
+    tq_up = 0.0
+    for k in range(n - 1):
+        dy[k] = y[oV + k]
+        dy[n + k] = y[oW + k]
+        d = y[k + 1] - y[k] - dx
+        f = -(kax * d + cax * (y[oV + k + 1] - y[oV + k]))
+        tq = -(kt * sin_small(y[n + k + 1] - y[n + k]) + cto * (y[oW + k + 1] - y[oW + k]))
+        dy[oV + k] = mg + f_up - f
+        dy[oW + k] = tq_up - tq
+        f_up = f
+        tq_up = tq
     e = n - 1
+    dy[e] = y[oV + e]
+    dy[n + e] = y[oW + e]
+    dy[oV + e] = mg + f_up
+    dy[oW + e] = tq_up
+    ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
+    dy[oV] += -(p[KT_AX] * (y[0] - h) + p[CT_AX] * y[oV])
+    if p[KT_TO] > 0.0:
+        dy[oW] += -(p[KT_TO] * sin_small(y[n] - ang) + p[CT_TO] * (y[oW] - om))
     if p[KB_AX] > 0.0:
         zr, vr = bit_rock(t, p)
-        wF[e, 0] += -p[KB_AX] * (y[e] + h - zr) - p[CB_AX] * (y[2 * n + e] - vr)
+        dy[oV + e] += -p[KB_AX] * (y[e] + h - zr) - p[CB_AX] * (y[oV + e] - vr)
     if p[BIT_TORQUE] > 0.0:
-        wF[e, 1] -= p[BIT_TORQUE] * math.tanh(y[3 * n + e] / p[BIT_EPS])
+        dy[oW + e] -= p[BIT_TORQUE] * math.tanh(y[oW + e] / p[BIT_EPS])
     for s in range(nl):
         row = ns + NLD * s
-        if _load_active(fp, row, t) and int(fp[row + LD_DIR]) == 2:
+        if _load_active(fp, row) and int(fp[row + LD_DIR]) == 2:
             k = int(fp[row + LD_BODY])
-            wF[k, int(fp[row + LD_KIND])] += fp[row + LD_MAG]
+            if int(fp[row + LD_KIND]) == 0:
+                dy[oV + k] += fp[row + LD_MAG]
+            else:
+                dy[oW + k] += fp[row + LD_MAG]
+    im = 1.0 / m
+    ij = 1.0 / jp
     for k in range(n):
-        dy[2 * n + k] = wF[k, 0] / m
-        dy[3 * n + k] = wF[k, 1] / jp
+        dy[oV + k] *= im
+        dy[oW + k] *= ij
 
 
-@njit(cache=_CACHE)
+@njit(cache=_CACHE, inline="always")
 def rhs(model, t, y, dy, p, ip, fp, u, wR, wF, wM):
     """Dispatch to the model's right-hand side (one compiled entry point for the integrators)."""
     if model == MODEL_FULL3D:

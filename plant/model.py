@@ -35,7 +35,9 @@ from .integrators import (
     advance_etd2,
     advance_expeuler,
     advance_rk4,
+    advance_rk4_span,
     advance_verlet,
+    block_split,
     exponential_matrices,
     stable_step,
 )
@@ -45,6 +47,8 @@ from .params import PlantParams
 __all__ = ["DrillstringModel", "FIXED_STEP_METHODS", "ModelKind", "needs_lateral", "series"]
 
 ModelKind = str  # "full3d" | "axial_torsional"
+# exponential-integrator matrices kept per step size (each costs one expm, ~10 ms at n = 30)
+_EXPM_CACHE_SIZE = 8
 MODEL_KINDS = ("full3d", "axial_torsional")
 # Fixed-step methods of :meth:`DrillstringModel.advance` and their stability radius |lambda dt|
 # (None: no stability limit; exponential integrators treat the linear part exactly).
@@ -276,10 +280,17 @@ class DrillstringModel:
         for ld in prm.loads:
             rows.append(
                 [0.0 if ld.kind == "force" else 1.0, ld.body - 1, "xyz".index(ld.direction),
-                 ld.magnitude, ld.start, ld.start + ld.duration]
+                 ld.magnitude, ld.start, ld.start + ld.duration, 0.0]
             )
         self.fp = np.concatenate([np.array(stab_z, dtype=float),
                                   np.array(rows, dtype=float).ravel()])
+        # times [s] where an input of the model jumps (loads) or kinks (end of the speed ramp):
+        # integrators step exactly to them (see integrators.next_breakpoint)
+        bps = [t for ld in prm.loads for t in (ld.start, ld.start + ld.duration)]
+        if td.rotary_speed != 0.0 and td.ramp_time > 0.0:
+            bps.append(td.ramp_time)
+        self.breakpoints = np.unique(np.array([t for t in bps if math.isfinite(t) and t > 0.0],
+                                              dtype=float))
         self.u = np.zeros(2 * self.n_sites)
 
     # ------------------------------------------------------------------ state layout
@@ -358,6 +369,7 @@ class DrillstringModel:
             Actuator forces [N] (C, E per site); defaults to the model's held inputs.
         """
         dy = np.empty(self.n_state)
+        kern.set_load_modes(self.ip, self.fp, float(t))
         kern.rhs(self.model_id, float(t), np.ascontiguousarray(y, dtype=float), dy, self.p, self.ip,
               self.fp, self.u if u is None else np.asarray(u, dtype=float), self.wR, self.wF,
               self.wM)
@@ -433,12 +445,25 @@ class DrillstringModel:
             H = self.n_state // 2
             return int(advance_verlet(*a, self.verlet_lambda, *w, k1, k2, k3[:H], k4[:H]))
         if method in ("expeuler", "etd2"):
-            P1, P2, Q = self.exponential_matrices(float(dt))
             if method == "expeuler":
-                return int(advance_expeuler(*a, P1, *w, k1))
+                return int(advance_expeuler(*a, *self.expeuler_operator(float(dt)), *w, k1, k2))
+            P1, P2, Q = self.exponential_matrices(float(dt))
             return int(advance_etd2(*a, P1, P2, Q, *w, k1, k2, k3))
         raise ValueError(f"method = {method!r} is not allowed: one of "
                          f"{', '.join(FIXED_STEP_METHODS)}")
+
+    def advance_span(self, t0: float, t1: float, max_dt: float, y: np.ndarray,
+                     u: np.ndarray | None = None) -> float:
+        """RK4 from ``t0`` to ``t1`` [s], steps <= ``max_dt`` [s], split at :attr:`breakpoints`.
+
+        ``y`` (shape (n_state,)) is advanced in place; returns the time [s] reached (``t1``
+        unless the state stopped being finite).
+        """
+        k1, k2, k3, k4, yt = self._scratch
+        return float(advance_rk4_span(
+            self.model_id, float(t0), float(t1), float(max_dt), self.breakpoints, y, self.p,
+            self.ip, self.fp, self.u if u is None else u, self.wR, self.wF, self.wM, k1, k2, k3,
+            k4, yt))
 
     def exponential_matrices(self, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(P1, P2, Q)`` of the exponential integrators for step ``dt`` [s] (cached per dt).
@@ -451,9 +476,38 @@ class DrillstringModel:
                              "3D model is far from linear under spin): use 'rk4' or 'verlet'")
         cache = self.__dict__.setdefault("_expm_cache", {})
         if dt not in cache:
+            if len(cache) >= _EXPM_CACHE_SIZE:
+                cache.pop(next(iter(cache)))
             A = self.jacobian(0.0, self.initial_state())
             cache[dt] = exponential_matrices(A, dt)
         return cache[dt]
+
+    def expeuler_operator(self, dt: float) -> tuple[np.ndarray, ...]:
+        """``P1 = dt phi1(dt A)`` for step ``dt`` [s] in the block form of ``block_split``."""
+        cache = self.__dict__.setdefault("_p1_blocks", {})
+        if dt not in cache:
+            if len(cache) >= _EXPM_CACHE_SIZE:  # variable steps: keep the newest few
+                cache.pop(next(iter(cache)))
+            cache[dt] = block_split(self.exponential_matrices(dt)[0])
+        return cache[dt]
+
+    @property
+    def linear_time_invariant(self) -> bool:
+        """Is the model linear time-invariant up to the small-twist ``sin`` and the loads?
+
+        True for the axial-torsional chain without top-drive rotation, prescribed bit motion
+        and bit torque (the Table 1 modal tests): then exponential Euler about the equilibrium
+        Jacobian is exact for the piecewise-constant loads, whatever the step.
+        """
+        p = self.p
+        return (self.kind == "axial_torsional" and p[lay.OMEGA0] == 0.0
+                and (p[lay.BIT_AMP] == 0.0 or p[lay.KB_AX] == 0.0) and p[lay.BIT_TORQUE] == 0.0)
+
+    @property
+    def default_method(self) -> str:
+        """The fastest accurate integrator for this model (``BENCHMARKS.md``): exponential Euler
+        (one step a communication step) if :attr:`linear_time_invariant`, else RK4."""
+        return "expeuler" if self.linear_time_invariant else "rk4"
 
     def advance_adaptive(self, t0: float, t1: float, y: np.ndarray, hstate: np.ndarray,
                          rtol: float = 1e-6, atol: float = 1e-9, u: np.ndarray | None = None,

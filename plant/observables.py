@@ -19,7 +19,9 @@ from .kernels import (
     IP_NS,
     bit_rock,
     cardan,
+    one_minus_cos_small,
     relative_rotation,
+    sin_small,
     top_drive,
 )
 from .layout import (
@@ -270,14 +272,14 @@ def outputs_at(t, y, p, ip, fp, u, wR, zbit_ref, out):
         pe -= m * g * y[k]
     for a in range(n - 1):
         d = y[a + 1] - y[a] - dx
-        pe += 0.5 * p[K_AX] * d * d + p[G1] * (1.0 - math.cos(y[n + a + 1] - y[n + a]))
+        pe += 0.5 * p[K_AX] * d * d + p[G1] * one_minus_cos_small(y[n + a + 1] - y[n + a])
     pe += 0.5 * p[KT_AX] * (y[0] - h) ** 2
     hook = p[KT_AX] * (y[0] - h) + p[CT_AX] * y[2 * n]
     ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
     tt = 0.0
     if p[KT_TO] > 0.0:
-        pe += p[KT_TO] * (1.0 - math.cos(y[n] - ang))
-        tt = -(p[KT_TO] * math.sin(y[n] - ang) + p[CT_TO] * (y[3 * n] - om))
+        pe += p[KT_TO] * one_minus_cos_small(y[n] - ang)
+        tt = -(p[KT_TO] * sin_small(y[n] - ang) + p[CT_TO] * (y[3 * n] - om))
     e = n - 1
     bz = y[e] + h
     fb = 0.0

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import guards
-from .batch import run_record_rk4
+from .batch import RECORD_EXPEULER, RECORD_RK4, run_record
 from .guards import check_state
-from .integrators import stable_step
+from .integrators import next_breakpoint, stable_step
 from .model import FIXED_STEP_METHODS, DrillstringModel
 
 __all__ = ["PlantSimulator", "StepResult", "simulate"]
@@ -43,6 +43,10 @@ class StepResult:
     value: float = math.nan
 
 
+_NO_OPERATOR = (np.zeros(0, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros(0),
+                np.zeros(1, dtype=np.int64))
+
+
 class PlantSimulator:
     """Time, state and inputs of one plant instance.
 
@@ -52,16 +56,20 @@ class PlantSimulator:
     max_step : float, optional
         Upper bound of the internal step [s]; default: the model's stable step for ``method``
         (``inf``, i.e. one step a communication step, for the exponential integrators).
-    method : {"rk4", "verlet", "expeuler", "etd2", "dopri5"}, optional
-        Internal integrator (default ``"rk4"``); see :meth:`DrillstringModel.advance`.
+    method : {"auto", "rk4", "verlet", "expeuler", "etd2", "dopri5"}, optional
+        Internal integrator; see :meth:`DrillstringModel.advance`. ``"auto"`` (default) is
+        :attr:`DrillstringModel.default_method`: exponential Euler for a linear time-invariant
+        axial-torsional scene, else RK4 (the Pareto choices of ``BENCHMARKS.md``).
         ``"dopri5"`` is adaptive (``rtol``, ``atol``) and steps to each communication point.
     """
 
     def __init__(self, model: DrillstringModel, max_step: float | None = None,
-                 method: str = "rk4", rtol: float = 1e-6, atol: float = 1e-9) -> None:
-        if method not in FIXED_STEP_METHODS and method != "dopri5":
+                 method: str = "auto", rtol: float = 1e-6, atol: float = 1e-9) -> None:
+        if method not in FIXED_STEP_METHODS and method not in ("dopri5", "auto"):
             raise ValueError(f"method = {method!r} is not allowed: one of "
-                             f"{', '.join([*FIXED_STEP_METHODS, 'dopri5'])}")
+                             f"{', '.join(['auto', *FIXED_STEP_METHODS, 'dopri5'])}")
+        if method == "auto":
+            method = model.default_method
         self.model = model
         self.method = method
         self.rtol = float(rtol)
@@ -126,9 +134,11 @@ class PlantSimulator:
                           float(val))
 
     def run_record(self, h: float, n_out: int, idx: np.ndarray) -> tuple[np.ndarray, StepResult]:
-        """``n_out`` RK4 output steps of ``h`` [s] in one compiled loop, recording outputs.
+        """``n_out`` output steps of ``h`` [s] in one compiled loop, recording outputs.
 
-        Equals ``n_out`` calls of :meth:`do_step` + :meth:`outputs` bit for bit.
+        Equals ``n_out`` calls of :meth:`do_step` + :meth:`outputs` bit for bit. For RK4, and
+        for exponential Euler with one step an output step and no load switch inside one;
+        other cases run that Python loop.
 
         Returns
         -------
@@ -137,16 +147,49 @@ class PlantSimulator:
         result : StepResult
         """
         m = self.model
-        n_sub = max(1, math.ceil(h / self.max_step - 1e-9))
+        idx = np.asarray(idx, dtype=np.int64)
+        if self.method == "rk4":
+            code_m, op = RECORD_RK4, _NO_OPERATOR
+        elif self.method == "expeuler" and self._expeuler_compiled(h, n_out):
+            code_m, op = RECORD_EXPEULER, m.expeuler_operator(float(h))
+        else:
+            return self._record_in_python(h, n_out, idx)
         rec = np.empty((n_out + 1, len(idx)))
         k1, k2, k3, k4, yt = m._scratch
         limits = np.array([MAX_LATERAL, MAX_TILT, MAX_SPEED, MAX_STRAIN])
-        done, code, i, val = run_record_rk4(
-            m.model_id, self.time, h, n_out, n_sub, self.y, m.p, m.ip, m.fp, self.u, m.wR, m.wF,
-            m.wM, k1, k2, k3, k4, yt, m._zbit_ref, m._out, np.asarray(idx, dtype=np.int64), rec,
-            limits, self._strain_factor)
+        done, code, i, val = run_record(
+            m.model_id, code_m, self.time, h, n_out, self.max_step, m.breakpoints, self.y, m.p,
+            m.ip, m.fp, self.u, m.wR, m.wF, m.wM, k1, k2, k3, k4, yt, *op, m._zbit_ref, m._out,
+            idx, rec, limits, self._strain_factor)
         self.time = self.time + done * h
         return rec[:done + 1], self._report(code, i, val)
+
+    def _expeuler_compiled(self, h: float, n_out: int) -> bool:
+        """One exponential Euler step an output step, no breakpoint inside one (see run_record)."""
+        if math.ceil(h / self.max_step - 1e-9) > 1:
+            return False
+        t0, t1 = self.time, self.time + n_out * h
+        tol = 1e-9 * max(1.0, abs(t1))
+        for b in self.model.breakpoints:
+            if t0 + tol < b < t1 - tol:
+                k = (b - t0) / h
+                if abs(k - round(k)) * h > tol:
+                    return False
+        return True
+
+    def _record_in_python(self, h: float, n_out: int, idx: np.ndarray
+                          ) -> tuple[np.ndarray, StepResult]:
+        rows = [self.outputs()[idx].copy()]
+        res = StepResult(True)
+        t0 = self.time
+        for k in range(n_out):
+            res = self.do_step(t0 + k * h, h)
+            if not res.ok and not res.quantity:
+                break
+            rows.append(self.outputs()[idx].copy())
+            if not res.ok:
+                break
+        return np.array(rows), res
 
     def _fail(self, what: str, quantity: str, value: float) -> StepResult:
         return StepResult(False, f"diverged at t = {self.time:.6g} s: {what}", self.time,
@@ -155,7 +198,8 @@ class PlantSimulator:
     def do_step(self, t: float, h: float) -> StepResult:
         """Advance from ``t`` [s] by ``h`` [s] with the inputs held.
 
-        The step is split into ``ceil(h / max_step)`` equal RK4 steps. Refused with the state
+        The step is split at the model's load switch times (:attr:`DrillstringModel.breakpoints`)
+        and each part into ``ceil(length / max_step)`` equal internal steps. Refused with the state
         unchanged (a result without ``quantity``): a step size that is not finite and > 0, a
         time ``t`` that is not the simulator's own (within 1e-9 relative), a non-finite input,
         or a step that needs more than :data:`MAX_SUBSTEPS` internal steps.
@@ -176,18 +220,30 @@ class PlantSimulator:
                                      f" internal steps of {self.max_step:.3g} s, more than "
                                      f"{MAX_SUBSTEPS:g} allowed per step; step rejected (state "
                                      f"unchanged)")
-        if self.method == "dopri5":
-            code = self.model.advance_adaptive(t, t + h, self.y, self._hstate, self.rtol,
-                                               self.atol, self.u)
-            self.time = t + h
-            res = self.check()
-            if res.ok and code != 0:
-                return StepResult(False, f"adaptive step failed at t = {t:.6g} s (code {code})",
-                                  t)
-            return res
-        n_sub = max(1, math.ceil(h / self.max_step - 1e-9))
-        done = self.model.advance(t, self.y, n_sub, h / n_sub, self.u, self.method)
-        self.time = t + h if done == n_sub else t + done * h / n_sub
+        if self.method == "rk4":
+            self.time = self.model.advance_span(t, t + h, self.max_step, self.y, self.u)
+            return self.check()
+        bps = self.model.breakpoints
+        t_start, t1 = t, t + h
+        while t < t1:  # segments between the load switch times (see next_breakpoint)
+            te = next_breakpoint(t, t1, bps)
+            length = h if (t == t_start and te == t1) else te - t  # (t + h) - t != h
+            if self.method == "dopri5":
+                code = self.model.advance_adaptive(t, te, self.y, self._hstate, self.rtol,
+                                                   self.atol, self.u)
+                self.time = te
+                if code != 0:
+                    res = self.check()
+                    return res if not res.ok else StepResult(
+                        False, f"adaptive step failed at t = {t:.6g} s (code {code})", t)
+            else:
+                n_sub = max(1, math.ceil(length / self.max_step - 1e-9))
+                dt = length / n_sub
+                done = self.model.advance(t, self.y, n_sub, dt, self.u, self.method)
+                self.time = te if done == n_sub else t + done * dt
+                if done < n_sub:
+                    break
+            t = te
         return self.check()
 
     def outputs(self) -> np.ndarray:
@@ -208,9 +264,11 @@ class PlantSimulator:
 
 def simulate(model: DrillstringModel, stop_time: float, output_interval: float,
              outputs: list[str] | None = None, max_step: float | None = None,
-             method: str = "rk4",
+             method: str = "auto",
              ) -> tuple[np.ndarray, dict[str, np.ndarray], StepResult]:
     """Run the plant alone (inputs zero) and sample outputs.
+
+    ``method`` and ``max_step`` as for :class:`PlantSimulator`.
 
     Returns
     -------
@@ -223,20 +281,8 @@ def simulate(model: DrillstringModel, stop_time: float, output_interval: float,
     """
     sim = PlantSimulator(model, max_step, method)
     names = outputs or model.output_names
-    idx = [model.output_names.index(n) for n in names]
+    idx = np.array([model.output_names.index(n) for n in names], dtype=np.int64)
     n_out = int(round(stop_time / output_interval))
-    if method == "rk4":  # compiled loop, same numbers as the loop below
-        arr, res = sim.run_record(output_interval, n_out, np.array(idx))
-        ts = np.arange(arr.shape[0]) * output_interval
-        return ts, {n: arr[:, i] for i, n in enumerate(names)}, res
-    ts = [0.0]
-    rows = [sim.outputs()[idx].copy()]
-    res = StepResult(True)
-    for k in range(n_out):
-        res = sim.do_step(k * output_interval, output_interval)
-        if not res.ok:
-            break
-        ts.append((k + 1) * output_interval)
-        rows.append(sim.outputs()[idx].copy())
-    arr = np.array(rows)
-    return np.array(ts), {n: arr[:, i] for i, n in enumerate(names)}, res
+    arr, res = sim.run_record(output_interval, n_out, idx)
+    ts = np.arange(arr.shape[0]) * output_interval
+    return ts, {n: arr[:, i] for i, n in enumerate(names)}, res
