@@ -21,7 +21,7 @@ RECORD_EXPEULER = 1
 
 @njit(cache=True)
 def run_record(model, method, t0, h, n_out, max_dt, breakpoints, y, p, ip, fp, u, wR, wF, wM, k1,
-               k2, k3, k4, yt, op_idx, op_ioff, op_mats, op_moff, zbit_ref, out, idx, rec, limits,
+               k2, k3, k4, yt, op_idx, op_sizes, op_blocks, zbit_ref, out, idx, rec, limits,
                strain_factor):
     """Advance ``n_out`` output steps of ``h`` [s], recording the outputs ``idx``.
 
@@ -44,8 +44,8 @@ def run_record(model, method, t0, h, n_out, max_dt, breakpoints, y, p, ip, fp, u
     for k in range(n_out):
         t = t0 + k * h
         if method == RECORD_EXPEULER:
-            advance_expeuler(model, t, y, 1, h, op_idx, op_ioff, op_mats, op_moff, p, ip, fp, u,
-                             wR, wF, wM, k1, k2)
+            advance_expeuler(model, t, y, 1, h, op_idx, op_sizes, op_blocks, p, ip, fp, u, wR,
+                             wF, wM, k1, k2)
         else:
             advance_rk4_span(model, t, t + h, max_dt, breakpoints, y, p, ip, fp, u, wR, wF, wM,
                              k1, k2, k3, k4, yt)

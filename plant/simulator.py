@@ -43,8 +43,7 @@ class StepResult:
     value: float = math.nan
 
 
-_NO_OPERATOR = (np.zeros(0, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros(0),
-                np.zeros(1, dtype=np.int64))
+_NO_OPERATOR = (np.zeros((0, 0), dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 0, 0)))
 
 
 class PlantSimulator:
