@@ -57,13 +57,16 @@ def real_time(quick: bool) -> dict:
     T3 = 10.0 if quick else 30.0
     m3 = scene_model("paper_open_loop")
     ma = scene_model("table1_axial_pulse")
-    Ta = 3.0
+    mt = scene_model("table1_torsional_pulse")
+    Ta = 10.0
     best: dict[str, float] = {}
     for _ in range(2 if quick else 3):
         for key, fn in (
             ("3d rk4", lambda: run_plant(m3, T3, "rk4").wall),
             ("at rk4", lambda: run_plant(ma, Ta, "rk4").wall),
             ("at expeuler", lambda: run_plant(ma, Ta, "expeuler").wall),
+            ("at auto", lambda: run_plant(ma, Ta, "auto").wall),
+            ("at torsional auto", lambda: run_plant(mt, Ta, "auto").wall),
         ):
             w = fn()
             best[key] = min(best.get(key, math.inf), w)
@@ -73,6 +76,8 @@ def real_time(quick: bool) -> dict:
                      "h_star": ma.stable_step()}
     out["at expeuler"] = {"T": Ta, "wall": best["at expeuler"], "rtf": Ta / best["at expeuler"],
                           "h_star": 1e-3}
+    for key, m in (("at auto", ma), ("at torsional auto", mt)):
+        out[key] = {"T": Ta, "wall": best[key], "rtf": Ta / best[key], "method": m.default_method}
     return out
 
 

@@ -280,7 +280,8 @@ def work_precision_at(quick: bool) -> dict:
             t1 = time.perf_counter()
             m.advance(0.0, y, nst, T / nst, method=meth)
             kern[meth] = min(kern.get(meth, math.inf), time.perf_counter() - t1)
-    return {"scene": "table1_axial_pulse", "model": m, "T": T, "ref": ref,
+    default = {"expeuler": "expeuler h = 1 ms", "rk4": "rk4 (auto step h*)"}[m.default_method]
+    return {"scene": "table1_axial_pulse", "model": m, "T": T, "ref": ref, "default_label": default,
             "ref_check": ref_check, "ref_wall": ref_wall, "runs": runs,
             "errors": [traj_error(r, ref) for r in runs], "kernel_wall": kern, "h_star": h0}
 
