@@ -266,6 +266,8 @@ def _ensemble_verdict(text: str) -> tuple[str, str] | None:
         if line.startswith("**Conclusion") and "Paired-t 95 % CIs: " in line:
             verdict = line.split(":** ", 1)[1].split(":", 1)[0]
             cis = line.split("Paired-t 95 % CIs: ", 1)[1].split(";", 1)[0]
+            if "Regular regime" in line:
+                cis += "; regular regime " + line.split("either run): ", 1)[1].rstrip(".")
             return ("yes" if verdict.startswith("yes") else verdict), cis
     return None
 
@@ -281,7 +283,7 @@ def _fmu_and_master_sections(quick: bool) -> list[str]:
     mo = _script(["benchmarks/bench_master_overhead.py", "--steps", steps], 1800)
     table = [ln for ln in mo.splitlines() if ln.startswith("|") or " steps of " in ln]
     red = _script(["benchmarks/bench_reduced.py", "--stop-time", "3" if quick else "10"], 900)
-    rms = "" if quick else _script(["benchmarks/bench_rms_sensitivity.py", "--members", "80",
+    rms = "" if quick else _script(["benchmarks/bench_rms_sensitivity.py", "--members", "160",
                                     "--divisors", "1,2", "--no-step-table"], 3600)
     return [red, rms, fm, "", "## Master overhead on tiny FMUs (benchmarks/bench_master_overhead.py)", "",
             f"Command: `python benchmarks/bench_master_overhead.py --steps {steps}` (target: "
