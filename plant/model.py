@@ -433,7 +433,9 @@ class DrillstringModel:
         ``method``: ``"rk4"`` (default), ``"verlet"`` (velocity Verlet, 1 rhs a step),
         ``"expeuler"`` / ``"etd2"`` (exponential integrators about the equilibrium Jacobian,
         axial-torsional model only). Returns the number of completed steps before a non-finite
-        state (``n_steps`` if none).
+        state (``n_steps`` if none). Step loads switch once a step (at its midpoint): a step
+        that straddles a switch time sees one value; :meth:`advance_span` and
+        ``PlantSimulator`` split the steps at :attr:`breakpoints`.
         """
         k1, k2, k3, k4, yt = self._scratch
         uu = self.u if u is None else u
