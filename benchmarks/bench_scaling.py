@@ -112,10 +112,15 @@ def scaling_time(quick: bool) -> dict:
 
 
 def memory(quick: bool) -> dict:
-    """Peak memory of a paper_open_loop run in a fresh subprocess, and of the imports alone."""
+    """Peak memory of a paper_open_loop run in a fresh subprocess, and of the imports alone.
+
+    ``cold``: the first run, which may compile the kernels (LLVM needs ~200 MiB more) when the
+    numba cache was empty or dropped after an edit; then ``imports+model`` and ``run`` with
+    the cache warm, what every later process sees.
+    """
     T = 5.0 if quick else 30.0
     res = {}
-    for key, run in (("imports+model", False), ("run", True)):
+    for key, run in (("cold", True), ("imports+model", False), ("run", True)):
         code = _MEM_SCRIPT.format(root=str(ROOT), run=run, T=T)
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                              check=True, timeout=600)

@@ -187,9 +187,10 @@ def report(quick: bool, out: Path) -> str:
     L.append(f"| cost vs simulated time | wall ~ T^{st['exponent']:.2f} | reported |")
     mr = mem["run"]
     L.append(f"| peak memory of a {mem['T']:g} s run | maxrss {mr['maxrss_kb'] / 1024:.0f} MiB "
-             f"(imports+model alone {mem['imports+model']['maxrss_kb'] / 1024:.0f} MiB); "
-             f"Python allocations during the run {mr['tracemalloc_peak_b'] / 2**20:.1f} MiB | "
-             "reported |")
+             f"(imports+model alone {mem['imports+model']['maxrss_kb'] / 1024:.0f} MiB; first "
+             f"process after an install or edit, compiling: {mem['cold']['maxrss_kb'] / 1024:.0f}"
+             f" MiB); Python allocations during the run {mr['tracemalloc_peak_b'] / 2**20:.1f} "
+             "MiB | reported |")
     L += ["", "## Work-precision: paper_open_loop, full 3D", "",
           f"Signals: {', '.join(wp.SIGNALS['full3d'])}; error = max over signals of "
           f"max|y - y_ref| / max|y_ref| over the first {w3['T']:g} s at 1 ms. "
@@ -241,8 +242,10 @@ def report(quick: bool, out: Path) -> str:
           f"paper_open_loop, {mem['T']:g} s, all scene outputs recorded at 1 ms, fresh "
           f"subprocess: maxrss {mr['maxrss_kb'] / 1024:.0f} MiB after the run, "
           f"{mem['imports+model']['maxrss_kb'] / 1024:.0f} MiB for imports + model + compiled "
-          f"kernels only; tracemalloc peak during the run {mr['tracemalloc_peak_b'] / 2**20:.1f} "
-          "MiB (the recorded samples).", "",
+          f"kernels only (numba cache warm); the first process after an install or an edit "
+          f"compiles the kernels and peaks at {mem['cold']['maxrss_kb'] / 1024:.0f} MiB "
+          f"(if the cache was already warm this equals the warm run); tracemalloc peak during "
+          f"the run {mr['tracemalloc_peak_b'] / 2**20:.1f} MiB (the recorded samples).", "",
           ""]
     L += sections
     text = "\n".join(L)
