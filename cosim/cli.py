@@ -146,7 +146,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     spec = importlib.util.spec_from_file_location("drillcosim_bench_run_all", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    return mod.main(["--quick"] if args.quick else [])
+    return mod.main((["--quick"] if args.quick else []) + (["--out", args.out] if args.out else []))
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -168,6 +168,7 @@ def _parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_build)
     p = sub.add_parser("bench", help="plant work-precision benchmarks -> BENCHMARKS.md")
     p.add_argument("--quick", action="store_true", help="short horizons (< 3 min)")
+    p.add_argument("--out", help="report path (default: BENCHMARKS.md of the checkout)")
     p.set_defaults(func=_cmd_bench)
     p = sub.add_parser("run", help="co-simulate a scene (plant FMU + controller FMU)")
     p.add_argument("scene", nargs="?", default="paper_closed_loop",
