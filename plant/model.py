@@ -407,14 +407,21 @@ class DrillstringModel:
         return J
 
     @cached_property
+    def initial_jacobian(self) -> np.ndarray:
+        """Jacobian of the rhs at t = 0 and the initial (static equilibrium) state [1/s].
+
+        Shape (n_state, n_state); the step choice and the exponential integrators share it.
+        """
+        return self.jacobian(0.0, self.initial_state())
+
+    @cached_property
     def max_eigenvalue(self) -> float:
         """Spectral radius [1/s] of the Jacobian at the initial state, plus active-contact margin.
 
         Contact adds at most k_w/m to the squared frequency of one body; that margin is added so
         that the step stays stable when the pipe touches the wellbore.
         """
-        y0 = self.initial_state()
-        J = self.jacobian(0.0, y0)
+        J = self.initial_jacobian
         with threadpool_limits(1):  # 6x faster than multithreaded BLAS on a loaded machine
             lam = float(np.max(np.abs(np.linalg.eigvals(J))))
         kc = self.p[lay.K_CONT] if self.contact_bodies and self.kind == "full3d" else 0.0
@@ -480,8 +487,7 @@ class DrillstringModel:
         if dt not in cache:
             if len(cache) >= _EXPM_CACHE_SIZE:
                 cache.pop(next(iter(cache)))
-            A = self.jacobian(0.0, self.initial_state())
-            cache[dt] = exponential_matrices(A, dt)
+            cache[dt] = exponential_matrices(self.initial_jacobian, dt)
         return cache[dt]
 
     def expeuler_operator(self, dt: float) -> tuple[np.ndarray, ...]:
