@@ -150,18 +150,9 @@ def run_one(spec: Spec, dy: np.ndarray | None) -> tuple[np.ndarray | None, float
     if dy is not None:
         sim.y += dy
     t0 = time.perf_counter()
-    if spec.method == "dopri5":
-        rec = np.empty((N_OUT + 1, len(SIGNALS)))
-        rec[0] = sim.outputs()[idx]
-        for k in range(N_OUT):
-            res = sim.do_step(k * DT_OUT, DT_OUT)
-            if not res.ok:
-                return None, time.perf_counter() - t0, res.message
-            rec[k + 1] = sim.outputs()[idx]
-    else:
-        rec, res = sim.run_record(DT_OUT, N_OUT, idx)
-        if not res.ok:
-            return None, time.perf_counter() - t0, res.message
+    rec, res = sim.run_record(DT_OUT, N_OUT, idx)
+    if not res.ok:
+        return None, time.perf_counter() - t0, res.message
     return rec, time.perf_counter() - t0, ""
 
 

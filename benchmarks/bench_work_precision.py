@@ -89,29 +89,10 @@ def run_plant(model: DrillstringModel, T: float, method: str = "rk4",
     """Run through ``PlantSimulator`` (what the FMU does) with 1 ms outputs; timed."""
     names = names or list(SIGNALS[model.kind])
     t0 = time.perf_counter()
-    if method == "dopri5":
-        from plant.simulator import PlantSimulator
-
-        sim = PlantSimulator(model, method="dopri5", rtol=rtol, atol=atol)
-        idx = [model.output_names.index(k) for k in names]
-        n_out = int(round(T / DT_OUT))
-        rows = np.empty((n_out + 1, len(idx)))
-        rows[0] = sim.outputs()[idx]
-        ok = True
-        for k in range(n_out):
-            res = sim.do_step(k * DT_OUT, DT_OUT)
-            if not res.ok:
-                ok = False
-                rows = rows[:k + 1]
-                break
-            rows[k + 1] = sim.outputs()[idx]
-        wall = time.perf_counter() - t0
-        t = np.arange(rows.shape[0]) * DT_OUT
-        vals = {k: rows[:, i] for i, k in enumerate(names)}
-    else:
-        t, vals, res = simulate(model, T, DT_OUT, names, max_step=max_step, method=method)
-        wall = time.perf_counter() - t0
-        ok = res.ok
+    t, vals, res = simulate(model, T, DT_OUT, names, max_step=max_step, method=method, rtol=rtol,
+                            atol=atol)
+    wall = time.perf_counter() - t0
+    ok = res.ok
     return Run(label or method, method, wall, t, vals, ok)
 
 

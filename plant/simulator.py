@@ -263,11 +263,11 @@ class PlantSimulator:
 
 def simulate(model: DrillstringModel, stop_time: float, output_interval: float,
              outputs: list[str] | None = None, max_step: float | None = None,
-             method: str = "auto",
+             method: str = "auto", rtol: float = 1e-6, atol: float = 1e-9,
              ) -> tuple[np.ndarray, dict[str, np.ndarray], StepResult]:
     """Run the plant alone (inputs zero) and sample outputs.
 
-    ``method`` and ``max_step`` as for :class:`PlantSimulator`.
+    ``max_step``, ``method``, ``rtol`` and ``atol`` as for :class:`PlantSimulator`.
 
     Returns
     -------
@@ -278,7 +278,7 @@ def simulate(model: DrillstringModel, stop_time: float, output_interval: float,
     result : StepResult
         ``ok`` or the divergence report; samples stop at the failure.
     """
-    sim = PlantSimulator(model, max_step, method)
+    sim = PlantSimulator(model, max_step, method, rtol, atol)
     names = outputs or model.output_names
     idx = np.array([model.output_names.index(n) for n in names], dtype=np.int64)
     n_out = int(round(stop_time / output_interval))
