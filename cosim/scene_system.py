@@ -74,7 +74,7 @@ from controller import MODES, ControllerParams
 from plant.observables import output_names
 from plant.scene import Scene, scenes_dir
 
-from .system import ALGORITHMS, COUPLINGS, Connection, FmuSpec, SystemSpec
+from .system import ALGORITHMS, COUPLINGS, Connection, FmuSpec, SystemSpec, integer_multiple
 
 __all__ = [
     "CONTROLLER",
@@ -175,9 +175,8 @@ def _number(scene: Scene, key: str, value: Any, *, positive: bool) -> float:
 
 
 def _multiple(scene: Scene, key: str, period: float, step: float) -> int:
-    ratio = period / step
-    n = round(ratio)
-    if n < 1 or abs(ratio - n) > 1e-9 * max(1.0, ratio):
+    n = integer_multiple(period, step)
+    if n is None:
         raise ValueError(f"{scene.source}: [cosim] {key} = {period!r} must be a positive "
                          f"integer multiple of step = {step!r} s")
     return n

@@ -199,10 +199,18 @@ def _check_keys(d: Mapping, allowed: Sequence[str], where: str) -> None:
                              f"allowed: {list(allowed)}")
 
 
-def _ticks(period: float, step: float, where: str) -> int:
+def integer_multiple(period: float, step: float) -> int | None:
+    """``period / step`` [-] if it is a positive integer (within 1e-9 relative), else None."""
     ratio = period / step
     n = round(ratio)
     if n < 1 or abs(ratio - n) > 1e-9 * max(1.0, ratio):
+        return None
+    return n
+
+
+def _ticks(period: float, step: float, where: str) -> int:
+    n = integer_multiple(period, step)
+    if n is None:
         raise ValueError(f"{where}: a positive integer multiple of step = {step} s, "
                          f"got {period} s")
     return n
