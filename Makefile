@@ -21,7 +21,7 @@ $(STAMP): $(BIN)/python pyproject.toml
 install: $(STAMP)
 
 $(FMUS) &: $(STAMP) $(SRC) $(wildcard scenes/*.toml)
-	$(BIN)/python -m fmu_src.build --out build/fmus
+	$(BIN)/python -m drillcosim.fmu_src.build --out build/fmus
 
 fmus: $(FMUS)
 

@@ -29,12 +29,12 @@ sys.path.insert(0, str(ROOT))
 from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
-from cosim.master import CoSimulation  # noqa: E402
-from cosim.scene_system import scene_system  # noqa: E402
-from fmu_src.build import build_all  # noqa: E402
-from plant.model import DrillstringModel  # noqa: E402
-from plant.scene import load_scene  # noqa: E402
-from plant.simulator import PlantSimulator  # noqa: E402
+from drillcosim.cosim.master.cosimulation import CoSimulation  # noqa: E402
+from drillcosim.cosim.scenario.scene_system import scene_system  # noqa: E402
+from drillcosim.fmu_src.build import build_all  # noqa: E402
+from drillcosim.plant.model import DrillstringModel  # noqa: E402
+from drillcosim.plant.scene import load_scene  # noqa: E402
+from drillcosim.plant.simulator import PlantSimulator  # noqa: E402
 
 
 def plant_alone(stop: float, h: float = 1e-3) -> float:
@@ -95,9 +95,9 @@ def master_run(scene: str, stop: float, fmu_dir: Path, overrides: dict | None = 
 MEM_SCRIPT = """
 import resource, sys
 sys.path.insert(0, {root!r})
-from cosim.master import CoSimulation
-from cosim.scene_system import scene_system
-from plant.scene import load_scene
+from drillcosim.cosim.master.cosimulation import CoSimulation
+from drillcosim.cosim.scenario.scene_system import scene_system
+from drillcosim.plant.scene import load_scene
 ss = scene_system(load_scene('paper_closed_loop'), {fmu_dir!r})
 CoSimulation(ss.system).run(stop_time={stop}, outputs=['plant.body11_radial_deflection'],
                             output_interval=1e-3, csv_path={csv!r})

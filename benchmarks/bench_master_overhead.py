@@ -6,7 +6,7 @@ by side in one process, best of ``--repeat`` runs of ``--steps`` steps each:
 
 * raw fmpy loop: ``FMU2Slave.getReal/setReal/doStep``, the usual hand-written loop;
 * raw ctypes loop: the FMI functions on preallocated buffers (lower bound);
-* cosim Jacobi / Gauss-Seidel: :class:`cosim.execution.Execution` without observers,
+* cosim Jacobi / Gauss-Seidel: :class:`cosim.master.execution.Execution` without observers,
   and the Jacobi run through :class:`cosim.master.CoSimulation` recording 2 outputs;
 * libcosimpy (libcosim, C++) on the same FMUs, if it loads them.
 
@@ -28,11 +28,11 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
-from master_fmus.build import build_fmu  # noqa: E402
 
-from cosim.execution import Execution  # noqa: E402
-from cosim.master import CoSimulation  # noqa: E402
-from cosim.system import Connection, FmuSpec, SystemSpec  # noqa: E402
+from drillcosim.cosim.master.cosimulation import CoSimulation  # noqa: E402
+from drillcosim.cosim.master.execution import Execution  # noqa: E402
+from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec  # noqa: E402
+from support.master_fmus.build import build_fmu  # noqa: E402
 
 H = 1e-3
 K = 0.5

@@ -16,9 +16,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from plant.model import DrillstringModel  # noqa: E402
-from plant.scene import load_scene  # noqa: E402
-from plant.simulator import simulate  # noqa: E402
+from drillcosim.plant.model import DrillstringModel  # noqa: E402
+from drillcosim.plant.scene import load_scene  # noqa: E402
+from drillcosim.plant.simulator import simulate  # noqa: E402
 
 SCENES = ("table1_axial_pulse", "table1_torsional_pulse")
 

@@ -49,9 +49,9 @@ from scipy import stats
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from plant.model import DrillstringModel  # noqa: E402
-from plant.scene import load_scene  # noqa: E402
-from plant.simulator import PlantSimulator  # noqa: E402
+from drillcosim.plant.model import DrillstringModel  # noqa: E402
+from drillcosim.plant.scene import load_scene  # noqa: E402
+from drillcosim.plant.simulator import PlantSimulator  # noqa: E402
 
 SCENE = "paper_open_loop"
 SIGNALS = ("body11_radial_deflection", "body26_radial_deflection")

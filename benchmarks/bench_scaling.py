@@ -26,9 +26,9 @@ ROOT = Path(__file__).resolve().parents[1]
 _MEM_SCRIPT = r"""
 import json, resource, sys, time, tracemalloc
 sys.path.insert(0, {root!r})
-from plant.model import DrillstringModel
-from plant.scene import load_scene
-from plant.simulator import simulate
+from drillcosim.plant.model import DrillstringModel
+from drillcosim.plant.scene import load_scene
+from drillcosim.plant.simulator import simulate
 sc = load_scene("paper_open_loop")
 m = DrillstringModel(sc.plant, sc.model)
 simulate(m, 0.01, 1e-3)  # compile/load caches outside the measurement

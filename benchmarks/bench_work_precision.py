@@ -29,10 +29,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from plant.model import DrillstringModel
-from plant.numpy_rhs import NumpyRhs
-from plant.scene import load_scene
-from plant.simulator import simulate
+from drillcosim.plant.model import DrillstringModel
+from drillcosim.plant.numpy_rhs import NumpyRhs
+from drillcosim.plant.scene import load_scene
+from drillcosim.plant.simulator import simulate
 
 DT_OUT = 1e-3  # s, output interval of every run
 

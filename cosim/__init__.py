@@ -1,18 +1,6 @@
-"""drillcosim: cosim package — the FMI 2 co-simulation master on fmpy.
+"""drillcosim.cosim: orchestration.
 
-Public API::
-
-    from cosim import (SystemSpec, FmuSpec, Connection, system_from_dict,
-                       CoSimulation, Result, Execution, Recorder,
-                       CosimError, DivergenceError)
+``master`` is the generic FMI 2.0 co-simulation master (it knows nothing of drillstrings),
+``scenario`` turns a scene into a system and runs it, ``study`` sweeps and predicts stability,
+``cli`` parses the command line. Dependencies point one way: cli -> study -> scenario -> master.
 """
-
-from .errors import CosimError, DivergenceError
-from .execution import Execution, ExecutionState
-from .master import CoSimulation, Divergence, Result
-from .recorder import Recorder
-from .system import Connection, FmuSpec, SystemSpec, system_from_dict
-
-__all__ = ["Connection", "CoSimulation", "CosimError", "Divergence", "DivergenceError",
-           "Execution", "ExecutionState", "FmuSpec", "Recorder", "Result", "SystemSpec",
-           "system_from_dict"]

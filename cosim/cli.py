@@ -26,9 +26,9 @@ class UsageError(Exception):
 
 
 def _cmd_modes(args: argparse.Namespace) -> int:
-    from plant.modal import PAPER_TABLE1, analytic_reference, operating_modes
-    from plant.model import DrillstringModel
-    from plant.scene import load_scene
+    from drillcosim.plant.modal import PAPER_TABLE1, analytic_reference, operating_modes
+    from drillcosim.plant.model import DrillstringModel
+    from drillcosim.plant.scene import load_scene
 
     scene = load_scene(args.scene)
     kind = args.model or scene.model
@@ -67,8 +67,8 @@ def _cmd_modes(args: argparse.Namespace) -> int:
 
 def scene_schema() -> str:
     """The whole scene schema (plant tables, then [controller] and [cosim]) as markdown."""
-    from cosim.scene_system import cosim_schema_markdown
-    from plant.scene import schema_markdown
+    from drillcosim.cosim.scenario.scene_system import cosim_schema_markdown
+    from drillcosim.plant.scene import schema_markdown
 
     return schema_markdown() + "\n" + cosim_schema_markdown()
 
@@ -79,7 +79,7 @@ def _cmd_schema(args: argparse.Namespace) -> int:
 
 
 def _cmd_scenes(args: argparse.Namespace) -> int:
-    from plant.scene import list_scenes, load_scene
+    from drillcosim.plant.scene import list_scenes, load_scene
 
     for name in list_scenes():
         sc = load_scene(name)
@@ -88,16 +88,15 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
 
 
 def _cmd_build(args: argparse.Namespace) -> int:
-    from fmu_src.build import build_all
+    from drillcosim.fmu_src.build import build_all, default_out
 
-    for path in build_all(args.out):
-        print(path)
+    build_all(args.out or default_out())  # prints "built <path>" per FMU
     return 0
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .errors import FMI2_ERROR, CosimError
-    from .run import run_scene
+    from drillcosim.cosim.master.errors import FMI2_ERROR, CosimError
+    from drillcosim.cosim.scenario.run import run_scene
 
     try:
         outcome = run_scene(args.scene, stop_time=args.stop_time, step=args.step,
@@ -116,8 +115,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    from .run import parse_set
-    from .sweep import run_sweep, sweep_from_args
+    from drillcosim.cosim.scenario.run import parse_set
+    from drillcosim.cosim.study.sweep import run_sweep, sweep_from_args
 
     spec = sweep_from_args(args.scene, args.gain, args.delay, args.step, args.stop_time,
                            args.engine, parse_set(args.set))
@@ -129,7 +128,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
           f"{res.n_unstable} unstable, {res.n_errors} errors) in {res.wall_time:.1f} s; "
           f"table {res.folder / 'results.csv'} and results.parquet")
     if args.maps:
-        from .maps import plot_maps
+        from drillcosim.cosim.study.maps import plot_maps
 
         for path in plot_maps(res.folder, predict=not args.no_prediction):
             print(path)
@@ -164,7 +163,9 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("scenes", help="list the shipped scenes")
     p.set_defaults(func=_cmd_scenes)
     p = sub.add_parser("build", help="build the FMUs")
-    p.add_argument("--out", default="build/fmus", help="output folder (default build/fmus)")
+    p.add_argument("--out", default=None, help="output folder (default: build/fmus of the "
+                   "checkout, or the per-user FMU folder of an installed package; "
+                   "`drillcosim run` looks there)")
     p.set_defaults(func=_cmd_build)
     p = sub.add_parser("bench", help="plant work-precision benchmarks -> BENCHMARKS.md")
     p.add_argument("--quick", action="store_true", help="short horizons (< 3 min)")

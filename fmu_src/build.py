@@ -1,4 +1,4 @@
-"""Build the project's FMUs with pythonfmu: ``python -m fmu_src.build --out DIR``.
+"""Build the project's FMUs with pythonfmu: ``python -m drillcosim.fmu_src.build --out DIR``.
 
 Every FMU is described by one :class:`FmuSpec` in :data:`REGISTRY`. ``build_all``
 builds each registered FMU whose adapter script exists (an entry whose script is
@@ -60,6 +60,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -86,8 +87,51 @@ __all__ = [
     "wrapper_of",
 ]
 
+#: The drillcosim package root: the repository in a checkout (editable install), the installed
+#: ``drillcosim/`` folder otherwise; both hold ``plant/``, ``controller/``, ``fmu_src/``, ``scenes/``.
 ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_OUT = ROOT / "build" / "fmus"
+
+
+def _checkout() -> bool:
+    """Whether ROOT is a source checkout (its ``pyproject.toml`` names this project)."""
+    try:
+        return 'name = "drillcosim"' in (ROOT / "pyproject.toml").read_text()
+    except OSError:
+        return False
+
+
+def user_cache() -> Path:
+    """Per-user cache folder: ``$DRILLCOSIM_CACHE``, else ``$XDG_CACHE_HOME/drillcosim``."""
+    env = os.environ.get("DRILLCOSIM_CACHE")
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "drillcosim"
+
+
+def default_out() -> Path:
+    """Where FMUs are built and found by default.
+
+    ``build/fmus/`` of the checkout; for an installed package (no checkout) a per-user folder
+    named by the version, ``<user_cache()>/fmus/<version>``, so ``drillcosim build`` and
+    ``drillcosim run`` agree from any working directory.
+    """
+    if _checkout():
+        return ROOT / "build" / "fmus"
+    from drillcosim import __version__
+
+    return user_cache() / "fmus" / __version__
+
+
+DEFAULT_OUT = default_out()
+
+#: Import name under which pythonfmu is shipped inside every FMU. pythonfmu's builder ships it
+#: as ``resources/pythonfmu/``; an FMU loaded in a Python host would then put a ``pythonfmu``
+#: from its (temporary) unzip folder into the host's ``sys.modules``, shadowing the host's own
+#: copy for the rest of the process (a later FmuBuilder then wrote FMUs without binaries). The
+#: adapters import it under this unique, versioned name instead, and the build replaces
+#: ``resources/pythonfmu/`` by it.
+PYTHONFMU_VENDORED = "_dcs_pythonfmu_0_7_0"
 
 #: SI base-unit exponents of the units the FMUs may declare (FMI 2.0 BaseUnit).
 UNIT_DEFINITIONS: dict[str, dict[str, int]] = {
@@ -143,7 +187,7 @@ def wrapper_of(fmu: Path | str) -> str:
 
 def _check_native_prerequisites() -> None:
     """Raise :class:`WrapperUnavailableError` (one line) if the native wrapper cannot be built."""
-    from fmu_src.wrapper import libpython_path
+    from drillcosim.fmu_src.wrapper import libpython_path
 
     cc = os.environ.get("CC") or "gcc"
     fallback = ("build with --wrapper pythonfmu (or DRILLCOSIM_FMU_WRAPPER=pythonfmu) "
@@ -173,7 +217,9 @@ class FmuSpec:
     name : str
         Adapter class name = FMI modelIdentifier = ``<name>.fmu``.
     script : str
-        Adapter script, relative to the repository root (unique file name).
+        Adapter script: absolute, or relative to :data:`ROOT`. It is shipped as the slave
+        module :attr:`slave_module` (a unique ``_dcs_`` name, so an FMU loaded in a Python
+        host never adds a generic module name to its ``sys.modules``).
     vendored : tuple of (str, str)
         ``(package folder relative to the root, vendored import name)``; each
         package is shipped as ``resources/<vendored import name>/``. The name must
@@ -201,7 +247,15 @@ class FmuSpec:
     @property
     def script_path(self) -> Path:
         """Path: absolute path of the adapter script."""
-        return ROOT / self.script
+        path = Path(self.script)
+        return path if path.is_absolute() else ROOT / path
+
+    @property
+    def slave_module(self) -> str:
+        """str: import name of the adapter inside the FMU, ``_dcs_<script stem>_<version>``."""
+        from drillcosim import __version__
+
+        return f"_dcs_{self.script_path.stem}_{__version__.replace('.', '_')}"
 
 
 #: The FMUs of the project. The plant entry is skipped until its adapter exists.
@@ -322,6 +376,17 @@ def finalize_model_description(
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
+def _drop_zip_members(fmu: Path, prefix: str) -> None:
+    """Remove every member whose name starts with ``prefix`` (rewrites the archive)."""
+    tmp = fmu.with_suffix(".tmp")
+    with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as dst:
+        for info in src.infolist():
+            if not info.filename.startswith(prefix):
+                dst.writestr(info.filename, src.read(info.filename),
+                             compress_type=zipfile.ZIP_DEFLATED)
+    os.replace(tmp, fmu)
+
+
 def _rewrite_zip_member(fmu: Path, member: str, data: bytes) -> None:
     """Replace one member of a zip file (rewrites the archive)."""
     tmp = fmu.with_suffix(".tmp")
@@ -335,11 +400,25 @@ def _rewrite_zip_member(fmu: Path, member: str, data: bytes) -> None:
 # -------------------------------------------------------------------------- worker
 def _build_in_this_process(spec: FmuSpec, workdir: Path, wrapper: str = "native") -> Path:
     """Build one FMU into ``workdir/out`` (run in a dedicated subprocess)."""
+    import pythonfmu
     from pythonfmu import FmuBuilder
 
     staging = workdir / "vendor"
     staging.mkdir(parents=True)
-    project_files: list[Path] = []
+    expected = "_dcs_pythonfmu_" + pythonfmu.__version__.replace(".", "_")
+    if expected != PYTHONFMU_VENDORED:
+        raise RuntimeError(f"pythonfmu {pythonfmu.__version__} is installed; the adapters import "
+                           f"{PYTHONFMU_VENDORED} (install the pinned version)")
+    # pythonfmu under its vendored name: shipped (runtime), and aliased here so the adapter's
+    # classes derive from the very Fmi2Slave the builder checks for
+    vend_pfmu = staging / PYTHONFMU_VENDORED
+    vend_pfmu.mkdir()
+    for src in Path(pythonfmu.__file__).parent.glob("*.py"):
+        shutil.copy2(src, vend_pfmu / src.name)
+    for name, module in list(sys.modules.items()):
+        if name == "pythonfmu" or name.startswith("pythonfmu."):
+            sys.modules[PYTHONFMU_VENDORED + name[len("pythonfmu"):]] = module
+    project_files: list[Path] = [vend_pfmu]
     for package, vname in spec.vendored:
         src = ROOT / package
         if not (src / "__init__.py").is_file():
@@ -353,21 +432,32 @@ def _build_in_this_process(spec: FmuSpec, workdir: Path, wrapper: str = "native"
             raise FileNotFoundError(f"extra file {path} of {spec.name} does not exist")
         project_files.append(path)
 
+    source = spec.script_path.read_text()
+    if re.search(r"^\s*(from|import)\s+pythonfmu\b", source, re.M):
+        raise RuntimeError(f"{spec.script_path}: import pythonfmu as {PYTHONFMU_VENDORED} (the "
+                           f"FMU ships it under that name only)")
+    script = staging / f"{spec.slave_module}.py"
+    shutil.copy2(spec.script_path, script)
     sys.path.insert(0, str(staging))  # so pythonfmu can import the adapter at build time
-    fmu = FmuBuilder.build_FMU(spec.script_path, dest=workdir / "out",
+    fmu = FmuBuilder.build_FMU(script, dest=workdir / "out",
                                project_files=project_files, **dict(spec.options))
     fmu = Path(fmu)
     if fmu.name != f"{spec.name}.fmu":
         raise RuntimeError(f"pythonfmu built {fmu.name}, expected {spec.name}.fmu: the "
                            f"adapter class must be named {spec.name}")
 
-    cls = getattr(sys.modules[spec.script_path.stem], spec.name)
+    cls = getattr(sys.modules[spec.slave_module], spec.name)
     with zipfile.ZipFile(fmu) as zf:
         names = set(zf.namelist())
         xml = zf.read("modelDescription.xml")
     xml = finalize_model_description(xml, getattr(cls, "VARIABLE_UNITS", {}),
                                      getattr(cls, "DIRECT_FEEDTHROUGH", None))
     _rewrite_zip_member(fmu, "modelDescription.xml", xml)
+    # the generic resources/pythonfmu/ copy goes: the adapter imports PYTHONFMU_VENDORED
+    _drop_zip_members(fmu, "resources/pythonfmu/")
+    names = {n for n in names if not n.startswith("resources/pythonfmu/")}
+    if f"resources/{PYTHONFMU_VENDORED}/fmi2slave.py" not in names:
+        raise RuntimeError(f"{fmu.name}: resources/{PYTHONFMU_VENDORED}/ missing")
 
     for package, vname in spec.vendored:
         if f"resources/{vname}/__init__.py" not in names:
@@ -375,7 +465,7 @@ def _build_in_this_process(spec: FmuSpec, workdir: Path, wrapper: str = "native"
         if any(n.startswith(f"resources/{package}/") for n in names):
             raise RuntimeError(f"{fmu.name}: unversioned resources/{package}/ would shadow")
     if wrapper == "native":
-        from fmu_src.wrapper import compile_wrapper, install_native_wrapper
+        from drillcosim.fmu_src.wrapper import compile_wrapper, install_native_wrapper
 
         library = compile_wrapper(workdir / "dcs_fmi2_native.so")
         install_native_wrapper(fmu, spec.name, library)
@@ -419,12 +509,12 @@ def build_one(spec: FmuSpec, out_dir: Path | str = DEFAULT_OUT,
     workdir = Path(tempfile.mkdtemp(prefix=f".{spec.name}-", dir=out_dir))
     try:
         env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join(
-            [str(ROOT)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
         env["PYTHONDONTWRITEBYTECODE"] = "1"
-        cmd = [sys.executable, "-m", "fmu_src.build", "--worker-spec",
+        cmd = [sys.executable, "-m", "drillcosim.fmu_src.build", "--worker-spec",
                json.dumps(asdict(spec)), "--workdir", str(workdir), "--wrapper", wrapper]
-        proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
+        # a fresh interpreter in an empty folder: nothing of the calling process (its
+        # sys.modules, a shadowing pythonfmu, the working directory) reaches the build
+        proc = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True)
         if proc.returncode != 0:
             raise RuntimeError(f"building {spec.name} failed (exit {proc.returncode}):\n"
                                f"{proc.stdout}\n{proc.stderr}")
@@ -474,7 +564,7 @@ def _spec_from_json(text: str) -> FmuSpec:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
-    parser = argparse.ArgumentParser(prog="python -m fmu_src.build", description=__doc__
+    parser = argparse.ArgumentParser(prog="python -m drillcosim.fmu_src.build", description=__doc__
                                      .split("\n")[0])
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
                         help=f"output folder (default {DEFAULT_OUT})")
@@ -501,7 +591,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         build_all(args.out, specs, args.wrapper)
     except WrapperUnavailableError as exc:
-        print(f"python -m fmu_src.build: {exc}", file=sys.stderr)
+        print(f"python -m drillcosim.fmu_src.build: {exc}", file=sys.stderr)
         return 1
     return 0
 

@@ -70,7 +70,7 @@ fails with an error naming the missing outputs; they are never silently zero.
 Error handling
 --------------
 The FMU is built by default with the native FMI wrapper (``fmu_src/wrapper``,
-``python -m fmu_src.build``), which returns the FMI 2.0 statuses directly: every
+``python -m drillcosim.fmu_src.build``), which returns the FMI 2.0 statuses directly: every
 message logged through ``_error`` (status fmi2Error, category logStatusError,
 naming the cause; divergence: fmi2Discard, logStatusDiscard) also sets
 ``self._fmi2_status`` (the highest status of the call), which that wrapper turns
@@ -132,8 +132,7 @@ from typing import Any, ClassVar
 from xml.etree.ElementTree import Element
 
 import numpy as np
-from _dcs_slave_support_0_1_0 import access_problem, guarded_access, reject
-from pythonfmu import (
+from _dcs_pythonfmu_0_7_0 import (
     Boolean,
     DefaultExperiment,
     Fmi2Causality,
@@ -144,7 +143,8 @@ from pythonfmu import (
     Real,
     String,
 )
-from pythonfmu.enums import Fmi2Status
+from _dcs_pythonfmu_0_7_0.enums import Fmi2Status
+from _dcs_slave_support_0_1_0 import access_problem, guarded_access, reject
 
 #: Name under which the build vendors ``plant/`` into this FMU's resources.
 VENDORED_PLANT = "_dcs_plant_0_1_0"

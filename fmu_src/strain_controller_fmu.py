@@ -30,7 +30,7 @@ unsupported, and pythonfmu cannot declare an Enumeration.
 Error handling
 --------------
 The FMU is built by default with the native FMI wrapper (``fmu_src/wrapper``,
-``python -m fmu_src.build``), which returns the FMI 2.0 statuses directly: every
+``python -m drillcosim.fmu_src.build``), which returns the FMI 2.0 statuses directly: every
 message logged through ``_error`` (status fmi2Error, category logStatusError,
 naming the cause) also sets ``self._fmi2_status`` (the highest status of the
 call), which that wrapper turns into the call's status and resets, and
@@ -77,8 +77,7 @@ from typing import Any, ClassVar
 import numpy as np
 from _dcs_controller_0_1_0 import MODES, ControllerParams
 from _dcs_controller_0_1_0 import StrainController as StrainLaw
-from _dcs_slave_support_0_1_0 import access_problem, guarded_access, reject
-from pythonfmu import (
+from _dcs_pythonfmu_0_7_0 import (
     Boolean,
     DefaultExperiment,
     Fmi2Causality,
@@ -88,7 +87,8 @@ from pythonfmu import (
     Integer,
     Real,
 )
-from pythonfmu.enums import Fmi2Status
+from _dcs_pythonfmu_0_7_0.enums import Fmi2Status
+from _dcs_slave_support_0_1_0 import access_problem, guarded_access, reject
 
 #: Name under which the build vendors ``controller/`` into this FMU's resources.
 VENDORED_CONTROLLER = "_dcs_controller_0_1_0"

@@ -1,13 +1,34 @@
-"""Shared test fixtures."""
+"""Shared fixtures of the test suite.
+
+* ``project_fmus`` (session): the plant and controller FMUs, built once into a session folder
+  by the project's build (each in its own subprocess) and validated; every FMU test uses them.
+* ``fmus`` (session): the tiny master-test FMUs of ``tests/support/master_fmus`` (cached across
+  sessions under a full key, validated before use, see :mod:`support.master_fmus.build`).
+* Two autouse guards: fmpy's logger proxy is restored after every test, and every test leaves
+  ``sys.path`` and the host's module namespace as it found them (see
+  :func:`_host_namespace_unchanged`).
+
+Markers (``pytest -m "not slow"`` is the fast subset): ``slow`` (long simulations, builds,
+campaigns), ``interop`` (third-party FMI engines: libcosim, Ecos, a C host), ``needs_cc`` (runs
+a C compiler itself).
+"""
 
 from __future__ import annotations
 
 import ctypes
+import sys
+import sysconfig
+from pathlib import Path
 
 import pytest
+from fmpy import platform
 from fmpy.fmi1 import printLogMessage
 from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 from fmpy.logging import addLoggerProxy
+from fmpy.validation import validate_fmu
+
+from drillcosim.fmu_src.build import REGISTRY, build_one
+from support.master_fmus.build import build_all as build_test_fmus
 
 # fmpy's native logger proxy (logging.so) keeps ONE global target for every FMU in the process:
 # the last addLoggerProxy() call wins. Tests that install a recording logger re-point it at their
@@ -18,6 +39,10 @@ _DEFAULT = fmi2CallbackFunctions()
 _DEFAULT.logger = fmi2CallbackLoggerTYPE(printLogMessage)
 _KEEP = _DEFAULT.logger
 
+_ENV_ROOTS = tuple(str(Path(p).resolve()) for p in {
+    sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"],
+    sysconfig.get_paths()["stdlib"], sysconfig.get_paths()["platstdlib"]})
+
 
 @pytest.fixture(autouse=True)
 def _restore_fmpy_logger_proxy():
@@ -25,3 +50,82 @@ def _restore_fmpy_logger_proxy():
     cb = fmi2CallbackFunctions()
     cb.logger = _KEEP
     addLoggerProxy(ctypes.byref(cb))
+
+
+def _fmu_folder(path: str | None) -> Path | None:
+    """The extracted FMU a module file lies in (a parent holding modelDescription.xml)."""
+    if not path:
+        return None
+    for parent in Path(path).resolve().parents:
+        if (parent / "modelDescription.xml").is_file():
+            return parent
+    return None
+
+
+def foreign_modules(before: set[str]) -> list[str]:
+    """Modules added since ``before`` that an FMU brought under a name that is not unique.
+
+    An FMU loaded in this process may add modules only under ``_dcs_`` names (versioned,
+    unique): a generic name (``pythonfmu``, an adapter script's name) from an FMU's unzip
+    folder would shadow the host's own module of that name for the rest of the process, and
+    dangle once the folder is deleted. ``pythonfmu`` itself must be the environment's.
+    """
+    found = []
+    for name in set(sys.modules) - before:
+        module = sys.modules.get(name)
+        if name.split(".")[0].startswith("_dcs_"):
+            continue
+        if _fmu_folder(getattr(module, "__file__", None)) is not None:
+            found.append(f"{name} from {module.__file__}")
+    pfmu = sys.modules.get("pythonfmu")
+    if pfmu is not None and not str(Path(pfmu.__file__).resolve()).startswith(_ENV_ROOTS):
+        found.append(f"pythonfmu from {pfmu.__file__} (not the environment's)")
+    return sorted(found)
+
+
+@pytest.fixture(autouse=True)
+def _host_namespace_unchanged(request):
+    """sys.path exactly as before; no non-unique module name brought in by an FMU."""
+    path_before = list(sys.path)
+    modules_before = set(sys.modules)
+    yield
+    problems = []
+    if sys.path != path_before:
+        added = [p for p in sys.path if p not in path_before]
+        removed = [p for p in path_before if p not in sys.path]
+        sys.path[:] = path_before
+        problems.append(f"sys.path changed (added {added}, removed {removed})")
+    foreign = foreign_modules(modules_before)
+    for entry in foreign:
+        sys.modules.pop(entry.split(" ")[0], None)
+    if foreign:
+        problems.append(f"modules from an FMU under non-unique names: {foreign}")
+    if problems:
+        pytest.fail(f"{request.node.nodeid} left the host process changed: "
+                    f"{'; '.join(problems)}", pytrace=False)
+
+
+def _validated(path: Path) -> Path:
+    ident = path.stem
+    import zipfile
+
+    with zipfile.ZipFile(path) as zf:
+        if f"binaries/{platform}/{ident}.so" not in zf.namelist():
+            raise RuntimeError(f"{path}: no binaries/{platform}/{ident}.so")
+    problems = validate_fmu(str(path))
+    if problems:
+        raise RuntimeError(f"{path}: fmpy validation: {problems}")
+    return path
+
+
+@pytest.fixture(scope="session")
+def project_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """``{name: path}`` of the plant and controller FMUs, built once per session, validated."""
+    out = tmp_path_factory.mktemp("project_fmus")
+    return {spec.name: _validated(build_one(spec, out)) for spec in REGISTRY}
+
+
+@pytest.fixture(scope="session")
+def fmus() -> dict[str, Path]:
+    """``{script name: path}`` of the tiny master-test FMUs (validated)."""
+    return build_test_fmus()

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from plant.params import PipeParams
+from drillcosim.plant.params import PipeParams
 
 
 def run(*args: str) -> subprocess.CompletedProcess:

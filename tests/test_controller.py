@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from controller import CHANNELS, ControllerParams, StrainController
+from drillcosim.controller import CHANNELS, ControllerParams, StrainController
 
 ROOT = Path(__file__).resolve().parents[1]
 

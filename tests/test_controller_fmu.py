@@ -30,13 +30,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmi_logging import RecordingInstance, fmu_fixtures
 from fmpy import simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
-import controller
-from fmu_src.build import REGISTRY, build_one
+from drillcosim import controller
+from drillcosim.fmu_src.build import REGISTRY, build_one
+from support.fmi_logging import RecordingInstance, fmu_fixtures
 
 ROOT = Path(__file__).resolve().parents[1]
 SPEC = next(s for s in REGISTRY if s.name == "StrainController")
@@ -205,7 +205,8 @@ CLEAN_SCRIPT = textwrap.dedent("""
     print(json.dumps({
         "force": force, "cold_start_s": t1 - t0,
         "vendored_file": sys.modules["%(vendored)s"].__file__, "unzipdir": str(d),
-        "pythonfmu_file": sys.modules["pythonfmu"].__file__,
+        "pythonfmu_file": sys.modules["_dcs_pythonfmu_0_7_0"].__file__,
+        "generic_pythonfmu": "pythonfmu" in sys.modules,
         "controller_imported": "controller" in sys.modules,
     }))
 """)
@@ -241,6 +242,7 @@ def test_fmu_runs_in_a_clean_python_with_only_numpy(fmu_path: Path, tmp_path: Pa
     assert out["force"] == -3000.0
     assert out["vendored_file"].startswith(out["unzipdir"])
     assert out["pythonfmu_file"].startswith(out["unzipdir"])  # the FMU's own copy
+    assert not out["generic_pythonfmu"]  # under its unique name only
     assert not out["controller_imported"]
     print(f"cold start (load library + instantiate + init + first doStep): "
           f"{out['cold_start_s'] * 1e3:.1f} ms")
@@ -252,7 +254,7 @@ SHADOW_SCRIPT = textwrap.dedent("""
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
     if order == "controller_first":
-        import controller
+        from drillcosim import controller
     md = read_model_description(fmu)
     d = extract(fmu)
     s = FMU2Slave(guid=md.guid, unzipDirectory=d, modelIdentifier="StrainController",
@@ -264,7 +266,7 @@ SHADOW_SCRIPT = textwrap.dedent("""
     s.setReal([0], [1e-6])
     s.doStep(0.0, 1e-3)
     if order == "fmu_first":
-        import controller
+        from drillcosim import controller
     print(json.dumps({
         "force": s.getReal([4])[0],
         "controller": controller.__file__,

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from fmu_src.build import REGISTRY, build_one
+pytestmark = [pytest.mark.interop]
 
 pytest.importorskip("libcosimpy")
 
@@ -43,8 +43,8 @@ SCRIPT = textwrap.dedent("""
 """)
 
 
-def test_libcosim_runs_the_controller_fmu(tmp_path: Path) -> None:
-    fmu = build_one(REGISTRY[0], tmp_path / "fmus")
+def test_libcosim_runs_the_controller_fmu(tmp_path: Path, project_fmus: dict[str, Path]) -> None:
+    fmu = project_fmus["StrainController"]
     script = tmp_path / "cosim_host.py"
     script.write_text(SCRIPT)
     n_steps = 100

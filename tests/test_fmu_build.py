@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import json
 import subprocess
 import sys
 import textwrap
@@ -14,7 +15,7 @@ import pytest
 from fmpy import read_model_description, simulate_fmu
 from fmpy.validation import validate_fmu
 
-from fmu_src.build import (
+from drillcosim.fmu_src.build import (
     REGISTRY,
     ROOT,
     UNIT_DEFINITIONS,
@@ -26,6 +27,8 @@ from fmu_src.build import (
     finalize_model_description,
     wrapper_of,
 )
+
+pytestmark = [pytest.mark.needs_cc]
 
 
 # ------------------------------------------------------------------------- registry
@@ -149,8 +152,8 @@ DUMMY_ADAPTER = textwrap.dedent('''
     import os
 
     from _dcs_dummy_0_1_0 import scale
-    from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
-    from pythonfmu.enums import Fmi2Initial
+    from _dcs_pythonfmu_0_7_0 import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+    from _dcs_pythonfmu_0_7_0.enums import Fmi2Initial
 
 
     class DummyScaler(Fmi2Slave):
@@ -259,3 +262,67 @@ def test_unit_definitions_are_dimensionally_consistent() -> None:
     assert UNIT_DEFINITIONS["1"] == {}
     for name, exps in UNIT_DEFINITIONS.items():
         assert set(exps) <= {"kg", "m", "s", "A", "K", "mol", "cd", "rad"}, name
+
+
+def test_an_adapter_importing_generic_pythonfmu_is_refused(tmp_path: Path) -> None:
+    script = tmp_path / "generic_fmu.py"
+    script.write_text(DUMMY_ADAPTER.replace("_dcs_pythonfmu_0_7_0", "pythonfmu"))
+    with pytest.raises(RuntimeError, match="_dcs_pythonfmu_0_7_0"):
+        build_one(FmuSpec(name="DummyScaler", script=str(script)), tmp_path / "out")
+
+
+HOST_THEN_BUILD = textwrap.dedent("""
+    import json, shutil, sys, zipfile
+    from pathlib import Path
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+    fmu, script, out = sys.argv[1], sys.argv[2], sys.argv[3]
+    md = read_model_description(fmu)
+    d = extract(fmu)
+    s = FMU2Slave(guid=md.guid, unzipDirectory=d,
+                  modelIdentifier=md.coSimulation.modelIdentifier, instanceName="x")
+    s.instantiate(); s.setupExperiment(startTime=0.0)
+    s.enterInitializationMode(); s.exitInitializationMode(); s.doStep(0.0, 1e-3)
+    s.terminate(); s.freeInstance()
+    shutil.rmtree(d)  # as fmpy.simulate_fmu does after a run
+    generic = "pythonfmu" in sys.modules
+    from pythonfmu import FmuBuilder  # the host's own copy, as a test process would
+    import pythonfmu
+    built = FmuBuilder.build_FMU(script, dest=out)
+    print(json.dumps({"generic_after_fmu": generic, "pythonfmu": pythonfmu.__file__,
+                      "names": zipfile.ZipFile(built).namelist()}))
+""")
+
+
+def test_an_fmu_loaded_in_a_python_host_leaves_its_pythonfmu_alone(
+        project_fmus: dict[str, Path], tmp_path: Path) -> None:
+    """Regression (fresh-machine failure): the root cause of the 3-file test FMUs.
+
+    pythonfmu's builder ships ``resources/pythonfmu/``; an FMU loaded in-process imported it
+    as ``pythonfmu`` from its unzip folder, and a later ``FmuBuilder`` in that process (whose
+    ``HERE`` was the deleted folder) wrote FMUs without ``binaries/`` and without
+    ``resources/pythonfmu/``. Our FMUs ship it only as ``_dcs_pythonfmu_0_7_0``.
+    """
+    script = tmp_path / "plain_slave.py"
+    script.write_text(textwrap.dedent("""
+        from pythonfmu import Fmi2Causality, Fmi2Slave, Real
+
+        class PlainSlave(Fmi2Slave):
+            def __init__(self, **kwargs):
+                super().__init__(**kwargs)
+                self.y = 1.0
+                self.register_variable(Real("y", causality=Fmi2Causality.output))
+
+            def do_step(self, current_time, step_size):
+                return True
+    """))
+    proc = subprocess.run([sys.executable, "-c", HOST_THEN_BUILD,
+                           str(project_fmus["StrainController"]), str(script), str(tmp_path)],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert not out["generic_after_fmu"]
+    assert "site-packages" in out["pythonfmu"]
+    names = out["names"]
+    assert any(n.startswith("binaries/linux64/") for n in names)
+    assert "resources/pythonfmu/fmi2slave.py" in names

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from plant.integrators import exponential_matrices
-from plant.model import DrillstringModel
-from plant.numpy_rhs import rhs3d_numpy
-from plant.scene import load_scene
-from plant.simulator import PlantSimulator
+from drillcosim.plant.integrators import exponential_matrices
+from drillcosim.plant.model import DrillstringModel
+from drillcosim.plant.numpy_rhs import rhs3d_numpy
+from drillcosim.plant.scene import load_scene
+from drillcosim.plant.simulator import PlantSimulator
 
 
 def _model(name: str, **ov) -> DrillstringModel:
@@ -104,6 +104,7 @@ def test_exponential_matrices_scalar():
     assert Q[0, 0] == pytest.approx(P2[0, 0] * np.exp(z), rel=1e-12)
 
 
+@pytest.mark.slow
 def test_dopri5_matches_scipy_dop853_and_lands_on_output_times():
     m = _model("paper_open_loop")
     T = 0.05

@@ -13,10 +13,10 @@ import math
 import numpy as np
 import pytest
 
-from plant.kernels import one_minus_cos_small, sin_small
-from plant.model import DrillstringModel
-from plant.scene import load_scene
-from plant.simulator import PlantSimulator
+from drillcosim.plant.kernels import one_minus_cos_small, sin_small
+from drillcosim.plant.model import DrillstringModel
+from drillcosim.plant.scene import load_scene
+from drillcosim.plant.simulator import PlantSimulator
 
 
 def _pulse_model(start: float, duration: float, kind: str = "axial_torsional") -> DrillstringModel:
@@ -128,7 +128,7 @@ def test_exponential_operator_is_two_blocks_on_the_chain():
     assert sizes.tolist() == [2 * m.n, 2 * m.n]  # axial and torsional states never couple
     P1 = m.exponential_matrices(1e-3)[0]
     x = np.random.default_rng(0).normal(size=P1.shape[0])
-    from plant.integrators import block_matvec_add
+    from drillcosim.plant.integrators import block_matvec_add
     out = np.zeros_like(x)
     block_matvec_add(idx, sizes, blocks, x, out, np.zeros_like(x))
     np.testing.assert_allclose(out, P1 @ x, rtol=1e-13, atol=1e-13 * np.abs(P1 @ x).max())

@@ -7,13 +7,12 @@ import csv
 
 import numpy as np
 import pytest
-from master_fmus.fixtures import fmus  # noqa: F401 - session fixture
 
-from cosim.errors import CosimError, DivergenceError
-from cosim.execution import Execution
-from cosim.master import CoSimulation
-from cosim.recorder import Recorder
-from cosim.system import Connection, FmuSpec, SystemSpec, system_from_dict
+from drillcosim.cosim.master.cosimulation import CoSimulation
+from drillcosim.cosim.master.errors import CosimError, DivergenceError
+from drillcosim.cosim.master.execution import Execution
+from drillcosim.cosim.master.recorder import Recorder
+from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec, system_from_dict
 
 
 class Trace:
@@ -26,7 +25,7 @@ class Trace:
         self.rows.append((ex.time, *(ex.get_real(r) for r in self.refs)))
 
 
-def oscillator(fmus, algorithm="jacobi", delay=0.0):  # noqa: F811
+def oscillator(fmus, algorithm="jacobi", delay=0.0):
     """Two-mass oscillator, linear coupling and a fractional delay: non-trivial floats."""
     return SystemSpec(
         [FmuSpec("a", fmus["mt_mass"], {"m": 1.0, "kc": 2.0, "x0": 1.0, "h_max": 2e-3}),
@@ -37,7 +36,7 @@ def oscillator(fmus, algorithm="jacobi", delay=0.0):  # noqa: F811
 
 
 @pytest.mark.parametrize("algorithm", ["jacobi", "gauss_seidel"])
-def test_split_run_equals_continuous_run_bit_for_bit(fmus, algorithm):  # noqa: F811
+def test_split_run_equals_continuous_run_bit_for_bit(fmus, algorithm):
     refs = ["a.x", "a.v", "b.x"]
     runs = []
     for stops in ([2.0], [0.73, 2.0], [1.0, 1.0, 1.5, 2.0]):
@@ -51,7 +50,7 @@ def test_split_run_equals_continuous_run_bit_for_bit(fmus, algorithm):  # noqa: 
     assert np.array_equal(runs[0], runs[1]) and np.array_equal(runs[0], runs[2])
 
 
-def test_30000_steps_of_1ms_end_at_exactly_30s(fmus):  # noqa: F811
+def test_30000_steps_of_1ms_end_at_exactly_30s(fmus):
     system = SystemSpec([FmuSpec("i", fmus["mt_integrator"], {"u": 1.0})], base_step=1e-3)
     with Execution(system, read_outputs=["i.n_steps"]) as ex:
         rec = Recorder(["i.n_steps"], interval_ticks=1000)
@@ -67,7 +66,7 @@ def test_30000_steps_of_1ms_end_at_exactly_30s(fmus):  # noqa: F811
         Execution(system).ticks_until(1.0005)
 
 
-def test_state_restore_reproduces_run_including_delay_buffers(fmus):  # noqa: F811
+def test_state_restore_reproduces_run_including_delay_buffers(fmus):
     refs = ["a.x", "b.x", "b.v"]
     with Execution(oscillator(fmus, "jacobi", delay=0.123), read_outputs=refs) as ex:
         ex.simulate_until(0.5)
@@ -90,7 +89,7 @@ def test_state_restore_reproduces_run_including_delay_buffers(fmus):  # noqa: F8
     assert np.array_equal(first, second) and np.array_equal(first, third)
 
 
-def test_state_without_delay_buffers_would_differ(fmus):  # noqa: F811
+def test_state_without_delay_buffers_would_differ(fmus):
     """Guard: the delay line really matters, so the test above checks the buffers."""
     with Execution(oscillator(fmus, "jacobi", delay=0.123), read_outputs=["b.x"]) as ex:
         ex.simulate_until(0.5)
@@ -105,14 +104,14 @@ def test_state_without_delay_buffers_would_differ(fmus):  # noqa: F811
 
 
 # --- errors -------------------------------------------------------------------------
-def plant_loop(fmus, plant_params, h=0.01):  # noqa: F811
+def plant_loop(fmus, plant_params, h=0.01):
     return SystemSpec(
         [FmuSpec("plant", fmus["mt_integrator"], {"x0": 1.0, **plant_params}),
          FmuSpec("ctrl", fmus["mt_gain"], {"k": 1.0})],
         [Connection("plant.x", "ctrl.u"), Connection("ctrl.y", "plant.u")], h)
 
 
-def test_discard_names_fmu_call_time_and_keeps_data(fmus, tmp_path):  # noqa: F811
+def test_discard_names_fmu_call_time_and_keeps_data(fmus, tmp_path):
     out = tmp_path / "run.csv"
     with pytest.raises(CosimError) as info:
         CoSimulation(plant_loop(fmus, {"fail_at_time": 0.5})).run(
@@ -132,7 +131,7 @@ def test_discard_names_fmu_call_time_and_keeps_data(fmus, tmp_path):  # noqa: F8
     assert float(rows[-1][0]) == 0.5 and float(rows[-1][1]) == data["plant.x"][-1]
 
 
-def test_exception_in_fmu_is_reported_as_error(fmus):  # noqa: F811
+def test_exception_in_fmu_is_reported_as_error(fmus):
     with pytest.raises(CosimError) as info:
         CoSimulation(plant_loop(fmus, {"fail_at_time": 0.2, "fail_mode": 1})).run(
             1.0, outputs=["plant.x"])
@@ -141,7 +140,7 @@ def test_exception_in_fmu_is_reported_as_error(fmus):  # noqa: F811
     assert info.value.result.data["time"][-1] == pytest.approx(0.2)
 
 
-def test_non_finite_output_stops_with_divergence(fmus):  # noqa: F811
+def test_non_finite_output_stops_with_divergence(fmus):
     system = plant_loop(fmus, {"nan_at_time": 0.3})
     with Execution(system) as ex, pytest.raises(DivergenceError) as info:
         ex.simulate_until(1.0)
@@ -153,7 +152,7 @@ def test_non_finite_output_stops_with_divergence(fmus):  # noqa: F811
     assert res.data["time"][-1] == pytest.approx(0.30) and np.isfinite(res.data["plant.x"]).all()
 
 
-def test_unwritable_output_directory_fails_before_running(fmus, tmp_path):  # noqa: F811
+def test_unwritable_output_directory_fails_before_running(fmus, tmp_path):
     blocker = tmp_path / "not_a_dir"
     blocker.write_text("x")
     target = blocker / "out.csv"
@@ -161,7 +160,7 @@ def test_unwritable_output_directory_fails_before_running(fmus, tmp_path):  # no
         CoSimulation(plant_loop(fmus, {})).run(0.1, outputs=["plant.x"], csv_path=target)
 
 
-def test_earlier_result_file_survives_until_new_one_is_complete(fmus, tmp_path):  # noqa: F811
+def test_earlier_result_file_survives_until_new_one_is_complete(fmus, tmp_path):
     out = tmp_path / "res.csv"
     out.write_text("earlier result\n")
     seen = []
@@ -190,7 +189,7 @@ def test_earlier_result_file_survives_until_new_one_is_complete(fmus, tmp_path):
     assert out.read_text() == "earlier result\n"
 
 
-def test_result_array_has_fmpy_result_layout(fmus):  # noqa: F811
+def test_result_array_has_fmpy_result_layout(fmus):
     """Structured array, 'time' first: the layout fmpy.util.plot_result takes."""
     res = CoSimulation(plant_loop(fmus, {})).run(0.2, outputs=["plant.x", "ctrl.y"],
                                                   output_interval=0.05)
@@ -201,7 +200,7 @@ def test_result_array_has_fmpy_result_layout(fmus):  # noqa: F811
 
 # --- multirate ------------------------------------------------------------------------
 @pytest.mark.parametrize("algorithm", ["jacobi", "gauss_seidel"])
-def test_multirate_fmu_steps_every_third_tick_with_3h(fmus, algorithm):  # noqa: F811
+def test_multirate_fmu_steps_every_third_tick_with_3h(fmus, algorithm):
     H = 0.01
     system = SystemSpec(
         [FmuSpec("fast", fmus["mt_integrator"], {"u": 1.0}),
@@ -219,7 +218,7 @@ def test_multirate_fmu_steps_every_third_tick_with_3h(fmus, algorithm):  # noqa:
     np.testing.assert_allclose(res.data["slow.x"], expected * 3 * H, atol=1e-14)
 
 
-def test_multirate_consumer_holds_slow_output(fmus):  # noqa: F811
+def test_multirate_consumer_holds_slow_output(fmus):
     """A fast probe of a period-4 source sees its value held for 4 ticks (Jacobi)."""
     system = SystemSpec(
         [FmuSpec("src", fmus["mt_source"], {"omega": 2.0}, sample_period_ticks=4),
@@ -271,8 +270,8 @@ def test_invalid_specs_name_the_field(make, match):
 
 
 # --- hooks ------------------------------------------------------------------------------
-def test_scheduled_change_manipulator_and_late_observer(fmus):  # noqa: F811
-    from cosim.manipulators import ScheduledChange
+def test_scheduled_change_manipulator_and_late_observer(fmus):
+    from drillcosim.cosim.master.manipulators import ScheduledChange
 
     system = SystemSpec([FmuSpec("i", fmus["mt_integrator"])], base_step=0.01)
     with Execution(system, read_outputs=["i.x"]) as ex:
@@ -287,7 +286,7 @@ def test_scheduled_change_manipulator_and_late_observer(fmus):  # noqa: F811
                                                                      0.0), atol=1e-12)
 
 
-def test_streaming_csv_keeps_memory_flat(fmus, tmp_path):  # noqa: F811
+def test_streaming_csv_keeps_memory_flat(fmus, tmp_path):
     out = tmp_path / "stream.csv"
     system = SystemSpec([FmuSpec("i", fmus["mt_integrator"], {"u": 1.0})], base_step=0.01)
     with Execution(system, read_outputs=["i.x"]) as ex:
@@ -301,7 +300,7 @@ def test_streaming_csv_keeps_memory_flat(fmus, tmp_path):  # noqa: F811
     np.testing.assert_allclose(data[:, 1], data[:, 0], atol=1e-12)
 
 
-def test_progress_bar_shows_real_time_factor(fmus, capsys):  # noqa: F811
+def test_progress_bar_shows_real_time_factor(fmus, capsys):
     system = SystemSpec([FmuSpec("i", fmus["mt_integrator"])], base_step=0.01)
     CoSimulation(system).run(1.0, progress=True)
     err = capsys.readouterr().err

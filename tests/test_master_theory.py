@@ -7,11 +7,10 @@ import math
 
 import numpy as np
 import pytest
-from master_fmus.fixtures import fmus  # noqa: F401 - session fixture
 from scipy.integrate import solve_ivp
 
-from cosim.master import CoSimulation
-from cosim.system import Connection, FmuSpec, SystemSpec
+from drillcosim.cosim.master.cosimulation import CoSimulation
+from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec
 
 H_LOOP = 0.01
 
@@ -21,7 +20,7 @@ def levin_may_bound(m: int) -> float:
     return 2.0 * math.cos(m * math.pi / (2 * m + 1))
 
 
-def loop_system(fmus, kh: float, algorithm: str, delay_steps: int) -> SystemSpec:  # noqa: F811
+def loop_system(fmus, kh: float, algorithm: str, delay_steps: int) -> SystemSpec:
     """Integrator plant x' = u and P controller u = -K x, delay on ctrl -> plant."""
     return SystemSpec(
         [FmuSpec("plant", fmus["mt_integrator"], {"x0": 1.0}),
@@ -40,7 +39,7 @@ CASES = [("gauss_seidel", m, m) for m in range(5)] + [("jacobi", m, m - 1) for m
 
 @pytest.mark.parametrize("side", [0.97, 1.03])
 @pytest.mark.parametrize("algorithm,m,delay_steps", CASES)
-def test_levin_may_stability_bound(fmus, algorithm, m, delay_steps, side):  # noqa: F811
+def test_levin_may_stability_bound(fmus, algorithm, m, delay_steps, side):
     kh = side * levin_may_bound(m)
     res = CoSimulation(loop_system(fmus, kh, algorithm, delay_steps)).run(
         20.0, outputs=["plant.x"])
@@ -53,7 +52,7 @@ def test_levin_may_stability_bound(fmus, algorithm, m, delay_steps, side):  # no
         assert tail > 20.0, f"m={m}: should grow at K*H = {kh:.4f}, |x| = {tail:.3g}"
 
 
-def test_gauss_seidel_loop_is_exact_geometric_sequence(fmus):  # noqa: F811
+def test_gauss_seidel_loop_is_exact_geometric_sequence(fmus):
     """m = 0: x_k = (1 - K H)^k, to rounding."""
     kh = 0.3
     res = CoSimulation(loop_system(fmus, kh, "gauss_seidel", 0)).run(1.0, outputs=["plant.x"])
@@ -61,7 +60,7 @@ def test_gauss_seidel_loop_is_exact_geometric_sequence(fmus):  # noqa: F811
     np.testing.assert_allclose(res.data["plant.x"], (1 - kh) ** k, rtol=1e-12)
 
 
-def test_jacobi_loop_matches_delayed_recursion(fmus):  # noqa: F811
+def test_jacobi_loop_matches_delayed_recursion(fmus):
     """Jacobi, delay 2 steps: x_{k+1} = x_k - a x_{k-3}, x constant before the start."""
     a = 0.2
     res = CoSimulation(loop_system(fmus, a, "jacobi", 2)).run(1.0, outputs=["plant.x"])
@@ -76,7 +75,7 @@ M1, K1, M2, K2, KC = 1.0, 1.0, 2.0, 0.5, 2.0
 T_OSC = 4.0
 
 
-def oscillator(fmus, h: float, coupling: str, algorithm: str) -> SystemSpec:  # noqa: F811
+def oscillator(fmus, h: float, coupling: str, algorithm: str) -> SystemSpec:
     return SystemSpec(
         [FmuSpec("a", fmus["mt_mass"], {"m": M1, "k": K1, "kc": KC, "x0": 1.0}),
          FmuSpec("b", fmus["mt_mass"], {"m": M2, "k": K2, "kc": KC, "x0": 0.0})],
@@ -100,7 +99,7 @@ STEPS = [0.04, 0.02, 0.01, 0.005]
 
 @pytest.mark.parametrize("algorithm", ["jacobi", "gauss_seidel"])
 @pytest.mark.parametrize("coupling,order", [("zoh", 1.0), ("linear", 2.0)])
-def test_coupling_error_order(fmus, reference, algorithm, coupling, order):  # noqa: F811
+def test_coupling_error_order(fmus, reference, algorithm, coupling, order):
     errors = []
     for h in STEPS:
         res = CoSimulation(oscillator(fmus, h, coupling, algorithm)).run(
@@ -118,7 +117,7 @@ H_D = 0.01
 OMEGA = 3.0
 
 
-def delay_system(fmus, delay: float, algorithm: str) -> SystemSpec:  # noqa: F811
+def delay_system(fmus, delay: float, algorithm: str) -> SystemSpec:
     """Sine source -> echo probe (gain k = -1) through a delayed connection."""
     return SystemSpec(
         [FmuSpec("src", fmus["mt_source"], {"omega": OMEGA}),
@@ -128,7 +127,7 @@ def delay_system(fmus, delay: float, algorithm: str) -> SystemSpec:  # noqa: F81
 
 @pytest.mark.parametrize("algorithm,lag", [("gauss_seidel", 0), ("jacobi", 1)])
 @pytest.mark.parametrize("m", [0, 1, 3, 7])
-def test_integer_delay_is_exact_shift(fmus, algorithm, lag, m):  # noqa: F811
+def test_integer_delay_is_exact_shift(fmus, algorithm, lag, m):
     """probe(t_k) = src(t_{k - m - lag}), bit for bit (lag: Jacobi's extra step)."""
     res = CoSimulation(delay_system(fmus, m * H_D, algorithm)).run(1.0, outputs=["src.y",
                                                                                  "probe.y"])
@@ -140,7 +139,7 @@ def test_integer_delay_is_exact_shift(fmus, algorithm, lag, m):  # noqa: F811
 
 
 @pytest.mark.parametrize("frac_delay", [0.25, 2.6])
-def test_fractional_delay_interpolates_linearly(fmus, frac_delay):  # noqa: F811
+def test_fractional_delay_interpolates_linearly(fmus, frac_delay):
     """d = (n + f) H: probe(t) = (1 - f) s(t - n H) + f s(t - (n + 1) H) (Gauss-Seidel)."""
     res = CoSimulation(delay_system(fmus, frac_delay * H_D, "gauss_seidel")).run(
         1.0, outputs=["probe.y"])
@@ -158,7 +157,8 @@ def test_fractional_delay_interpolates_linearly(fmus, frac_delay):  # noqa: F811
     assert 0.5 * bound < dev <= bound * (1 + 1e-6)
 
 
-def test_jacobi_loop_delay_agrees_with_libcosim(fmus):  # noqa: F811
+@pytest.mark.interop
+def test_jacobi_loop_delay_agrees_with_libcosim(fmus):
     """libcosim's fixed-step (Jacobi) master shows the same one-step loop delay:
     both sequences obey x_{k+1} = x_k - a x_{k-1}; only the first step differs
     (libcosim steps first with the input's start value u = 0)."""

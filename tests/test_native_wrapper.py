@@ -30,8 +30,10 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.validation import validate_fmu
 
-from fmu_src.build import REGISTRY, FmuSpec, build_one
-from fmu_src.wrapper import compile_wrapper
+from drillcosim.fmu_src.build import REGISTRY, FmuSpec, build_one
+from drillcosim.fmu_src.wrapper import compile_wrapper
+
+pytestmark = [pytest.mark.needs_cc]
 
 ROOT = Path(__file__).resolve().parents[1]
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
@@ -40,8 +42,8 @@ ENV = dict(os.environ, OPENBLAS_NUM_THREADS="1")
 
 RAISING_SLAVE = textwrap.dedent('''
     """Test slave: do_step raises for x < 0, exit_initialization_mode for x > 100."""
-    from pythonfmu import Fmi2Causality, Fmi2Slave, Real
-    from pythonfmu.enums import Fmi2Status
+    from _dcs_pythonfmu_0_7_0 import Fmi2Causality, Fmi2Slave, Real
+    from _dcs_pythonfmu_0_7_0.enums import Fmi2Status
 
 
     class Raiser(Fmi2Slave):
@@ -71,11 +73,8 @@ RAISING_SLAVE = textwrap.dedent('''
 
 
 @pytest.fixture(scope="session")
-def native_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("native_fmus")
-    for spec in REGISTRY:
-        build_one(spec, out, wrapper="native")
-    return out
+def native_dir(project_fmus: dict[str, Path]) -> Path:
+    return project_fmus["DrillstringPlant"].parent
 
 
 @pytest.fixture(scope="session")
@@ -86,12 +85,17 @@ def pyfmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
+#: A slave that raises on request; its script is written by the fixture (a unique temp path).
+RAISER = FmuSpec(name="Raiser", script=str(Path(__import__("tempfile").mkdtemp(
+    prefix="dcs_raiser_")) / "raiser_slave.py"))
+
+
 @pytest.fixture(scope="session")
 def raiser_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    src = tmp_path_factory.mktemp("raiser_src") / "raiser_slave.py"
+    src = Path(RAISER.script)
+    src.parent.mkdir(parents=True, exist_ok=True)
     src.write_text(RAISING_SLAVE)
-    spec = FmuSpec(name="Raiser", script=str(src))
-    return build_one(spec, tmp_path_factory.mktemp("raiser"), wrapper="native")
+    return build_one(RAISER, tmp_path_factory.mktemp("raiser"), wrapper="native")
 
 
 def run_script(code: str, *args: str, env: dict | None = None, timeout: int = 600) -> dict:
@@ -398,7 +402,7 @@ def test_instantiate_failure_returns_null_and_logs(raiser_fmu: Path, tmp_path: P
     with zipfile.ZipFile(raiser_fmu) as src, zipfile.ZipFile(broken, "w") as dst:
         for info in src.infolist():
             data = src.read(info.filename)
-            if info.filename == "resources/raiser_slave.py":
+            if info.filename == f"resources/{RAISER.slave_module}.py":
                 data = data.replace(b"self.x = 0.0", b"self.x = 1 / 0")
             dst.writestr(info, data)
     code = PRELUDE + textwrap.dedent("""
@@ -461,14 +465,15 @@ def test_fmu_state_get_set_serialize_bit_identical(name: str, native_dir: Path) 
 
 
 # ------------------------------------------------------------------------ third parties
+@pytest.mark.interop
 def test_libcosim_runs_native_fmus_like_our_master(native_dir: Path, tmp_path: Path) -> None:
     pytest.importorskip("libcosimpy")
     from test_ssp_libcosim import HOST
 
-    from cosim.master import CoSimulation
-    from cosim.scene_system import scene_system
-    from cosim.ssp import export_ssp
-    from plant.scene import load_scene
+    from drillcosim.cosim.master.cosimulation import CoSimulation
+    from drillcosim.cosim.master.ssp import export_ssp
+    from drillcosim.cosim.scenario.scene_system import scene_system
+    from drillcosim.plant.scene import load_scene
 
     sc = load_scene("paper_restricted_actuator", overrides={"controller": {"gain": 5e8}})
     sc = dataclasses.replace(sc, cosim={"step": 1e-3, "controller_sample_period": 2e-3})

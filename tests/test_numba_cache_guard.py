@@ -10,8 +10,8 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-import plant
-from plant import _drop_stale_numba_cache
+from drillcosim import plant
+from drillcosim.plant import _drop_stale_numba_cache
 
 
 def _copy(tmp_path: Path) -> Path:

@@ -29,16 +29,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmi_logging import RecordingInstance, fmu_fixtures
 from fmpy import simulate_fmu
 from fmpy.validation import validate_fmu
 
-import plant
-from fmu_src.build import REGISTRY
-from plant.model import DrillstringModel
-from plant.params import PlantParams
-from plant.scene import SECTIONS, load_scene
-from plant.simulator import PlantSimulator
+from drillcosim import plant
+from drillcosim.fmu_src.build import REGISTRY
+from drillcosim.plant.model import DrillstringModel
+from drillcosim.plant.params import PlantParams
+from drillcosim.plant.scene import SECTIONS, load_scene
+from drillcosim.plant.simulator import PlantSimulator
+from support.fmi_logging import RecordingInstance, fmu_fixtures
 
 ROOT = Path(__file__).resolve().parents[1]
 SPEC = next(s for s in REGISTRY if s.name == "DrillstringPlant")
@@ -269,7 +269,8 @@ CLEAN_SCRIPT = textwrap.dedent("""
     print(json.dumps({
         "hook": s.getReal([vr["hook_load"]])[0], "cold_start_s": t1 - t0,
         "vendored_file": sys.modules["%(vendored)s"].__file__, "unzipdir": str(d),
-        "pythonfmu_file": sys.modules["pythonfmu"].__file__,
+        "pythonfmu_file": sys.modules["_dcs_pythonfmu_0_7_0"].__file__,
+        "generic_pythonfmu": "pythonfmu" in sys.modules,
         "plant_imported": "plant" in sys.modules,
     }))
     s.terminate()
@@ -313,6 +314,7 @@ def test_self_contained_and_cold_start(fmu_path: Path, tmp_path: Path, make) -> 
     assert out["hook"] > 1e4
     assert Path(out["vendored_file"]).is_relative_to(cache_root())
     assert out["pythonfmu_file"].startswith(out["unzipdir"])  # the FMU's own copy
+    assert not out["generic_pythonfmu"]  # under its unique name only
     assert not out["plant_imported"]
     print(f"cold start after first use (instantiate + init + first doStep): "
           f"{out['cold_start_s']:.3f} s")
@@ -325,7 +327,7 @@ SHADOW_SCRIPT = textwrap.dedent("""
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
     if order == "plant_first":
-        import plant.simulator
+        import drillcosim.plant.simulator as simulator
     md = read_model_description(fmu)
     d = extract(fmu)
     s = FMU2Slave(guid=md.guid, unzipDirectory=d, modelIdentifier="DrillstringPlant",
@@ -336,11 +338,11 @@ SHADOW_SCRIPT = textwrap.dedent("""
     s.exitInitializationMode()
     s.doStep(0.0, 1e-3)
     if order == "fmu_first":
-        import plant.simulator
+        import drillcosim.plant.simulator as simulator
     vendored = sys.modules["%(vendored)s.simulator"]
     print(json.dumps({
-        "plant": plant.simulator.__file__, "vendored": vendored.__file__,
-        "same_class": plant.simulator.PlantSimulator is vendored.PlantSimulator,
+        "plant": simulator.__file__, "vendored": vendored.__file__,
+        "same_class": simulator.PlantSimulator is vendored.PlantSimulator,
     }))
     s.terminate()
     s.freeInstance()

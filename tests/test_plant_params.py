@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from plant.model import DrillstringModel
-from plant.params import (
+from drillcosim.plant.model import DrillstringModel
+from drillcosim.plant.params import (
     ContactParams,
     LoadParams,
     PipeParams,
@@ -16,7 +16,7 @@ from plant.params import (
     StabilizerParams,
     TopDriveParams,
 )
-from plant.scene import SceneError, list_scenes, load_scene, scene_from_dict, schema_markdown
+from drillcosim.plant.scene import SceneError, list_scenes, load_scene, scene_from_dict, schema_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -135,7 +135,7 @@ def test_unknown_scene_name_suggests():
 
 
 def test_scene_schema_doc_is_current():
-    from cosim.cli import scene_schema
+    from drillcosim.cosim.cli import scene_schema
 
     doc = (ROOT / "docs" / "scenes.md").read_text()
     assert schema_markdown() in doc

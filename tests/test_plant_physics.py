@@ -8,10 +8,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from plant.kernels import cardan
-from plant.modal import first_modes, static_equilibrium
-from plant.model import DrillstringModel
-from plant.params import (
+from drillcosim.plant.kernels import cardan
+from drillcosim.plant.modal import first_modes, static_equilibrium
+from drillcosim.plant.model import DrillstringModel
+from drillcosim.plant.params import (
     BitParams,
     ContactParams,
     DampingParams,
@@ -22,7 +22,7 @@ from plant.params import (
     TopDriveParams,
     UnbalanceParams,
 )
-from plant.scene import load_scene
+from drillcosim.plant.scene import load_scene
 
 PIPE = PipeParams()
 EI = PIPE.youngs_modulus * PIPE.second_moment
@@ -153,7 +153,7 @@ def single_span(tension: float = 0.0, n: int = 20) -> PlantParams:
 
 def test_beam_fe_reference_matches_closed_forms_and_converges():
     """The lateral reference (Hermite beam elements) is itself checked against the formulas."""
-    from plant.beam_fe import pinned_beam_frequencies
+    from drillcosim.plant.beam_fe import pinned_beam_frequencies
 
     w1 = pinned_beam_frequencies(53.33, [0.0, 53.33], EI, RHO_A, n_elements=48, count=2)
     assert w1[0] == pytest.approx(pinned_pinned(53.33), rel=1e-6)
@@ -341,7 +341,7 @@ def test_axial_torsional_model_equals_full3d_on_its_scenes(scene):
 # ----------------------------------------------------------------------------- spinning
 def test_linearization_in_the_top_drive_frame_is_time_invariant():
     """If the rotating-frame transformation were wrong, A would depend on the time."""
-    from plant.linearize import linearize
+    from drillcosim.plant.linearize import linearize
 
     prm = replace(quiet(gravity=9.81, pipe=PipeParams(n_segments=10)),
                   top_drive=TopDriveParams(rotary_speed=20.0))
@@ -353,7 +353,7 @@ def test_linearization_in_the_top_drive_frame_is_time_invariant():
 def test_spin_leaves_axial_torsional_modes_and_barely_moves_lateral():
     """Axisymmetric string: spin does not couple into axial/torsion; for this slender pipe
     (J_polar / J_transverse = 0.003) the gyroscopic split of the lateral mode is < 0.1 %."""
-    from plant.modal import operating_modes
+    from drillcosim.plant.modal import operating_modes
 
     prm = quiet(gravity=9.81)
 
@@ -376,7 +376,7 @@ def test_spin_leaves_axial_torsional_modes_and_barely_moves_lateral():
 def test_internal_damping_destabilizes_supercritical_whirl():
     """Rotordynamics (Kimball-Newkirk): damping that rotates with the shaft (joint dampers) makes
     forward whirl unstable above the first critical speed; external drag keeps it stable."""
-    from plant.modal import operating_modes
+    from drillcosim.plant.modal import operating_modes
 
     def min_lateral_damping(model: str) -> float:
         prm = quiet(damping=DampingParams(lateral_model=model))

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from plant.model import DrillstringModel
-from plant.scene import load_scene
-from plant.simulator import MAX_STRAIN, PlantSimulator
+from drillcosim.plant.model import DrillstringModel
+from drillcosim.plant.scene import load_scene
+from drillcosim.plant.simulator import MAX_STRAIN, PlantSimulator
 
 
 def test_runaway_actuator_stops_with_a_strain_report():

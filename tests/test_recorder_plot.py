@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from master_fmus.fixtures import fmus  # noqa: F401 - session fixture
 from test_master_mechanics import plant_loop
 
-from cosim.master import CoSimulation
+from drillcosim.cosim.master.cosimulation import CoSimulation
 
 
-def test_fmpy_plot_result_accepts_the_recorded_array(fmus):  # noqa: F811
+def test_fmpy_plot_result_accepts_the_recorded_array(fmus):
     """fmpy.util.plot_result = create_plotly_figure + show/write: the figure gets one trace per
     recorded variable with our time axis and values."""
     pytest.importorskip("plotly")

@@ -18,17 +18,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fuzz_fmi import Harness
 
-from fmu_src.build import REGISTRY, build_one
+from support.fuzz_fmi import Harness
 
 STEPS = 40
 
 
 @pytest.fixture(scope="module")
-def fmu_paths(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
-    out = tmp_path_factory.mktemp("fmus")
-    return {spec.name: str(build_one(spec, out)) for spec in REGISTRY}
+def fmu_paths(project_fmus: dict[str, Path]) -> dict[str, str]:
+    return {name: str(path) for name, path in project_fmus.items()}
 
 
 def _inputs(h: Harness, k: int) -> list[float]:
@@ -87,6 +85,7 @@ def _spawn_pool() -> ProcessPoolExecutor:
     return ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
 
 
+@pytest.mark.slow
 def test_plant_fmu_runs_are_bit_identical_in_process_and_in_a_worker(fmu_paths) -> None:
     fmu = fmu_paths["DrillstringPlant"]
     params = {"top_drive.rotary_speed": 15.0, "bit.displacement_amplitude": 0.004}
@@ -110,7 +109,7 @@ def test_controller_fmu_runs_are_bit_identical_in_process_and_in_a_worker(fmu_pa
 
 def scene_run(out_dir: str, fmu_dir: str) -> bytes:
     """``drillcosim run`` (plant + controller through the master): results.csv bytes."""
-    from cosim.run import run_scene
+    from drillcosim.cosim.scenario.run import run_scene
 
     outcome = run_scene("paper_closed_loop", stop_time=0.01, out_dir=out_dir, fmu_dir=fmu_dir,
                         progress=False, plots=False)
@@ -118,6 +117,7 @@ def scene_run(out_dir: str, fmu_dir: str) -> bytes:
     return (Path(out_dir) / "results.csv").read_bytes()
 
 
+@pytest.mark.slow
 def test_master_plant_and_controller_bit_identical_in_process_and_in_a_worker(
         fmu_paths, tmp_path: Path) -> None:
     fmu_dir = str(Path(fmu_paths["DrillstringPlant"]).parent)

@@ -1,7 +1,7 @@
 """Reliability: faults during a co-simulation.
 
-Injected by manipulators (:class:`cosim.manipulators.InjectFault`,
-:class:`~cosim.manipulators.ScheduledChange`) or by the environment:
+Injected by manipulators (:class:`cosim.master.manipulators.InjectFault`,
+:class:`~cosim.master.manipulators.ScheduledChange`) or by the environment:
 
 * an FMU that starts discarding its steps mid-run, a NaN on an input, a plant
   driven to divergence by a huge actuator force;
@@ -14,7 +14,7 @@ temporary file is left behind, and no earlier result file is overwritten by a
 truncated one. Bugs in files owned by others are ``xfail(strict=True)``.
 
 The facade :class:`cosim.master.CoSimulation` takes no manipulators; the tests
-add theirs through a subclass of :class:`cosim.execution.Execution` patched into
+add theirs through a subclass of :class:`cosim.master.execution.Execution` patched into
 ``cosim.master``, so the facade's own error handling is what is tested.
 """
 
@@ -33,22 +33,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from master_fmus.fixtures import fmus  # noqa: F401 - session fixture
 
-import cosim.master
-import cosim.recorder
-from cosim.errors import CosimError
-from cosim.execution import Execution
-from cosim.manipulators import InjectFault, ScheduledChange
-from cosim.master import CoSimulation
-from cosim.recorder import ResultWriteError
-from cosim.system import FmuSpec, SystemSpec
-from fmu_src.build import REGISTRY, build_one
+import drillcosim.cosim.master.cosimulation as cosimulation_module
+import drillcosim.cosim.master.recorder as recorder_module
+import drillcosim.cosim.scenario.summary as summary_module
+from drillcosim.cosim.master.cosimulation import CoSimulation
+from drillcosim.cosim.master.errors import CosimError
+from drillcosim.cosim.master.execution import Execution
+from drillcosim.cosim.master.manipulators import InjectFault, ScheduledChange
+from drillcosim.cosim.master.recorder import ResultWriteError
+from drillcosim.cosim.master.system import FmuSpec, SystemSpec
 
 OUTPUTS = ["i.x", "i.n_steps", "i.last_h"]
 
 
-def integrator(fmus, **params) -> SystemSpec:  # noqa: F811
+def integrator(fmus, **params) -> SystemSpec:
     """One integrator x' = u (u = 1, unconnected), 1 ms steps."""
     return SystemSpec([FmuSpec("i", fmus["mt_integrator"], {"u": 1.0, **params})],
                       base_step=1e-3)
@@ -65,7 +64,7 @@ def manipulated(monkeypatch: pytest.MonkeyPatch, *manipulators) -> Iterator[None
                 self.add_manipulator(m)
 
     with monkeypatch.context() as mp:
-        mp.setattr(cosim.master, "Execution", WithManipulators)
+        mp.setattr(cosimulation_module, "Execution", WithManipulators)
         yield
 
 
@@ -109,7 +108,7 @@ def earlier(tmp_path: Path) -> tuple[Path, str]:
 # ------------------------------------------------------------- FMU faults
 @pytest.mark.parametrize("flush_every", [1, 7, 1000])
 def test_fmu_discarding_mid_run_stops_with_report_and_complete_partial_file(
-        fmus, tmp_path, monkeypatch, earlier, flush_every):  # noqa: F811
+        fmus, tmp_path, monkeypatch, earlier, flush_every):
     out = tmp_path / "run.csv"
     fault = ScheduledChange(0.5, "i.fail_at_time", 0.5)
     with manipulated(monkeypatch, fault), pytest.raises(CosimError) as info:
@@ -130,7 +129,7 @@ def test_fmu_discarding_mid_run_stops_with_report_and_complete_partial_file(
 
 
 def test_nan_injected_on_an_input_stops_with_divergence_and_finite_rows(
-        fmus, tmp_path, monkeypatch):  # noqa: F811
+        fmus, tmp_path, monkeypatch):
     out = tmp_path / "run.csv"
     fault = InjectFault(0.3, "i.u", math.nan)
     with manipulated(monkeypatch, fault):
@@ -144,7 +143,7 @@ def test_nan_injected_on_an_input_stops_with_divergence_and_finite_rows(
     no_temporaries(tmp_path)
 
 
-def test_inject_fault_holds_then_restores(fmus, monkeypatch):  # noqa: F811
+def test_inject_fault_holds_then_restores(fmus, monkeypatch):
     fault = InjectFault(0.2, "i.u", 5.0, stop=0.4, restore=1.0)
     with manipulated(monkeypatch, fault):
         res = CoSimulation(integrator(fmus)).run(1.0, outputs=["i.x"], output_interval=0.1)
@@ -155,9 +154,8 @@ def test_inject_fault_holds_then_restores(fmus, monkeypatch):  # noqa: F811
 
 
 @pytest.fixture(scope="module")
-def plant_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    spec = next(s for s in REGISTRY if s.name == "DrillstringPlant")
-    return build_one(spec, tmp_path_factory.mktemp("fmus"))
+def plant_fmu(project_fmus: dict[str, Path]) -> Path:
+    return project_fmus["DrillstringPlant"]
 
 
 PLANT_OUT = ["plant.body11_X", "plant.body11_Y", "plant.strain1_C"]
@@ -215,7 +213,7 @@ def _check_disk_full(err: CosimError, out: Path, old_text: str, folder: Path,
     assert res.data["time"][-1] == pytest.approx(err.time)
 
 
-def test_full_disk_tmpfs_stops_cleanly_and_keeps_earlier_file(fmus, tmp_path):  # noqa: F811
+def test_full_disk_tmpfs_stops_cleanly_and_keeps_earlier_file(fmus, tmp_path):
     with tiny_tmpfs(tmp_path / "disk") as disk:
         out = disk / "run.csv"
         old_text = "time,i.x\n0,0\n"
@@ -243,7 +241,7 @@ class _DiskFullFile(io.TextIOWrapper):
 
 @pytest.mark.parametrize("budget, flush_every", [(5_000, 10), (60_000, 1000), (0, 1)])
 def test_full_disk_patched_enospc_stops_cleanly_and_keeps_earlier_file(
-        fmus, tmp_path, monkeypatch, budget, flush_every):  # noqa: F811
+        fmus, tmp_path, monkeypatch, budget, flush_every):
     out = tmp_path / "run.csv"
     old_text = "time,i.x\n0,0\n"
     out.write_text(old_text)
@@ -256,7 +254,7 @@ def test_full_disk_patched_enospc_stops_cleanly_and_keeps_earlier_file(
     patched_os = types.SimpleNamespace(**{k: getattr(os, k) for k in dir(os)
                                           if not k.startswith("__")})
     patched_os.fdopen = fdopen
-    monkeypatch.setattr(cosim.recorder, "os", patched_os)
+    monkeypatch.setattr(recorder_module, "os", patched_os)
     with pytest.raises(CosimError) as info:
         CoSimulation(integrator(fmus)).run(5.0, outputs=OUTPUTS, csv_path=out,
                                            flush_every=flush_every)
@@ -285,7 +283,7 @@ def read_only_dir(path: Path) -> Iterator[Path]:
         subprocess.run(["umount", str(path)], check=False)
 
 
-def test_unwritable_output_folder_fails_before_running(fmus, tmp_path):  # noqa: F811
+def test_unwritable_output_folder_fails_before_running(fmus, tmp_path):
     with read_only_dir(tmp_path / "ro") as ro:
         with pytest.raises(OSError) as info:
             CoSimulation(integrator(fmus)).run(0.1, outputs=OUTPUTS, csv_path=ro / "run.csv")
@@ -308,13 +306,12 @@ def test_cli_run_into_read_only_folder_exits_2_with_one_line(tmp_path: Path) -> 
 
 def test_cli_run_disk_full_while_writing_summary_gives_one_line(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
-    import cosim.summary
-    from cosim.cli import main
+    from drillcosim.cosim.cli import main
 
     def full(*args, **kwargs):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(tmp_path / "summary.json"))
 
-    monkeypatch.setattr(cosim.summary, "write_json", full)
+    monkeypatch.setattr(summary_module, "write_json", full)
     code = None
     with contextlib.suppress(OSError):
         code = main(["run", "--out", str(tmp_path / "out"), "--stop-time", "0.01",

@@ -1,6 +1,6 @@
 """Reliability: FMI API misuse against both FMUs, fuzzed with hypothesis in child processes.
 
-Every campaign (``tests/fuzz_fmi.py``) runs in its own Python process, so a crash
+Every campaign (``tests/support/fuzz_fmi.py``) runs in its own Python process, so a crash
 (segfault, abort) is a failing test (negative exit code) and a hang is caught by a
 timeout. Properties: every call returns a status (fmpy raises ``FMICallException``
 for Discard/Error, which the fuzzer catches and counts), none is fmi2Fatal, and a
@@ -33,20 +33,17 @@ from pathlib import Path
 
 import pytest
 
-from fmu_src.build import REGISTRY, build_one
-
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-FUZZER = HERE / "fuzz_fmi.py"
+FUZZER = HERE / "support" / "fuzz_fmi.py"
 DEFAULT_EXAMPLES = {"StrainController": 150, "DrillstringPlant": 40}
 TIMEOUT = float(os.environ.get("DRILLCOSIM_FUZZ_TIMEOUT", "600"))
 
 
 @pytest.fixture(scope="module")
-def fmu_paths(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """Both project FMUs, built once for this module."""
-    out = tmp_path_factory.mktemp("fmus")
-    return {spec.name: build_one(spec, out) for spec in REGISTRY}
+def fmu_paths(project_fmus: dict[str, Path]) -> dict[str, Path]:
+    """Both project FMUs (the shared session build)."""
+    return project_fmus
 
 
 def _env() -> dict[str, str]:
@@ -68,6 +65,7 @@ def _run_child(args: list[str], timeout: float, cwd: Path) -> subprocess.Complet
     return proc
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["StrainController", "DrillstringPlant"])
 def test_fuzzed_fmi_call_sequences_never_crash_hang_or_go_fatal(
         fmu_paths: dict[str, Path], tmp_path: Path, name: str) -> None:
@@ -96,7 +94,7 @@ def test_fuzzed_fmi_call_sequences_never_crash_hang_or_go_fatal(
 # ----------------------------------------------------------------- targeted cases
 PRELUDE = textwrap.dedent("""
     import json, math, sys, faulthandler
-    from fuzz_fmi import Harness, FMICallException
+    from support.fuzz_fmi import Harness, FMICallException
     h = Harness(sys.argv[1])
 
     def status(f, *args):

@@ -26,9 +26,9 @@ from typing import Any
 
 import pytest
 
-from controller.params import ControllerParams
-from plant.params import LoadParams, PlantParams
-from plant.scene import SECTIONS, SceneError, load_scene, scene_from_dict
+from drillcosim.controller.params import ControllerParams
+from drillcosim.plant.params import LoadParams, PlantParams
+from drillcosim.plant.scene import SECTIONS, SceneError, load_scene, scene_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 ALL_SECTIONS: dict[str, type] = {**SECTIONS, "loads": LoadParams}
@@ -315,7 +315,7 @@ def test_cli_bad_input_exits_2_with_one_line_and_no_traceback(
 
 
 def test_library_callers_get_value_error_from_run_scene(tmp_path: Path) -> None:
-    from cosim.run import run_scene
+    from drillcosim.cosim.scenario.run import run_scene
 
     with pytest.raises(ValueError, match="not found"):
         run_scene("NO_SUCH_SCENE", out_dir=tmp_path / "out")

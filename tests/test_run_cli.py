@@ -13,12 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.cli import main
-from cosim.errors import CosimError
-from cosim.run import run_system
-from cosim.scene_system import ensure_fmus, scene_system
-from cosim.summary import SUMMARY_KEYS
-from plant.scene import load_scene
+from drillcosim.cosim.cli import main
+from drillcosim.cosim.master.errors import CosimError
+from drillcosim.cosim.scenario.run import run_system
+from drillcosim.cosim.scenario.scene_system import ensure_fmus, scene_system
+from drillcosim.cosim.scenario.summary import SUMMARY_KEYS
+from drillcosim.plant.scene import load_scene
 
 PNGS = ("orbit.png", "orbit_steady.png", "deflection_contact.png", "actuators.png")
 #: Fixed co-simulation settings, so the tests do not follow tuning of the scene files.
@@ -142,8 +142,7 @@ def test_bad_plant_parameter_from_the_cli_exits_2_naming_it(good_run, capsys) ->
 def test_parameter_refused_by_the_fmu_at_initialization_exits_2_naming_it(
         good_run, fmu_dir, capsys, monkeypatch) -> None:
     """The FMU's own check (not the scene's) rejects a parameter: one line, exit 2."""
-    import cosim.scene_system as scene_system_module
-
+    import drillcosim.cosim.scenario.scene_system as scene_system_module
     out, _ = good_run
     before = _snapshot(out)
     real = scene_system_module.scene_system

@@ -7,15 +7,15 @@ import math
 
 import pytest
 
-from cosim.run import parse_set
-from cosim.scene_system import (
+from drillcosim.cosim.scenario.run import parse_set
+from drillcosim.cosim.scenario.scene_system import (
     COSIM_KEYS,
     cosim_schema_markdown,
     cosim_settings,
     scene_system,
     span_info,
 )
-from plant.scene import load_scene
+from drillcosim.plant.scene import load_scene
 
 FAKE = {"plant_fmu": "/nonexistent/DrillstringPlant.fmu",
         "controller_fmu": "/nonexistent/StrainController.fmu"}

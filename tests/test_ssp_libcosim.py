@@ -19,11 +19,13 @@ from xml.etree import ElementTree as ET
 import numpy as np
 import pytest
 
-from cosim.master import CoSimulation
-from cosim.scene_system import ensure_fmus, scene_system
-from cosim.ssp import NS, export_ssp, unsupported_features
-from cosim.system import Connection
-from plant.scene import load_scene
+from drillcosim.cosim.master.cosimulation import CoSimulation
+from drillcosim.cosim.master.ssp import NS, export_ssp, unsupported_features
+from drillcosim.cosim.master.system import Connection
+from drillcosim.cosim.scenario.scene_system import scene_system
+from drillcosim.plant.scene import load_scene
+
+pytestmark = [pytest.mark.interop]
 
 HOST = textwrap.dedent("""
     import json, sys
@@ -54,17 +56,13 @@ HOST = textwrap.dedent("""
 
 
 @pytest.fixture(scope="module")
-def scene_sys():
+def scene_sys(project_fmus):
     pytest.importorskip("libcosimpy")
-    try:
-        ensure_fmus()
-    except (FileNotFoundError, RuntimeError) as exc:
-        pytest.skip(f"plant/controller FMUs unavailable: {exc}")
     # Multirate (controller every 2 ms), a non-default gain and the restricted mode, so the
     # parameter bindings (Real, Integer, Boolean, String) and the step-size hint matter.
     sc = load_scene("paper_restricted_actuator", overrides={"controller": {"gain": 5e8}})
     sc = dataclasses.replace(sc, cosim={"step": 1e-3, "controller_sample_period": 2e-3})
-    return scene_system(sc)
+    return scene_system(sc, project_fmus["DrillstringPlant"].parent)
 
 
 def test_ssd_structure(scene_sys, tmp_path: Path) -> None:

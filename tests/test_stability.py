@@ -1,4 +1,4 @@
-"""Linear sampled-loop prediction (cosim.stability) vs closed forms and the simulation."""
+"""Linear sampled-loop prediction (cosim.study.stability) vs closed forms and the simulation."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from cosim.stability import (
+from drillcosim.cosim.study.stability import (
     LoopModel,
     closed_loop_matrix,
     discretize,
@@ -112,7 +112,7 @@ def test_prediction_boundaries_of_the_paper_scene(drill):
 
 def _monolithic_force_growth(gain: float, delay: float, step: float, t_end: float) -> float:
     """Fit ln|F| peaks of the 'python' engine loop over its second half [1/s]."""
-    from cosim.sweep_point import PointOptions, _run_python, _scene
+    from drillcosim.cosim.study.point import PointOptions, _run_python, _scene
 
     kick = {"kind": "force", "body": 11, "direction": "x", "magnitude": 1.0, "start": 0.05,
             "duration": 0.01}

@@ -12,9 +12,9 @@ import math
 import numpy as np
 import pytest
 
-from plant.model import DrillstringModel
-from plant.scene import load_scene
-from plant.simulator import PlantSimulator
+from drillcosim.plant.model import DrillstringModel
+from drillcosim.plant.scene import load_scene
+from drillcosim.plant.simulator import PlantSimulator
 
 T = 0.5
 H = 1e-3
@@ -50,6 +50,7 @@ CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", list(CASES))
 def test_stress_case_finishes_finite_or_reports(case):
     m = _model(**CASES[case])

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from cosim.sweep import SweepSpec, execute_point, run_sweep
-from cosim.sweep_grid import Point, parse_list
-from cosim.sweep_table import COLUMNS, ResultTable, read_table
+from drillcosim.cosim.study.grid import Point, parse_list
+from drillcosim.cosim.study.sweep import SweepSpec, execute_point, run_sweep
+from drillcosim.cosim.study.table import COLUMNS, ResultTable, read_table
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = "paper_closed_loop"
@@ -134,12 +134,13 @@ def test_a_dying_worker_is_recorded_and_the_sweep_goes_on(tmp_path):
 
 
 # --- resume -------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_killed_sweep_resumes_and_skips_finished_points(tmp_path):
     """SIGKILL a sweep process mid-way; the rerun only runs the missing points."""
     script = (
         "import sys; sys.path.insert(0, {!r})\n"
         "from test_sweep import slow_runner\n"
-        "from cosim.sweep import SweepSpec, run_sweep\n"
+        "from drillcosim.cosim.study.sweep import SweepSpec, run_sweep\n"
         "spec = SweepSpec({!r}, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0], [0.0], [1e-3], 1.0, 'python')\n"
         "run_sweep(spec, {!r}, workers=0, runner=slow_runner, progress=False)\n"
     ).format(str(ROOT / "tests"), SCENE, str(tmp_path))
@@ -164,6 +165,7 @@ def test_killed_sweep_resumes_and_skips_finished_points(tmp_path):
 
 
 # --- real engines -------------------------------------------------------------------------
+@pytest.mark.slow
 def test_small_sweep_on_a_dask_local_cluster(tmp_path):
     """2 x 2 closed-loop points (+ 1 open loop), python engine, 1.2 s at H = 1 ms, on a
     LocalCluster with one worker process; then the maps."""
@@ -183,7 +185,7 @@ def test_small_sweep_on_a_dask_local_cluster(tmp_path):
     assert rows[(1e9, 1e-3)]["stable"] == 0.0 and "force cap" in rows[(1e9, 1e-3)]["reason"]
     assert rows[(1e8, 0.0)]["status"] == "ok" and rows[(1e8, 0.0)]["end_time"] == 1.2
     assert all(math.isfinite(r["peak_force"]) and r["wall_time"] > 0 for r in rows.values())
-    from cosim.maps import plot_maps
+    from drillcosim.cosim.study.maps import plot_maps
 
     paths = plot_maps(tmp_path, predict=False)
     assert [p.name for p in paths] == ["stability_map.png", "benefit_map.png"]
@@ -193,7 +195,7 @@ def test_small_sweep_on_a_dask_local_cluster(tmp_path):
 def test_fmu_engine_matches_the_python_engine():
     """Smoke test of the FMU path (plant + controller FMUs in the master): one 0.2 s point
     agrees with the in-process engine."""
-    from cosim.sweep_point import run_point
+    from drillcosim.cosim.study.point import run_point
 
     args = (SCENE, 1e9, 5e-4, 1e-3, 0.2)
     fmu = run_point(*args, engine="fmu", overrides=FAST)

@@ -16,8 +16,8 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from pythonfmu import Boolean, Integer, Real, String
-from pythonfmu.enums import Fmi2Causality
+from _dcs_pythonfmu_0_7_0 import Boolean, Integer, Real, String
+from _dcs_pythonfmu_0_7_0.enums import Fmi2Causality
 
 __all__ = ["access_problem", "reject", "guarded_access"]
 

@@ -4,7 +4,7 @@ pythonfmu 0.7.0's prebuilt C++ wrapper can return only fmi2OK, fmi2Discard
 (``do_step`` returned False) and fmi2Fatal (any Python exception, after which it
 releases the instance's Python objects twice). ``dcs_fmi2_native.c`` beside this
 file replaces ``binaries/linux64/<modelIdentifier>.so`` of a pythonfmu-built FMU
-(``python -m fmu_src.build``: the default, ``--wrapper native``); the rest of the
+(``python -m drillcosim.fmu_src.build``: the default, ``--wrapper native``); the rest of the
 FMU (script, ``resources/``, modelDescription.xml) is unchanged. It is compiled on the build
 machine against the running Python's headers and records the path of its libpython
 and executable; the FMU therefore runs with this machine's Python (the same

@@ -6,7 +6,7 @@ end of the step after each doStep).
 
 import math
 
-from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+from _dcs_pythonfmu_0_7_0 import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 
 
 class MtSource(Fmi2Slave):

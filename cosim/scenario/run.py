@@ -6,9 +6,9 @@ Used by ``drillcosim run`` (:mod:`cosim.cli`). The output folder (default
 * ``results.csv`` - every recorded variable at the output interval, header
   line ``time,plant.body11_X,...`` (streamed during the run, moved into place
   atomically; readable by ``numpy.loadtxt(..., delimiter=",", skiprows=1)``);
-* ``summary.json`` - see :mod:`cosim.summary`;
+* ``summary.json`` - see :mod:`cosim.scenario.summary`;
 * ``orbit.png``, ``orbit_steady.png``, ``deflection_contact.png``,
-  ``actuators.png`` - see :mod:`cosim.plots`.
+  ``actuators.png`` - see :mod:`cosim.scenario.plots`.
 
 A run that fails while stepping (divergence: a non-finite output, or the plant
 discarding a step) keeps the rows recorded so far, writes the summary (with
@@ -37,8 +37,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-from .errors import CosimError
-from .master import CoSimulation, Result
+from drillcosim.cosim.master.cosimulation import CoSimulation, Result
+from drillcosim.cosim.master.errors import CosimError
 
 __all__ = ["EXIT_DIVERGED", "EXIT_OK", "RunOutcome", "parse_set", "run_scene", "run_system"]
 
@@ -196,7 +196,7 @@ def _simulate(ss, stop: float, progress: bool | None, csv_path: Path) -> Result:
 
 def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
                progress: bool | None = None, plots: bool = True) -> RunOutcome:
-    """Run a :class:`cosim.scene_system.SceneSystem` and write results, summary and plots.
+    """Run a :class:`cosim.scenario.scene_system.SceneSystem` and write results, summary and plots.
 
     Parameters
     ----------
@@ -327,7 +327,7 @@ def run_scene(scene: str | os.PathLike = "paper_closed_loop", *, stop_time: floa
     ValueError
         Bad input (scene, keys, values), one line.
     """
-    from plant.scene import load_scene
+    from drillcosim.plant.scene import load_scene
 
     from .scene_system import scene_system
 

@@ -1,4 +1,4 @@
-"""Export a :class:`~cosim.system.SystemSpec` as an SSP 1.0 archive (``.ssp``).
+"""Export a :class:`~cosim.master.system.SystemSpec` as an SSP 1.0 archive (``.ssp``).
 
 The archive holds ``SystemStructure.ssd`` and the FMUs under ``resources/``. It
 is written for what libcosim's SSP loader (``CosimExecution.from_ssp_file`` in
@@ -231,7 +231,7 @@ def export_ssp(system: SystemSpec, path: str | Path, *, name: str = "drillcosim"
             zf.writestr("SystemStructure.ssd", xml, compress_type=zipfile.ZIP_DEFLATED)
             for src, res in _resource_names(system).items():
                 zf.write(src, f"resources/{res}", compress_type=zipfile.ZIP_STORED)
-        from .summary import publish
+        from drillcosim.cosim.scenario.summary import publish
 
         publish(tmp, path)
     except BaseException:

@@ -7,7 +7,7 @@ the coupling error).  Input: x_other [m].  Outputs: x [m], v [m/s].
 
 import math
 
-from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+from _dcs_pythonfmu_0_7_0 import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 
 
 class MtMass(Fmi2Slave):

@@ -7,7 +7,7 @@ the output x becomes NaN. Outputs: x, n_steps (number of doStep calls) and
 last_h (size of the last step).
 """
 
-from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
+from _dcs_pythonfmu_0_7_0 import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 
 
 class MtIntegrator(Fmi2Slave):

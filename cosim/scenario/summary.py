@@ -120,7 +120,7 @@ def summarize(data: np.ndarray, *, scene: str = "", scene_file: str = "",
         Scene name and file.
     spans : mapping, optional
         ``{body: {"span": ..., "span_length": [m]}}`` (see
-        :func:`cosim.scene_system.span_info`); default: bodies found in ``data``.
+        :func:`cosim.scenario.scene_system.span_info`); default: bodies found in ``data``.
     n_sites : int
         Number of actuator sites.
     stop_time, step : float

@@ -2,7 +2,7 @@
 
 Usage (normally started by ``tests/test_reliability_fuzz.py``)::
 
-    python tests/fuzz_fmi.py FMU --examples N [--seed S] [--report FILE]
+    python tests/support/fuzz_fmi.py FMU --examples N [--seed S] [--report FILE]
 
 Hypothesis draws sequences of FMI calls (instantiate, setupExperiment,
 enter/exitInitializationMode, set/get of every type with valid, unknown and
@@ -41,7 +41,6 @@ from typing import Any
 
 import hypothesis
 import numpy as np
-from fmi_logging import RecordingCallbacks
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (
@@ -49,6 +48,8 @@ from fmpy.fmi2 import (
 )
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+
+from support.fmi_logging import RecordingCallbacks
 
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
 STATUS_NAMES = ("ok", "warning", "discard", "error", "fatal", "pending")

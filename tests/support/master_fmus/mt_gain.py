@@ -4,7 +4,7 @@ The output is computed when it is read, from the input last set, so with
 k = -1 it is a probe that echoes its input. Outputs: y, n_steps.
 """
 
-from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+from _dcs_pythonfmu_0_7_0 import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 
 
 class MtGain(Fmi2Slave):

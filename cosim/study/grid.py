@@ -120,7 +120,7 @@ class Point:
     overrides : str
         JSON of extra scene overrides (nested dict), "" for none.
     options : tuple of (str, float)
-        Metric options for the runner (see :class:`cosim.sweep_point.PointOptions`).
+        Metric options for the runner (see :class:`cosim.study.point.PointOptions`).
     """
 
     scene: str
@@ -140,7 +140,7 @@ class Point:
                          self.stop_time, self.overrides)
 
     def kwargs(self) -> dict[str, Any]:
-        """Keyword arguments of :func:`cosim.sweep_point.run_point`."""
+        """Keyword arguments of :func:`cosim.study.point.run_point`."""
         return {"scene": self.scene, "gain": self.gain, "delay": self.delay, "step": self.step,
                 "stop_time": self.stop_time, "engine": self.engine,
                 "open_loop": self.kind == "open_loop",
@@ -169,7 +169,7 @@ class SweepSpec:
     open_loop : bool
         Also run one open-loop reference per step (needed for the control benefit).
     options : mapping of str -> float
-        Metric options (:class:`cosim.sweep_point.PointOptions` fields).
+        Metric options (:class:`cosim.study.point.PointOptions` fields).
     """
 
     scene: str

@@ -12,7 +12,7 @@ never truncated before the new one is complete; if the run fails, closing
 readable file under the target name.
 
 If writing the CSV fails (disk full, quota, I/O error), the recorder raises
-:class:`ResultWriteError` (a :class:`~cosim.errors.CosimError`: when it happens
+:class:`ResultWriteError` (a :class:`~cosim.master.errors.CosimError`: when it happens
 while stepping, the facade attaches the rows recorded in memory as
 ``error.result``; when the final write in :meth:`Recorder.close` fails, the
 rows stay in :attr:`Recorder.data`), deletes

@@ -78,10 +78,10 @@ class Connection:
     source, target : str
         ``'fmu.variable'``; the source is an output, the target an input.
     delay : float
-        Transport delay [s], >= 0 (see :mod:`cosim.delays`).
+        Transport delay [s], >= 0 (see :mod:`cosim.master.delays`).
     coupling : {'zoh', 'linear'}
         Zero-order hold of the latest sample, or linear extrapolation from the
-        last two samples (see :mod:`cosim.delays`).
+        last two samples (see :mod:`cosim.master.delays`).
     """
 
     source: str

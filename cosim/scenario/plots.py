@@ -10,7 +10,7 @@
   restricted actuator) on common axes.
 
 Inputs are the structured arrays of :class:`cosim.master.Result` or
-:func:`cosim.summary.load_results` (columns ``plant.<output>`` /
+:func:`cosim.scenario.summary.load_results` (columns ``plant.<output>`` /
 ``controller.<output>``). Files are written atomically (temporary file +
 ``os.replace``). Uses matplotlib's non-interactive Agg backend.
 """

@@ -1,7 +1,7 @@
 """Scene -> co-simulation system: the plant FMU, the controller FMU and their wiring.
 
 :func:`scene_system` turns a :class:`plant.scene.Scene` into a
-:class:`cosim.system.SystemSpec` with two FMU instances, ``plant``
+:class:`cosim.master.system.SystemSpec` with two FMU instances, ``plant``
 (``DrillstringPlant.fmu``) and ``controller`` (``StrainController.fmu``), connected
 by name both ways:
 
@@ -51,9 +51,9 @@ Every key is optional::
 Notes on timing: with Jacobi and zero delays the controller's force over
 ``[t_k, t_k+1]`` is computed from strains sampled at ``t_k`` and reaches the
 plant at ``t_k+1``: the loop has one communication step of inherent delay (see
-:mod:`cosim.algorithms`); ``gauss_seidel`` with the plant first removes the
+:mod:`cosim.master.algorithms`); ``gauss_seidel`` with the plant first removes the
 delay on the sensor side. Delays act on the samples of the source FMU (see
-:mod:`cosim.delays`; fractional multiples of the source period are
+:mod:`cosim.master.delays`; fractional multiples of the source period are
 interpolated linearly).
 
 Every error is a one-line ``ValueError`` naming the scene file and the key,
@@ -70,11 +70,17 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from controller import MODES, ControllerParams
-from plant.observables import output_names
-from plant.scene import Scene, scenes_dir
-
-from .system import ALGORITHMS, COUPLINGS, Connection, FmuSpec, SystemSpec, integer_multiple
+from drillcosim.controller import MODES, ControllerParams
+from drillcosim.cosim.master.system import (
+    ALGORITHMS,
+    COUPLINGS,
+    Connection,
+    FmuSpec,
+    SystemSpec,
+    integer_multiple,
+)
+from drillcosim.plant.observables import output_names
+from drillcosim.plant.scene import Scene, scenes_dir
 
 __all__ = [
     "CONTROLLER",
@@ -311,13 +317,13 @@ def span_info(scene: Scene) -> dict[int, dict[str, float | str]]:
 
 def default_fmu_dir() -> Path:
     """``build/fmus/`` in the repository."""
-    from fmu_src.build import DEFAULT_OUT
+    from drillcosim.fmu_src.build import DEFAULT_OUT
 
     return DEFAULT_OUT
 
 
 def _stale(fmu: Path, name: str) -> bool:
-    from fmu_src.build import REGISTRY, ROOT, default_wrapper, wrapper_of
+    from drillcosim.fmu_src.build import REGISTRY, ROOT, default_wrapper, wrapper_of
 
     if not fmu.is_file():
         return True
@@ -351,7 +357,7 @@ def ensure_fmus(fmu_dir: str | Path | None = None, names: Sequence[str] = (
     FileNotFoundError
         If an FMU is still missing after the build (e.g. no adapter yet).
     """
-    from fmu_src.build import REGISTRY, build_one
+    from drillcosim.fmu_src.build import REGISTRY, build_one
 
     folder = Path(fmu_dir) if fmu_dir is not None else default_fmu_dir()
     paths = {}
@@ -485,7 +491,7 @@ def cosim_schema_markdown() -> str:
               else f"{d:g}")
         lines.append(f"| {name} | {ds} | {ctrl_units[name]} | {ctrl_text[name]} |")
     lines += ["", "## [cosim]", "",
-              "Co-simulation settings (`cosim.scene_system.cosim_settings`).", "",
+              "Co-simulation settings (`cosim.scenario.scene_system.cosim_settings`).", "",
               "| key | default | unit | meaning |", "|---|---|---|---|"]
     for key, (default, unit, text) in COSIM_KEYS.items():
         ds = "-" if default is None else (f'"{default}"' if isinstance(default, str)

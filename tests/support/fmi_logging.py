@@ -82,16 +82,16 @@ class RecordingInstance:
 def fmu_fixtures(spec):
     """Session fixtures ``fmu_path``, ``md``, ``vr``, ``unzipdir`` for one FMU of the registry.
 
+    ``fmu_path`` is the shared session build of ``conftest.project_fmus``.
+
     Assign them to module names of the same name in a test module.
     """
     import pytest
     from fmpy import extract, read_model_description
 
-    from fmu_src.build import build_one
-
     @pytest.fixture(scope="session", name="fmu_path")
-    def fmu_path(tmp_path_factory):
-        return build_one(spec, tmp_path_factory.mktemp("fmus"))
+    def fmu_path(project_fmus):
+        return project_fmus[spec.name]
 
     @pytest.fixture(scope="session", name="md")
     def md(fmu_path):

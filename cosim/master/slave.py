@@ -6,7 +6,7 @@ and exposes the raw ctypes FMI functions (``fmi2DoStep``, ``fmi2GetReal``,
 loops call the shared library directly: no list conversion, no dict lookup,
 no Python object creation per call. Status codes are returned to the caller,
 which hands any status worse than ``fmi2Warning`` to
-:func:`cosim.errors.raise_for_status`.
+:func:`cosim.master.errors.raise_for_status`.
 """
 
 from __future__ import annotations

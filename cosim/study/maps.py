@@ -3,7 +3,7 @@ per communication step, with the linear prediction's boundary overlaid.
 
 * ``stability_map.png``: each point a marker (stable / unstable: growing envelope /
   diverged / error); the predicted critical gain ``K_c(tau)`` of
-  :class:`cosim.stability.LoopModel` as a line (unstable above it).
+  :class:`cosim.study.stability.LoopModel` as a line (unstable above it).
 * ``benefit_map.png``: the long span's control benefit ``1 - RMS/RMS_open`` (colour),
   unstable points crossed out, same boundary.
 
@@ -82,7 +82,7 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
     Parameters
     ----------
     folder : path-like
-        A :func:`cosim.sweep.run_sweep` output folder.
+        A :func:`cosim.study.sweep.run_sweep` output folder.
     predict : bool
         Overlay the linear prediction (computed once, cached in ``prediction.json``).
 
@@ -96,7 +96,7 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
     import matplotlib.pyplot as plt
     from matplotlib.colors import TwoSlopeNorm
 
-    from .sweep_table import read_table
+    from .table import read_table
 
     folder = Path(folder)
     rows = [r for r in read_table(folder) if r["kind"] == "closed_loop"]

@@ -1,4 +1,4 @@
-"""Facade: run a :class:`~cosim.system.SystemSpec` and return a :class:`Result`."""
+"""Facade: run a :class:`~cosim.master.system.SystemSpec` and return a :class:`Result`."""
 
 from __future__ import annotations
 
@@ -84,7 +84,7 @@ class CoSimulation:
             Show a progress bar (None: only on a TTY).
         csv_path : str or Path, optional
             Also stream the recorded rows to this CSV (atomic, see
-            :mod:`cosim.recorder`).
+            :mod:`cosim.master.recorder`).
         flush_every : int
             Rows per CSV write.
         observers : sequence

@@ -1,10 +1,10 @@
 """Parameter sweeps over controller gain x actuator delay x communication step.
 
 ``drillcosim sweep SCENE --gain LIST --delay LIST --step LIST`` runs one
-co-simulation per point (:func:`cosim.sweep_point.run_point`), plus one
+co-simulation per point (:func:`cosim.study.point.run_point`), plus one
 open-loop reference per step for the control benefit, and records each point
 as it finishes in ``OUT/results.csv`` / ``results.parquet``
-(:mod:`cosim.sweep_table`). Re-running the same sweep into the same folder
+(:mod:`cosim.study.table`). Re-running the same sweep into the same folder
 skips the finished points, so a killed sweep resumes where it stopped.
 
 Executors: a local process pool (``spawn``; ``workers`` processes, default all
@@ -27,9 +27,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from .sweep_grid import Point, SweepSpec, parse_list
-from .sweep_point import error_row, run_point
-from .sweep_table import ResultTable
+from .grid import Point, SweepSpec, parse_list
+from .point import error_row, run_point
+from .table import ResultTable
 
 __all__ = ["SweepOutcome", "execute_point", "parse_list", "run_sweep", "SweepSpec"]
 
@@ -215,10 +215,9 @@ def sweep_from_args(scene: str, gain: str, delay: str, step: str, stop_time: flo
                     engine: str = "fmu", sets: Mapping[str, Any] | None = None,
                     options: Mapping[str, float] | None = None) -> SweepSpec:
     """Build a :class:`SweepSpec` from command-line strings (LIST syntax, see
-    :mod:`cosim.sweep_grid`); the stop time defaults to the scene's ``[cosim]``."""
-    from plant.scene import load_scene
-
-    from .scene_system import cosim_settings
+    :mod:`cosim.study.grid`); the stop time defaults to the scene's ``[cosim]``."""
+    from drillcosim.cosim.scenario.scene_system import cosim_settings
+    from drillcosim.plant.scene import load_scene
 
     gains = parse_list(gain, "--gain", minimum=0.0)
     delays = parse_list(delay, "--delay", minimum=0.0)

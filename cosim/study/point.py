@@ -5,12 +5,12 @@ returns a flat dict, so it runs unchanged in a process pool or on a
 dask.distributed worker. Two engines:
 
 ``"fmu"``
-    The scene's system (:func:`cosim.scene_system.scene_system`: plant FMU +
-    controller FMU) run by the master (:class:`cosim.execution.Execution`).
+    The scene's system (:func:`cosim.scenario.scene_system.scene_system`: plant FMU +
+    controller FMU) run by the master (:class:`cosim.master.execution.Execution`).
 ``"python"``
     The same loop in-process, without FMI: :class:`plant.simulator.PlantSimulator`
     and :class:`controller.StrainController`, the master's delay lines
-    (:class:`cosim.delays.DelayLine`) and stepping order (Gauss-Seidel or Jacobi,
+    (:class:`cosim.master.delays.DelayLine`) and stepping order (Gauss-Seidel or Jacobi,
     from the scene's ``[cosim]``), zero-order hold or linear coupling. Same
     numbers as the FMU engine up to the FMU's float exchange, ~3x faster.
 
@@ -25,7 +25,7 @@ Metrics (:func:`metrics`), all from the recorded series (every ``output_interval
   of the four gauges (high-passed above ``highpass`` rad/s) in windows of
   ``envelope_window`` s;
 * ``stable``: not diverged (the table then also requires the growth rate to
-  exceed the open-loop run's by at most :data:`cosim.sweep_table.GROWTH_MARGIN`:
+  exceed the open-loop run's by at most :data:`cosim.study.table.GROWTH_MARGIN`:
   the forced whirl itself builds up over the first seconds, in every band);
 * ``rms_long``, ``rms_short`` [m]: RMS radial deflection of the long/short span's
   contact body over the last ``rms_fraction`` of the run (a scene with one span
@@ -187,7 +187,7 @@ def metrics(series: Mapping[str, np.ndarray], spans: Mapping[int, str], n_sites:
 
 def _scene(scene: str, gain: float, delay: float, step: float, stop_time: float,
            open_loop: bool, overrides: Mapping[str, Any] | None):
-    from plant.scene import load_scene
+    from drillcosim.plant.scene import load_scene
 
     over: dict[str, Any] = {k: dict(v) if isinstance(v, Mapping) else v
                             for k, v in (overrides or {}).items()}
@@ -209,7 +209,7 @@ class _ForceCap:
         self.cap = cap
 
     def on_step(self, execution) -> None:
-        from .errors import DivergenceError
+        from drillcosim.cosim.master.errors import DivergenceError
 
         for ref in self.refs:
             v = execution.get_real(ref)
@@ -221,10 +221,10 @@ def _run_fmu(sc, over: Mapping[str, Any], opts: PointOptions, fmu_dir) -> tuple[
     import contextlib
     import io
 
-    from .errors import CosimError, DivergenceError
-    from .execution import Execution
-    from .recorder import Recorder
-    from .scene_system import scene_system
+    from drillcosim.cosim.master.errors import CosimError, DivergenceError
+    from drillcosim.cosim.master.execution import Execution
+    from drillcosim.cosim.master.recorder import Recorder
+    from drillcosim.cosim.scenario.scene_system import scene_system
 
     plant_over = {k: v for k, v in over.items() if k not in ("cosim", "controller")}
     ss = scene_system(sc, fmu_dir, plant_overrides=plant_over)
@@ -260,12 +260,11 @@ def _run_fmu(sc, over: Mapping[str, Any], opts: PointOptions, fmu_dir) -> tuple[
 
 
 def _run_python(sc, opts: PointOptions) -> tuple[dict, str]:
-    from controller import ControllerParams, StrainController
-    from plant.model import DrillstringModel
-    from plant.simulator import PlantSimulator
-
-    from .delays import DelayLine
-    from .scene_system import controller_parameters, cosim_settings
+    from drillcosim.controller import ControllerParams, StrainController
+    from drillcosim.cosim.master.delays import DelayLine
+    from drillcosim.cosim.scenario.scene_system import controller_parameters, cosim_settings
+    from drillcosim.plant.model import DrillstringModel
+    from drillcosim.plant.simulator import PlantSimulator
 
     st = cosim_settings(sc)
     if st.controller_sample_ticks != 1:
@@ -397,9 +396,9 @@ def run_point(scene: str, gain: float, delay: float, step: float, stop_time: flo
     ------
     Exception
         Bad input or an FMU failure before the first step (the sweep records it
-        as an ``error`` row, see :func:`cosim.sweep.run_sweep`).
+        as an ``error`` row, see :func:`cosim.study.sweep.run_sweep`).
     """
-    from .scene_system import span_info
+    from drillcosim.cosim.scenario.scene_system import span_info
 
     wall0 = time.perf_counter()
     opts = PointOptions.from_kwargs(options)
@@ -419,7 +418,7 @@ def run_point(scene: str, gain: float, delay: float, step: float, stop_time: flo
                            "end_time": end, "reason": reason}
     row.update(metrics(series, spans, len(sc.plant.actuator_joints), opts, diverged))
     # provisional: the table compares the growth with the open-loop run's
-    # (cosim.sweep_table.fill_derived); alone, only a divergence is conclusive
+    # (cosim.study.table.fill_derived); alone, only a divergence is conclusive
     row["stable"] = 0.0 if diverged else 1.0
     row["wall_time"] = time.perf_counter() - wall0
     return row

@@ -17,8 +17,8 @@ The controller (:class:`controller.StrainController`) samples the strains at
 the communication points and outputs, after each step, ``F = a F_prev + (1 - a)
 K c`` with ``a = exp(-H / T_lag)`` (``a = 0`` without actuator lag, ``F = K c``).
 
-Loop timing (the master's conventions, :mod:`cosim.algorithms`,
-:mod:`cosim.delays`): with samples ``s_k = C x_k`` and ``G_k`` the controller
+Loop timing (the master's conventions, :mod:`cosim.master.algorithms`,
+:mod:`cosim.master.delays`): with samples ``s_k = C x_k`` and ``G_k`` the controller
 output computed from ``s_k`` (lag filter applied to the samples),
 
     u_k = sum_l W_l G_{k-l}
@@ -31,7 +31,7 @@ where ``W`` is the convolution of
   ``t_k`` was computed from the strains of ``t_{k-1}`` (``m0 = 1``: one step more);
 * each connection's transport delay ``tau = (n + f) H``: the sample ``n`` steps
   back, linearly interpolated with the one ``n + 1`` back for ``0 < f < 1``
-  (``(1 - f) s[-n] + f s[-n-1]``, exactly the master's :class:`~cosim.delays.DelayLine`);
+  (``(1 - f) s[-n] + f s[-n-1]``, exactly the master's :class:`~cosim.master.delays.DelayLine`);
 * with ``coupling="linear"``, the extrapolation ``(1 + h) d[0] - h d[-1]`` of each
   delayed signal to the midpoint of the target's step (``h = +-1/2`` source
   steps, depending on algorithm and stepping order, see :func:`loop_weights`).
@@ -390,10 +390,9 @@ class LoopModel:
         **kwargs
             Override any field (e.g. ``algorithm="jacobi"``, ``method="rk4"``).
         """
-        from plant.linearize import linearize
-        from plant.scene import load_scene
-
-        from .scene_system import controller_parameters, cosim_settings
+        from drillcosim.cosim.scenario.scene_system import controller_parameters, cosim_settings
+        from drillcosim.plant.linearize import linearize
+        from drillcosim.plant.scene import load_scene
 
         sc = load_scene(scene, overrides=dict(overrides) if overrides else None) \
             if isinstance(scene, (str, bytes)) or hasattr(scene, "__fspath__") else scene
@@ -522,7 +521,7 @@ def _first_crossing(unstable, x_min: float, x_max: float, per_decade: int, rtol:
 
 
 def _boundary_report(scene: str = "paper_closed_loop") -> list[str]:
-    """The numbers of ``docs/delay_study.md`` (``python -m cosim.stability [SCENE]``)."""
+    """The numbers of ``docs/delay_study.md`` (``python -m drillcosim.cosim.study.stability [SCENE]``)."""
     lm = LoopModel.from_scene(scene)
     lines = [f"scene {scene}: loop {lm.algorithm} (inherent delay "
              f"{ALGORITHM_DELAY_STEPS[lm.algorithm]} step), coupling {lm.coupling}, "

@@ -1,0 +1,26 @@
+"""drillcosim.cosim.master: a generic FMI 2.0 co-simulation master on fmpy.
+
+It imports nothing from the drillstring packages (plant, controller, fmu_src): any FMI 2.0
+co-simulation FMUs can be coupled. The pieces, each with one job (as in libcosim):
+
+* :mod:`.system` - the typed description of a system (FMU instances, connections, steps);
+* :mod:`.slave` - one FMU instance behind fmpy's low-level API;
+* :mod:`.algorithms` - Jacobi / Gauss-Seidel stepping with multirate sampling;
+* :mod:`.delays` - transport delays and coupling (hold, extrapolation) on connections;
+* :mod:`.execution` - owns time (integer ticks) and calls algorithm, observers, manipulators;
+* :mod:`.recorder`, :mod:`.progress` - observers (read only);
+* :mod:`.manipulators` - scenario events and fault injection (write only);
+* :mod:`.errors` - the one place FMI statuses become exceptions;
+* :mod:`.ssp` - SSP 1.0 export;
+* :mod:`.cosimulation` - run a system to a stop time and return its recorded result.
+"""
+
+from .cosimulation import CoSimulation, Divergence, Result
+from .errors import CosimError, DivergenceError
+from .execution import Execution, ExecutionState
+from .recorder import Recorder
+from .system import Connection, FmuSpec, SystemSpec, system_from_dict
+
+__all__ = ["Connection", "CoSimulation", "CosimError", "Divergence", "DivergenceError",
+           "Execution", "ExecutionState", "FmuSpec", "Recorder", "Result", "SystemSpec",
+           "system_from_dict"]

@@ -1,0 +1,1 @@
+"""The shipped scene files (TOML), installed as package data of ``drillcosim.scenes``."""
