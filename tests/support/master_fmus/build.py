@@ -72,6 +72,7 @@ def build_fmu(name: str, dest: Path | None = None, wrapper: str | None = None) -
     wrapper = wrapper or project_build.default_wrapper()
     script = HERE / f"{name}.py"
     dest = dest or cache_dir()
+    dest.mkdir(parents=True, exist_ok=True)
     target = dest / f"{name}-{cache_key(script, wrapper)}.fmu"
     if target.exists() and not problems(target):
         return target
