@@ -35,7 +35,7 @@ import numpy as np
 import pytest
 
 import drillcosim.cosim.master.cosimulation as cosimulation_module
-import drillcosim.cosim.master.recorder as recorder_module
+import drillcosim.cosim.master.files as files_module
 import drillcosim.cosim.scenario.summary as summary_module
 from drillcosim.cosim.master.cosimulation import CoSimulation
 from drillcosim.cosim.master.errors import CosimError
@@ -254,7 +254,7 @@ def test_full_disk_patched_enospc_stops_cleanly_and_keeps_earlier_file(
     patched_os = types.SimpleNamespace(**{k: getattr(os, k) for k in dir(os)
                                           if not k.startswith("__")})
     patched_os.fdopen = fdopen
-    monkeypatch.setattr(recorder_module, "os", patched_os)
+    monkeypatch.setattr(files_module, "os", patched_os)   # the recorder's atomic file
     with pytest.raises(CosimError) as info:
         CoSimulation(integrator(fmus)).run(5.0, outputs=OUTPUTS, csv_path=out,
                                            flush_every=flush_every)

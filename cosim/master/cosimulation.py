@@ -102,7 +102,8 @@ class CoSimulation:
         ------
         CosimError
             If an FMU call fails; ``error.result`` holds the partial
-            :class:`Result` (and the CSV is finalised).
+            :class:`Result` (and the CSV is finalised if at least one step was made;
+            a failure before the first step leaves an earlier file untouched).
         """
         system = self.system
         stop = system.stop_time if stop_time is None else stop_time
@@ -148,11 +149,12 @@ class CoSimulation:
         wall = time.perf_counter() - wall0
         end = execution.time if execution is not None else float("nan")
         sim = (execution.time - execution.start_time) if execution is not None else 0.0
+        stepped = execution is not None and execution.tick > 0
         if execution is not None:
             execution.close()
-        if recorder.n_rows:
+        if stepped:
             recorder.close()
-        else:  # failed before the first row: leave any earlier file untouched
+        else:  # failed before the first step: leave any earlier file untouched
             recorder.abort()
         return Result(recorder.data, wall, sim / wall if wall > 0 else float("inf"), end,
                       diverged, recorder.csv_path)

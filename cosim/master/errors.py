@@ -1,7 +1,7 @@
 """Exceptions of the co-simulation master.
 
 This is the one place where FMI status codes returned by fmpy's low-level calls
-become exceptions: :func:`check_status` / :func:`raise_for_status` turn a status
+become exceptions: :func:`raise_for_status` turns a status
 of ``fmi2Discard``, ``fmi2Error``, ``fmi2Fatal`` or ``fmi2Pending`` into a
 :class:`CosimError` naming the FMU instance, the FMI function and the simulated
 time of the call.
@@ -103,5 +103,3 @@ def raise_for_status(status: int, fmu_name: str, call: str, time: float) -> None
     }.get(status, f"{status_name(status)} returned")
     raise CosimError(fmu_name, call, time, hint, status=status)
 
-
-check_status = raise_for_status

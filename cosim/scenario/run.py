@@ -224,26 +224,24 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
     """
     from .plots import plot_run
     from .scene_system import controller_parameters, span_info
-    from .summary import publish, summarize, write_json
+    from .summary import summarize, write_json
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     stop = ss.stop_time if stop_time is None else float(stop_time)
     if not (math.isfinite(stop) and stop > 0):
         raise ValueError(f"stop time: a finite number > 0 [s], got {stop!r}")
-    staging = out / ".results.running.csv"
+    csv = out / "results.csv"
     log = _FmuLog(sys.stdout)
     err: CosimError | None = None
     try:
         with contextlib.redirect_stdout(log):
-            result = _simulate(ss, stop, progress, staging)
+            result = _simulate(ss, stop, progress, csv)
     except CosimError as exc:
         err = exc
         result = exc.result
         if result is None or not math.isfinite(result.end_time) or \
                 result.end_time <= ss.system.start_time:
-            with contextlib.suppress(OSError):  # keep the real error visible
-                staging.unlink(missing_ok=True)
             detail = log.detail(exc.fmu_name)
             if detail is None:
                 raise
@@ -251,13 +249,6 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
                               status=exc.status)
             full.result = exc.result
             raise full from exc
-    except BaseException:
-        with contextlib.suppress(OSError):
-            staging.unlink(missing_ok=True)
-        raise
-    csv = out / "results.csv"
-    if staging.exists():
-        publish(staging, csv)
     failure = _failure(err, result, log)
     scene = ss.scene
     spans = span_info(scene)

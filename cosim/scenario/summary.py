@@ -42,15 +42,15 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["SUMMARY_KEYS", "load_results", "publish", "summarize", "write_json"]
+from drillcosim.cosim.master.files import atomic_write
+
+__all__ = ["SUMMARY_KEYS", "load_results", "summarize", "write_json"]
 
 #: Top-level keys every summary has.
 SUMMARY_KEYS = ("scene", "scene_file", "stop_time_s", "end_time_s", "completed", "wall_time_s",
@@ -225,31 +225,7 @@ def _clean(obj: Any) -> Any:
     return obj
 
 
-def publish(tmp: str | Path, path: str | Path) -> Path:
-    """Give ``tmp`` the default permissions (0666 minus the umask) and rename it onto ``path``.
-
-    ``tempfile.mkstemp`` creates files readable by the owner only; the published
-    file gets the mode an ordinary ``open`` would have given it.
-    """
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
-    os.replace(tmp, path)
-    return Path(path)
-
-
 def write_json(obj: Any, path: str | Path) -> Path:
-    """Write ``obj`` as indented JSON atomically (temp file + ``os.replace``); nan -> null."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(_clean(obj), fh, indent=2, allow_nan=False)
-            fh.write("\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        publish(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    """Write ``obj`` as indented JSON atomically (:func:`cosim.master.files.atomic_write`);
+    non-finite floats become ``null``."""
+    return atomic_write(path, json.dumps(_clean(obj), indent=2, allow_nan=False) + "\n")
