@@ -116,17 +116,20 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from drillcosim.cosim.scenario.run import parse_set
-    from drillcosim.cosim.study.sweep import run_sweep, sweep_from_args
+    from drillcosim.cosim.study.sweep import judging_note, run_sweep, sweep_from_args
 
     spec = sweep_from_args(args.scene, args.gain, args.delay, args.step, args.stop_time,
                            args.engine, parse_set(args.set))
+    note = judging_note(spec)
+    if note:
+        print(f"drillcosim sweep: note: {note}", file=sys.stderr)
     out = args.out or f"out/sweep_{spec.scene.rsplit('/', 1)[-1].removesuffix('.toml')}"
     res = run_sweep(spec, out, workers=args.workers, scheduler=args.scheduler,
                     progress=False if args.no_progress else None,
                     retry_errors=args.retry_errors)
-    print(f"sweep: {res.n_points} points ({res.n_skipped} already done, {res.n_run} run, "
-          f"{res.n_unstable} unstable, {res.n_errors} errors) in {res.wall_time:.1f} s; "
-          f"table {res.folder / 'results.csv'} and results.parquet")
+    print(f"ran {res.n_run} of {res.n_points} points ({res.n_skipped} already done) in "
+          f"{res.wall_time:.1f} s")
+    print(res.summary())
     if args.maps:
         from drillcosim.cosim.study.maps import plot_maps
 

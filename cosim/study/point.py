@@ -23,10 +23,12 @@ Metrics (:func:`metrics`), all from the recorded series (every ``output_interval
 * ``growth_rate`` [1/s]: slope of a least-squares fit of ``ln(envelope)`` over
   the last ``fit_fraction`` of the run, the envelope being the largest ``|strain|``
   of the four gauges (high-passed above ``highpass`` rad/s) in windows of
-  ``envelope_window`` s;
-* ``stable``: not diverged (the table then also requires the growth rate to
-  exceed the open-loop run's by at most :data:`cosim.study.table.GROWTH_MARGIN`:
-  the forced whirl itself builds up over the first seconds, in every band);
+  ``envelope_window`` s (NaN with fewer than 3 windows); ``growth_noise`` [1/s]: the
+  standard error of that slope (scatter of the envelope about the fitted line);
+* ``min_stop_time`` [s]: the shortest run whose growth fit supports a verdict
+  (:func:`cosim.study.verdict.scene_judging_window`; NaN if the scene cannot be
+  linearized). The verdict itself needs the open-loop reference run and is made by
+  the results table (:mod:`cosim.study.verdict`);
 * ``rms_long``, ``rms_short`` [m]: RMS radial deflection of the long/short span's
   contact body over the last ``rms_fraction`` of the run (a scene with one span
   fills the ``long`` columns); NaN when the run diverged;
@@ -109,16 +111,17 @@ class _Series:
 
 
 def _envelope_growth(t: np.ndarray, s: np.ndarray, window: float, fraction: float
-                     ) -> float:
-    """Slope of ln(windowed max |s|) over the last ``fraction`` of ``t`` [1/s]."""
+                     ) -> tuple[float, float]:
+    """Slope of ln(windowed max |s|) over the last ``fraction`` of ``t`` and its standard
+    error [1/s] (NaN, NaN with fewer than 3 windows)."""
     if len(t) < 4:
-        return math.nan
+        return math.nan, math.nan
     t0 = t[-1] - fraction * (t[-1] - t[0])
     sel = t >= t0
     tt, ss = t[sel], np.abs(s[sel])
     n_win = int((tt[-1] - tt[0]) // window)
-    if n_win < 2:
-        return math.nan
+    if n_win < 3:
+        return math.nan, math.nan
     edges = tt[0] + window * np.arange(n_win + 1)
     idx = np.searchsorted(tt, edges)
     centers, env = [], []
@@ -128,9 +131,13 @@ def _envelope_growth(t: np.ndarray, s: np.ndarray, window: float, fraction: floa
             if m > 0:
                 centers.append(float(tt[a:b].mean()))
                 env.append(math.log(m))
-    if len(env) < 2:
-        return math.nan
-    return float(np.polyfit(centers, env, 1)[0])
+    if len(env) < 3:
+        return math.nan, math.nan
+    x, y = np.array(centers), np.array(env)
+    slope, intercept = np.polyfit(x, y, 1)
+    r = y - (slope * x + intercept)
+    dx = x - x.mean()
+    return float(slope), float(math.sqrt(float(r @ r) / (len(x) - 2) / float(dx @ dx)))
 
 
 def metrics(series: Mapping[str, np.ndarray], spans: Mapping[int, str], n_sites: int,
@@ -163,8 +170,8 @@ def metrics(series: Mapping[str, np.ndarray], spans: Mapping[int, str], n_sites:
             sos = butter(4, opts.highpass / nyq, "highpass", output="sos")
             strains = [sosfilt(sos, s) for s in strains]
     smax = np.max(np.abs(np.vstack(strains)), axis=0) if strains and len(t) else np.zeros(0)
-    out["growth_rate"] = _envelope_growth(t, smax, opts.envelope_window, opts.fit_fraction) \
-        if len(t) else math.nan
+    out["growth_rate"], out["growth_noise"] = _envelope_growth(
+        t, smax, opts.envelope_window, opts.fit_fraction) if len(t) else (math.nan, math.nan)
     forces = [series[k] for k in series if k.startswith("actuator") and "_force_" in k]
     powers = [series[f"actuator{s}_power"] for s in range(1, n_sites + 1)
               if f"actuator{s}_power" in series]
@@ -353,7 +360,7 @@ def error_row(exc: BaseException, wall_time: float = math.nan) -> dict[str, Any]
     last = traceback.extract_tb(exc.__traceback__)[-1:] if exc.__traceback__ else []
     where = f" ({last[0].filename.rsplit('/', 1)[-1]}:{last[0].lineno})" if last else ""
     msg = " ".join(str(exc).split()) or type(exc).__name__
-    return {"status": "error", "stable": math.nan, "reason": f"{type(exc).__name__}: "
+    return {"status": "error", "reason": f"{type(exc).__name__}: "
             f"{msg}{where}"[:500], "wall_time": wall_time}
 
 
@@ -388,9 +395,10 @@ def run_point(scene: str, gain: float, delay: float, step: float, stop_time: flo
     Returns
     -------
     dict
-        ``status`` (``"ok"`` | ``"diverged"``), ``stable`` (1.0/0.0),
-        ``divergence_time`` [s] (NaN if none), ``end_time`` [s], ``reason`` and the
-        metrics of :func:`metrics`, ``wall_time`` [s].
+        ``status`` (``"ok"`` | ``"diverged"``), ``divergence_time`` [s] (NaN if none),
+        ``end_time`` [s], ``reason`` (why it diverged; empty if ok), the metrics of
+        :func:`metrics`, ``min_stop_time`` [s] (closed loop; NaN for open loop) and
+        ``wall_time`` [s]. The verdict is the table's (:func:`cosim.study.verdict.judge`).
 
     Raises
     ------
@@ -417,10 +425,22 @@ def run_point(scene: str, gain: float, delay: float, step: float, stop_time: flo
                            "divergence_time": end if diverged else math.nan,
                            "end_time": end, "reason": reason}
     row.update(metrics(series, spans, len(sc.plant.actuator_joints), opts, diverged))
-    # provisional: the table compares the growth with the open-loop run's
-    # (cosim.study.table.fill_derived); alone, only a divergence is conclusive
-    row["stable"] = 0.0 if diverged else 1.0
+    row["min_stop_time"] = math.nan if open_loop else _min_stop_time(scene, overrides, opts)
     row["wall_time"] = time.perf_counter() - wall0
     return row
+
+
+def _min_stop_time(scene: str, overrides: Mapping[str, Any] | None, opts: PointOptions
+                   ) -> float:
+    """:attr:`JudgingWindow.min_stop_time` [s] of the scene; NaN if it cannot be derived."""
+    import numpy as np
+
+    from .verdict import scene_judging_window
+
+    try:
+        return scene_judging_window(scene, overrides, opts.highpass,
+                                    opts.fit_fraction).min_stop_time
+    except (ValueError, np.linalg.LinAlgError):  # e.g. no damped mode above the cut-off
+        return math.nan
 
 

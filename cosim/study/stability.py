@@ -57,6 +57,7 @@ __all__ = [
     "ALGORITHM_DELAY_STEPS",
     "LoopModel",
     "closed_loop_matrix",
+    "coupled_plant",
     "discretize",
     "line_weights",
     "loop_weights",
@@ -324,6 +325,28 @@ def reduce_loop(A: np.ndarray, B: np.ndarray, C: np.ndarray, tol: float = 1e-10
     return At[:r, :r], (Ti @ B)[:r], (C @ T)[:, :r], lam[~keep]
 
 
+def coupled_plant(scene: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """The scene's plant linearized (full 3D, top-drive frame) and reduced to the loop's modes.
+
+    Parameters
+    ----------
+    scene : Scene
+        A loaded :class:`plant.scene.Scene`.
+
+    Returns
+    -------
+    A, B, C, dropped : numpy.ndarray
+        As :func:`reduce_loop` returns them for :func:`plant.linearize.linearize`'s
+        ``A`` [1/s], ``B``, ``C``.
+    stable_step : float
+        The plant model's own stable RK4 step [s].
+    """
+    from drillcosim.plant.linearize import linearize
+
+    lin = linearize(scene.plant, "full3d")
+    return (*reduce_loop(lin.A, lin.B, lin.C), lin.model.stable_step())
+
+
 def spectral_radius(M: np.ndarray) -> float:
     """Largest eigenvalue modulus of ``M`` (stable iff < 1)."""
     if M.size == 0:
@@ -391,7 +414,6 @@ class LoopModel:
             Override any field (e.g. ``algorithm="jacobi"``, ``method="rk4"``).
         """
         from drillcosim.cosim.scenario.scene_system import controller_parameters, cosim_settings
-        from drillcosim.plant.linearize import linearize
         from drillcosim.plant.scene import load_scene
 
         sc = load_scene(scene, overrides=dict(overrides) if overrides else None) \
@@ -399,15 +421,14 @@ class LoopModel:
         st = cosim_settings(sc)
         if st.controller_sample_ticks != 1:
             raise ValueError("LoopModel: only controller_sample_period = step is modelled")
-        lin = linearize(sc.plant, "full3d")
-        A, B, C, dropped = reduce_loop(lin.A, lin.B, lin.C)
+        A, B, C, dropped, stable_step = coupled_plant(sc)
         opts: dict[str, Any] = {
             "algorithm": st.algorithm, "order": tuple(st.order), "coupling": st.coupling,
             "sensor_delay": st.sensor_delay,
             "lag_time_constant": float(controller_parameters(sc)["lag_time_constant"]),
         }
         if kwargs.get("method") == "rk4" and "max_step" not in kwargs:
-            kwargs["max_step"] = lin.model.stable_step()
+            kwargs["max_step"] = stable_step
         opts.update(kwargs)
         return cls(A, B, C, dropped=dropped, **opts)
 

@@ -12,12 +12,13 @@ cores), an existing dask.distributed cluster (``scheduler``: an address or a
 ``distributed.Client``), or ``workers=0``: in this process, one after another.
 A point that raises, or whose worker process dies, is recorded as an ``error``
 row with its reason and never stops the sweep (``retry_errors`` re-runs them).
+The verdicts (stable / unstable / undecided, :mod:`cosim.study.verdict`) are the table's,
+computed from the finished rows whatever order they finished in.
 """
 
 from __future__ import annotations
 
 import json
-import math
 import os
 import time
 from collections.abc import Callable, Iterator, Mapping
@@ -29,7 +30,7 @@ from typing import Any
 
 from .grid import Point, SweepSpec, parse_list
 from .point import error_row, run_point
-from .table import ResultTable
+from .table import ResultTable, verdict_counts
 
 __all__ = ["SweepOutcome", "execute_point", "parse_list", "run_sweep", "SweepSpec"]
 
@@ -38,7 +39,7 @@ Runner = Callable[..., dict]
 
 @dataclass(frozen=True)
 class SweepOutcome:
-    """What :func:`run_sweep` did.
+    """What :func:`run_sweep` did, and the verdicts of the sweep's points.
 
     Attributes
     ----------
@@ -48,21 +49,35 @@ class SweepOutcome:
     n_skipped : int
         Already in the table.
     n_run : int
-    n_errors : int
-        Points recorded with status ``error`` in this run.
-    n_unstable : int
-        Closed-loop points recorded unstable in this run.
     wall_time : float
         [s].
+    counts : dict of str -> int
+        Points of this sweep per verdict (:data:`cosim.study.verdict.VERDICTS`), from the
+        table after the run: the same for any completion order and after a resume.
     """
 
     folder: Path
     n_points: int
     n_skipped: int
     n_run: int
-    n_errors: int
-    n_unstable: int
     wall_time: float
+    counts: dict[str, int]
+
+    @property
+    def n_errors(self) -> int:
+        """Points recorded with status ``error``."""
+        return self.counts.get("error", 0)
+
+    @property
+    def n_unstable(self) -> int:
+        """Points judged unstable (diverged, or growing faster than open loop)."""
+        return self.counts.get("unstable", 0)
+
+    def summary(self) -> str:
+        """One line of verdict counts (a function of the table only)."""
+        parts = [f"{n} {v}" for v, n in self.counts.items() if n]
+        return (f"sweep: {self.n_points} points: {', '.join(parts) or 'none finished'}; table "
+                f"{self.folder / 'results.csv'} and results.parquet")
 
 
 def execute_point(point: Point, runner: Runner = run_point) -> dict[str, Any]:
@@ -79,15 +94,12 @@ def execute_point(point: Point, runner: Runner = run_point) -> dict[str, Any]:
         row = dict(runner(**point.kwargs()))
     except Exception as exc:  # one bad point never stops the sweep
         row = error_row(exc, time.perf_counter() - wall0)
-    if point.kind == "open_loop" and row.get("status") == "ok":
-        row["stable"] = 1.0          # the reference: its growth is the forced build-up
-        row["reason"] = ""
     row.update(base)
     return row
 
 
 def _lost_row(point: Point, reason: str) -> dict[str, Any]:
-    row = {"status": "error", "stable": math.nan, "reason": reason}
+    row = {"status": "error", "reason": reason}
     row.update({"key": point.key, "scene": point.scene, "engine": point.engine,
                 "kind": point.kind, "gain": point.gain, "delay": point.delay,
                 "step": point.step, "stop_time": point.stop_time})
@@ -195,20 +207,19 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int | Non
         rows = _inline(todo, runner)
     else:
         rows = _local(todo, runner, n_workers)
-    n_err = n_unst = 0
     bar = tqdm(total=len(points), initial=len(points) - len(todo), unit="point",
                desc="sweep", disable=None if progress is None else not progress)
     try:
         for row in rows:
-            full = table.append(row)
-            n_err += full["status"] == "error"
-            n_unst += full["kind"] == "closed_loop" and full["stable"] == 0.0
+            table.append(row)
             bar.update(1)
     finally:
         bar.close()
         lock.close()
+    keys = {p.key for p in points}
+    counts = verdict_counts(r for r in table.rows if r["key"] in keys)
     return SweepOutcome(Path(out_dir), len(points), len(points) - len(todo), len(todo),
-                        n_err, n_unst, time.perf_counter() - wall0)
+                        time.perf_counter() - wall0, counts)
 
 
 def sweep_from_args(scene: str, gain: str, delay: str, step: str, stop_time: float | None,
@@ -229,3 +240,27 @@ def sweep_from_args(scene: str, gain: str, delay: str, step: str, stop_time: flo
                      dict(sets or {}), True, dict(options or {}))
 
 
+
+
+def judging_note(spec: SweepSpec) -> str:
+    """One line when ``spec.stop_time`` is below the scene's judging window, else ``""``.
+
+    See :func:`cosim.study.verdict.scene_judging_window`; closed-loop points of such a sweep
+    that do not diverge are ``undecided``.
+    """
+    import numpy as np
+
+    from .point import PointOptions
+    from .verdict import scene_judging_window
+
+    opts = PointOptions.from_kwargs(dict(spec.options))
+    try:
+        window = scene_judging_window(spec.scene, spec.overrides, opts.highpass,
+                                      opts.fit_fraction)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        return f"no judging window for {spec.scene} ({exc}); growth verdicts are unchecked"
+    if spec.stop_time >= window.min_stop_time:
+        return ""
+    return (f"stop time {spec.stop_time:g} s is below the {window.min_stop_time:.3g} s needed "
+            f"to judge growth in {spec.scene} ({window.describe()}): closed-loop points that do "
+            "not diverge will be 'undecided'")
