@@ -4,6 +4,7 @@ result files and system validation."""
 from __future__ import annotations
 
 import csv
+from collections import deque
 
 import numpy as np
 import pytest
@@ -131,13 +132,46 @@ def test_discard_names_fmu_call_time_and_keeps_data(fmus, tmp_path):
     assert float(rows[-1][0]) == 0.5 and float(rows[-1][1]) == data["plant.x"][-1]
 
 
-def test_exception_in_fmu_is_reported_as_error(fmus):
+def test_exception_in_fmu_is_reported_as_error(fmus, capfd):
+    """The FMU's own message (a Python exception in its doStep, logged through the FMI logger
+    callback) ends the error, on one line; nothing is printed."""
     with pytest.raises(CosimError) as info:
         CoSimulation(plant_loop(fmus, {"fail_at_time": 0.2, "fail_mode": 1})).run(
             1.0, outputs=["plant.x"])
     assert info.value.call == "fmi2DoStep" and info.value.status in (3, 4)
     assert info.value.time == pytest.approx(0.2)
     assert info.value.result.data["time"][-1] == pytest.approx(0.2)
+    assert info.value.fmu_message == ("plant: Python exception in fmi2DoStep: RuntimeError: "
+                                      "injected failure")
+    assert str(info.value).endswith(info.value.fmu_message) and "\n" not in str(info.value)
+    assert capfd.readouterr().out == ""
+
+
+def test_fmu_messages_reach_their_own_execution_through_the_logger_callback(fmus, caplog):
+    """fmpy's logger proxy is one global of the process: another logger installed after the
+    FMUs were instantiated (as a test or another tool may do) does not steal their messages,
+    and two executions with equally named instances keep their messages apart."""
+    import ctypes
+
+    from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+    from fmpy.logging import addLoggerProxy
+
+    stolen = []
+    other = fmi2CallbackFunctions()
+    other.logger = fmi2CallbackLoggerTYPE(lambda *args: stolen.append(args))
+    failing = Execution(plant_loop(fmus, {"fail_at_time": 0.05, "fail_mode": 1}))
+    healthy = Execution(plant_loop(fmus, {}))
+    with failing, healthy, caplog.at_level("DEBUG", "drillcosim.cosim.master.fmi_log"):
+        failing.initialize()
+        healthy.initialize()
+        addLoggerProxy(ctypes.byref(other))          # someone re-points the global proxy
+        with pytest.raises(CosimError, match="RuntimeError: injected failure"):
+            failing.simulate_until(0.1)
+        healthy.simulate_until(0.1)
+        assert healthy.slaves["plant"].log.messages == deque()
+        assert [m[0] for m in failing.slaves["plant"].log.messages] == [3]
+    assert stolen == []
+    assert any("injected failure" in r.getMessage() for r in caplog.records)
 
 
 def test_non_finite_output_stops_with_divergence(fmus):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -14,6 +14,7 @@ from .errors import CosimError, DivergenceError
 from .execution import Execution
 from .progress import ProgressObserver
 from .recorder import Recorder
+from .slave import Slave
 from .system import SystemSpec
 
 
@@ -60,15 +61,20 @@ class CoSimulation:
     Parameters
     ----------
     system : SystemSpec
+    slaves : mapping of str to Slave, optional
+        Ready-made components (see :class:`~cosim.master.execution.Execution`), used by one
+        run (they are closed at its end).
     """
 
-    def __init__(self, system: SystemSpec):
+    def __init__(self, system: SystemSpec, slaves: Mapping[str, Slave] | None = None):
         self.system = system
+        self.slaves = slaves
 
     def run(self, stop_time: float | None = None, outputs: Sequence[str] = (),
             output_interval: float | None = None, progress: bool | None = False,
             csv_path: str | Path | None = None, flush_every: int = 1000,
-            observers: Sequence[Any] = (), manipulators: Sequence[Any] = ()) -> Result:
+            observers: Sequence[Any] = (), manipulators: Sequence[Any] = (),
+            output_ticks: int | None = None) -> Result:
         """Simulate from the start time to ``stop_time``.
 
         Parameters
@@ -80,6 +86,8 @@ class CoSimulation:
         output_interval : float, optional
             Recording interval [s], an integer multiple of the base step
             (default: every base step).
+        output_ticks : int, optional
+            The recording interval in base steps instead (not with ``output_interval``).
         progress : bool or None
             Show a progress bar (None: only on a TTY).
         csv_path : str or Path, optional
@@ -110,7 +118,9 @@ class CoSimulation:
         if stop is None:
             raise ValueError("stop_time: required (the system has no stop_time)")
         H = system.base_step
-        interval = 1
+        interval = 1 if output_ticks is None else output_ticks
+        if output_interval is not None and output_ticks is not None:
+            raise ValueError("output_interval and output_ticks: give one of them")
         if output_interval is not None:
             interval = round(output_interval / H)
             if interval < 1 or abs(interval * H - output_interval) > 1e-9 * output_interval:
@@ -121,7 +131,7 @@ class CoSimulation:
         wall0 = time.perf_counter()
         diverged = None
         try:
-            execution = Execution(system, read_outputs=outputs)
+            execution = Execution(system, read_outputs=outputs, slaves=self.slaves)
             for obs in observers:
                 execution.add_observer(obs)
             for man in manipulators:

@@ -42,8 +42,9 @@ class FmuSpec:
     ----------
     name : str
         Instance name, unique in the system, without '.'.
-    path : str or Path
-        Path of the ``.fmu`` file.
+    path : str, Path or None
+        Path of the ``.fmu`` file; None for a component the caller hands to the execution
+        ready-made (an in-process slave, see :class:`~cosim.master.execution.Execution`).
     parameters : dict[str, float | int | bool | str]
         Start values set before initialisation, by variable name.
     sample_period_ticks : int
@@ -52,7 +53,7 @@ class FmuSpec:
     """
 
     name: str
-    path: str | Path
+    path: str | Path | None
     parameters: dict[str, ParameterValue] = field(default_factory=dict)
     sample_period_ticks: int = 1
 

@@ -26,6 +26,9 @@ import numpy as np  # noqa: E402
 
 from drillcosim.cosim.master.files import AtomicFile  # noqa: E402
 
+from .scene_system import CONTROLLER, PLANT  # noqa: E402
+from .summary import column, contact_bodies  # noqa: E402
+
 __all__ = ["plot_actuators", "plot_deflection_contact", "plot_orbit", "plot_run", "save_figure"]
 
 MM = 1e3  # m -> mm
@@ -42,19 +45,6 @@ def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:
     return Path(path)
 
 
-def _col(data: np.ndarray, name: str) -> np.ndarray | None:
-    for cand in (name, f"plant.{name}", f"controller.{name}"):
-        if cand in (data.dtype.names or ()):
-            return np.asarray(data[cand], dtype=float)
-    return None
-
-
-def _bodies(data: np.ndarray) -> list[int]:
-    names = data.dtype.names or ()
-    return sorted({int(n.split("body")[1].split("_")[0]) for n in names
-                   if "body" in n and n.endswith("_radial_deflection")})
-
-
 def _span_label(body: int, spans: Mapping[int, Mapping] | None) -> str:
     info = (spans or {}).get(body, {})
     kind = info.get("span", "")
@@ -66,7 +56,7 @@ def _long_body(data: np.ndarray, spans: Mapping[int, Mapping] | None) -> int | N
         for b, info in spans.items():
             if info.get("span") == "long":
                 return b
-    bodies = _bodies(data)
+    bodies = contact_bodies(data)
     return bodies[0] if bodies else None
 
 
@@ -83,7 +73,7 @@ def plot_orbit(data: np.ndarray, path: str | Path, clearance: float,
     body = _long_body(data, spans)
     if body is None:
         return None
-    x, y = _col(data, f"body{body}_X"), _col(data, f"body{body}_Y")
+    x, y = column(data, PLANT, f"body{body}_X"), column(data, PLANT, f"body{body}_Y")
     if x is None or y is None:
         return None
     sel = np.ones(len(x), bool) if t_from is None else data["time"] >= t_from
@@ -121,15 +111,15 @@ def plot_deflection_contact(data: np.ndarray, path: str | Path, clearance: float
 
     ``switch_on_time`` [s], if given, is marked by a dotted line.
     """
-    bodies = _bodies(data)
+    bodies = contact_bodies(data)
     if not bodies:
         return None
     t = data["time"]
     fig, axes = plt.subplots(2, len(bodies), figsize=(5 * len(bodies), 6), sharex=True,
                              squeeze=False, layout="constrained")
     for j, b in enumerate(bodies):
-        r = _col(data, f"body{b}_radial_deflection")
-        f = _col(data, f"body{b}_contact_force")
+        r = column(data, PLANT, f"body{b}_radial_deflection")
+        f = column(data, PLANT, f"body{b}_contact_force")
         ax = axes[0, j]
         ax.plot(t, r * MM, lw=0.7)
         ax.axhline(clearance * MM, color="k", ls="--", lw=1.0, label="clearance")
@@ -154,14 +144,14 @@ def plot_actuators(data: np.ndarray, path: str | Path, n_sites: int = 2,
                    switch_on_time: float | None = None) -> Path | None:
     """Actuator forces [kN] (C and E) and delivered power [W] vs time per site."""
     t = data["time"]
-    if all(_col(data, f"actuator{s}_power") is None for s in range(1, n_sites + 1)):
+    if all(column(data, PLANT, f"actuator{s}_power") is None for s in range(1, n_sites + 1)):
         return None
     fig, axes = plt.subplots(2, n_sites, figsize=(5 * n_sites, 6), sharex=True, squeeze=False,
                              layout="constrained")
     for j, s in enumerate(range(1, n_sites + 1)):
         ax = axes[0, j]
         for a, color in (("C", "tab:blue"), ("E", "tab:orange")):
-            f = _col(data, f"actuator{s}_force_{a}")
+            f = column(data, CONTROLLER, f"actuator{s}_force_{a}")
             if f is not None:
                 ax.plot(t, f * KN, lw=0.7, color=color, label=f"force {a}")
         ax.set_ylabel("actuator force [kN]")
@@ -173,7 +163,7 @@ def plot_actuators(data: np.ndarray, path: str | Path, n_sites: int = 2,
             ax.text(0.5, 0.5, "controller disabled", ha="center", transform=ax.transAxes)
         ax.grid(alpha=0.3)
         ax = axes[1, j]
-        p = _col(data, f"actuator{s}_power")
+        p = column(data, PLANT, f"actuator{s}_power")
         if p is not None:
             ax.plot(t, p, lw=0.7, color="tab:green")
         ax.set_ylabel("actuator power [W]")

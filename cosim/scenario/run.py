@@ -14,16 +14,16 @@ A run that fails while stepping (divergence: a non-finite output, or the plant
 discarding a step) keeps the rows recorded so far, writes the summary (with
 ``diverged`` set) and the plots, and reports one line; exit code 1. A run that
 fails before the first step leaves earlier files of the folder untouched and
-raises :class:`CosimError` whose message ends with the FMU's own log line (e.g.
-the plant naming an out-of-range parameter at ``fmi2ExitInitializationMode``).
+raises :class:`CosimError` whose message ends with the FMU's own message, received
+through the FMI logger callback (e.g. the plant naming an out-of-range parameter at
+``fmi2ExitInitializationMode``).
 Bad input raises ``ValueError`` (exit code 2 in the CLI; so does an FMU
 rejecting its parameters with fmi2Error at initialization).
 """
 
 from __future__ import annotations
 
-import contextlib
-import io
+import dataclasses
 import math
 import os
 import sys
@@ -115,83 +115,16 @@ def _merge(base: dict[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-class _FmuLog(io.TextIOBase):
-    """stdout pass-through remembering FMU log lines (fmpy prints them as ``[STATUS] msg``).
-
-    A message holding a Python traceback (the native FMI wrapper logs exceptions as
-    ``name: Python exception in fmi2X: Traceback ...``) is remembered with the
-    traceback's last line (the exception) in place of ``Traceback ...``.
-    """
-
-    _TRACEBACK = "Traceback (most recent call last):"
-
-    def __init__(self, target):
-        self.target = target
-        self.problems: list[str] = []
-        self._buf = ""
-        self._in_traceback = False
-        self._head = ""
-
-    def write(self, s: str) -> int:
-        self.target.write(s)
-        self._buf += s
-        *lines, self._buf = self._buf.split("\n")
-        for ln in lines:
-            if ln.startswith(("[DISCARD]", "[ERROR]", "[FATAL]")):
-                self.problems.append(ln)
-                self._in_traceback = ln.endswith(self._TRACEBACK)
-                self._head = ln[: -len(self._TRACEBACK)]
-            elif ln.startswith("["):
-                self._in_traceback = False
-            elif self._in_traceback and ln.strip() and not ln.startswith(" "):
-                self.problems[-1] = self._head + ln.strip()
-        return len(s)
-
-    def detail(self, fmu_name: str) -> str | None:
-        """The last problem line of FMU instance ``fmu_name`` (else any), without the label."""
-        texts = [p.split("] ", 1)[-1] for p in self.problems]
-        own = [t for t in texts if t.startswith(f"{fmu_name}:")]
-        return (own or texts or [None])[-1]
-
-    def flush(self) -> None:
-        self.target.flush()
-
-
-def _failure(err: CosimError | None, result: Result, log: _FmuLog) -> dict[str, Any] | None:
+def _failure(err: CosimError | None, result: Result) -> dict[str, Any] | None:
     if result.diverged is not None:
         d = result.diverged
         return {"time_s": d.time, "quantity": d.quantity, "value": d.value,
                 "message": f"non-finite {d.quantity} = {d.value!r} at t = {d.time:.6g} s"}
     if err is None:
         return None
-    detail = log.detail(err.fmu_name) or err.message
     return {"time_s": err.time, "quantity": f"{err.fmu_name}.{err.call}", "value": None,
             "message": f"FMU '{err.fmu_name}' {err.call} failed at t = {err.time:.6g} s: "
-                       f"{detail}"}
-
-
-class _FmuLogging:
-    """Observer switching on the FMUs' logging (``fmi2SetDebugLogging``) at the start.
-
-    fmpy instantiates with logging off; pythonfmu then drops the messages that
-    explain a discarded step (e.g. the plant's divergence report).
-    """
-
-    def on_start(self, execution) -> None:
-        for slave in execution.slaves.values():
-            with contextlib.suppress(Exception):
-                slave.fmu.fmi2SetDebugLogging(slave.component, 1, 0, None)
-
-    def on_step(self, execution) -> None:
-        """Nothing to do per step."""
-
-
-def _simulate(ss, stop: float, progress: bool | None, csv_path: Path) -> Result:
-    """:meth:`CoSimulation.run` with the FMU-logging observer added."""
-    H = ss.system.base_step
-    return CoSimulation(ss.system).run(
-        stop_time=stop, outputs=ss.outputs, output_interval=max(1, round(ss.output_interval / H))
-        * H, progress=progress, csv_path=csv_path, observers=[_FmuLogging()])
+                       f"{err.fmu_message or err.message}"}
 
 
 def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
@@ -223,7 +156,7 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
         If the run failed before its first step (earlier files are kept).
     """
     from .plots import plot_run
-    from .scene_system import controller_parameters, span_info
+    from .scene_system import scene_controller, span_info
     from .summary import summarize, write_json
 
     out = Path(out_dir)
@@ -232,36 +165,30 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
     if not (math.isfinite(stop) and stop > 0):
         raise ValueError(f"stop time: a finite number > 0 [s], got {stop!r}")
     csv = out / "results.csv"
-    log = _FmuLog(sys.stdout)
     err: CosimError | None = None
     try:
-        with contextlib.redirect_stdout(log):
-            result = _simulate(ss, stop, progress, csv)
+        result = CoSimulation(ss.system).run(stop_time=stop, outputs=ss.outputs,
+                                             output_ticks=ss.settings.output_ticks,
+                                             progress=progress, csv_path=csv)
     except CosimError as exc:
         err = exc
         result = exc.result
         if result is None or not math.isfinite(result.end_time) or \
                 result.end_time <= ss.system.start_time:
-            detail = log.detail(exc.fmu_name)
-            if detail is None:
-                raise
-            full = CosimError(exc.fmu_name, exc.call, exc.time, f"{exc.message}: {detail}",
-                              status=exc.status)
-            full.result = exc.result
-            raise full from exc
-    failure = _failure(err, result, log)
+            raise
+    failure = _failure(err, result)
     scene = ss.scene
     spans = span_info(scene)
     n_sites = len(scene.plant.actuator_joints)
-    ctrl = controller_parameters(scene)
-    switch = ctrl["switch_on_time"] if ctrl["enabled"] else None
+    ctrl = scene_controller(scene)
+    switch = ctrl.switch_on_time if ctrl.enabled else None
     summary = summarize(result.data, scene=scene.name, scene_file=scene.source, spans=spans,
                         n_sites=n_sites, stop_time=stop, step=ss.system.base_step,
                         output_interval=ss.output_interval, wall_time=result.wall_time,
                         real_time_factor=result.real_time_factor, end_time=result.end_time,
                         switch_on_time=switch, diverged=failure)
-    summary["controller"] = ctrl
-    summary["cosim"] = {k: v for k, v in vars(ss.settings).items()}
+    summary["controller"] = dataclasses.asdict(ctrl)
+    summary["cosim"] = {**vars(ss.settings), "output_interval": ss.settings.output_interval}
     files = [csv, write_json(summary, out / "summary.json")]
     if plots and len(result.data) > 1:
         files += plot_run(result.data, out, scene.plant.contact.clearance, spans, n_sites,

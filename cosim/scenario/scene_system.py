@@ -92,6 +92,7 @@ __all__ = [
     "cosim_schema_markdown",
     "cosim_settings",
     "default_fmu_dir",
+    "scene_controller",
     "ensure_fmus",
     "scene_system",
     "span_info",
@@ -129,7 +130,8 @@ def _suggest(word: str, choices: Sequence[str]) -> str:
 
 @dataclass(frozen=True)
 class CosimSettings:
-    """Validated ``[cosim]`` table of a scene (all times in seconds)."""
+    """Validated ``[cosim]`` table of a scene (times in seconds; periods of the controller and of
+    the recording in base steps, ``*_ticks``)."""
 
     step: float
     stop_time: float
@@ -139,7 +141,12 @@ class CosimSettings:
     actuator_delay: float
     sensor_delay: float
     controller_sample_ticks: int
-    output_interval: float
+    output_ticks: int
+
+    @property
+    def output_interval(self) -> float:
+        """Recording interval [s] (``output_ticks`` base steps)."""
+        return self.output_ticks * self.step
 
 
 @dataclass(frozen=True)
@@ -221,23 +228,16 @@ def cosim_settings(scene: Scene) -> CosimSettings:
     ticks = _multiple(scene, "controller_sample_period", ctrl_period, step)
     if "output_interval" in table:
         interval = _number(scene, "output_interval", table["output_interval"], positive=True)
-        _multiple(scene, "output_interval", interval, step)
+        out_ticks = _multiple(scene, "output_interval", interval, step)
     else:
-        interval = step * max(1, math.ceil(1e-3 / step - 1e-9))
+        out_ticks = max(1, math.ceil(1e-3 / step - 1e-9))
     return CosimSettings(step, stop, get("algorithm", "jacobi"), tuple(order),
                          get("coupling", "zoh"), delays["actuator_delay"],
-                         delays["sensor_delay"], ticks, interval)
+                         delays["sensor_delay"], ticks, out_ticks)
 
 
-def controller_parameters(scene: Scene) -> dict[str, float | int | bool]:
-    """FMU parameters of the controller from the scene's ``[controller]`` table.
-
-    Returns
-    -------
-    dict
-        ``gain`` [N], ``mode`` (Integer: index in :data:`controller.MODES`),
-        ``force_limit`` [N], ``symmetric_force_limit`` [N] (inf -> 1e30),
-        ``switch_on_time`` [s], ``lag_time_constant`` [s], ``enabled``.
+def scene_controller(scene: Scene) -> ControllerParams:
+    """The scene's ``[controller]`` table as validated, typed parameters.
 
     Raises
     ------
@@ -251,9 +251,28 @@ def controller_parameters(scene: Scene) -> dict[str, float | int | bool]:
                              f"{_suggest(key, names)}")
     raw = {"enabled": False, **scene.controller}
     try:
-        p = ControllerParams(**raw)
+        return ControllerParams(**raw)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{scene.source}: [controller] {exc}") from None
+
+
+def controller_parameters(scene: Scene) -> dict[str, float | int | bool]:
+    """The controller FMU's parameters for the scene: :func:`scene_controller` encoded for the
+    FMU (the one place that encoding happens).
+
+    Returns
+    -------
+    dict
+        ``gain`` [N], ``mode`` (Integer: index in :data:`controller.MODES`),
+        ``force_limit`` [N], ``symmetric_force_limit`` [N] (inf -> 1e30),
+        ``switch_on_time`` [s], ``lag_time_constant`` [s], ``enabled``.
+
+    Raises
+    ------
+    ValueError
+        Unknown key (with suggestion) or invalid value, naming the scene file.
+    """
+    p = scene_controller(scene)
     sym = p.symmetric_force_limit
     return {"gain": p.gain, "mode": MODES.index(p.mode), "force_limit": p.force_limit,
             "symmetric_force_limit": NO_LIMIT if math.isinf(sym) else sym,
@@ -395,7 +414,8 @@ def _plant_outputs(scene: Scene) -> list[str]:
 def scene_system(scene: Scene, fmu_dir: str | Path | None = None, *,
                  plant_fmu: str | Path | None = None,
                  controller_fmu: str | Path | None = None,
-                 plant_overrides: Mapping[str, Any] | None = None) -> SceneSystem:
+                 plant_overrides: Mapping[str, Any] | None = None,
+                 in_process: bool = False) -> SceneSystem:
     """Build the co-simulation system of a scene.
 
     Parameters
@@ -410,6 +430,9 @@ def scene_system(scene: Scene, fmu_dir: str | Path | None = None, *,
         Plant parameters overridden on top of the scene file (the nested dict
         given to :func:`plant.scene.load_scene`); passed to the plant FMU as
         flattened ``section.key`` parameters (scalars only).
+    in_process : bool
+        No FMU files (their paths are None): the system is run with the in-process slaves of
+        :func:`cosim.scenario.inprocess.inprocess_slaves`.
 
     Returns
     -------
@@ -435,8 +458,9 @@ def scene_system(scene: Scene, fmu_dir: str | Path | None = None, *,
                          f"{len(CONTROLLER_SITES)} sites, the plant has {n_sites}")
     need = ([] if plant_fmu else ["DrillstringPlant"]) + \
         ([] if controller_fmu or not enabled else ["StrainController"])
-    paths = ensure_fmus(fmu_dir, need) if need else {}
-    plant_path = Path(plant_fmu) if plant_fmu else paths["DrillstringPlant"]
+    paths = ensure_fmus(fmu_dir, need) if need and not in_process else {}
+    plant_path = None if in_process else Path(plant_fmu) if plant_fmu else \
+        paths["DrillstringPlant"]
     plant_params: dict[str, float | int | bool | str] = {"scene": scene_reference(scene)}
     plant_params.update(_flatten(plant_overrides or {}, scene.source))
     fmus = [FmuSpec(PLANT, plant_path, plant_params)]
@@ -444,7 +468,8 @@ def scene_system(scene: Scene, fmu_dir: str | Path | None = None, *,
     outputs = [f"{PLANT}.{n}" for n in _plant_outputs(scene)]
     order: tuple[str, ...] = (PLANT,)
     if enabled:
-        ctrl_path = Path(controller_fmu) if controller_fmu else paths["StrainController"]
+        ctrl_path = None if in_process else Path(controller_fmu) if controller_fmu else \
+            paths["StrainController"]
         fmus.append(FmuSpec(CONTROLLER, ctrl_path, dict(ctrl), settings.controller_sample_ticks))
         for s in CONTROLLER_SITES:
             for a in AXES:
