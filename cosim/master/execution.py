@@ -102,8 +102,8 @@ class Execution:
                 if spec.name in given:
                     self.slaves[spec.name] = given.pop(spec.name)
                     continue
-                path = Path(spec.path).resolve() if spec.path is not None else None
-                if path is not None and path not in dirs and path.is_file():
+                path = Path(spec.path).resolve()
+                if path not in dirs and path.is_file():
                     dirs[path] = extract(str(path))
                     self._dirs.append(dirs[path])
                 self.slaves[spec.name] = FmuSlave(spec, dirs.get(path))

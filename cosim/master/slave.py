@@ -168,9 +168,6 @@ class FmuSlave(Slave):
     def __init__(self, spec: FmuSpec, unzip_dir: str | None = None):
         self.spec = spec
         self.name = spec.name
-        if spec.path is None:
-            raise CosimError(spec.name, "load", math.nan, "no FMU file given (path None) and "
-                             "no in-process slave for it")
         path = Path(spec.path)
         if not path.is_file():
             raise CosimError(spec.name, "load", math.nan, f"no FMU file at '{path}'")

@@ -42,9 +42,10 @@ class FmuSpec:
     ----------
     name : str
         Instance name, unique in the system, without '.'.
-    path : str, Path or None
-        Path of the ``.fmu`` file; None for a component the caller hands to the execution
-        ready-made (an in-process slave, see :class:`~cosim.master.execution.Execution`).
+    path : str or Path
+        Path of the ``.fmu`` file (it also describes a component the caller hands to the
+        execution ready-made, e.g. an in-process slave, see
+        :class:`~cosim.master.execution.Execution`).
     parameters : dict[str, float | int | bool | str]
         Start values set before initialisation, by variable name.
     sample_period_ticks : int
@@ -53,7 +54,7 @@ class FmuSpec:
     """
 
     name: str
-    path: str | Path | None
+    path: str | Path
     parameters: dict[str, ParameterValue] = field(default_factory=dict)
     sample_period_ticks: int = 1
 

@@ -10,8 +10,9 @@ lines and observers) gives the same numbers with either, bit for bit
 (``tests/test_sweep.py``), while the in-process pair saves the FMI boundary. Parameters stay
 typed (:class:`plant.model.DrillstringModel`, :class:`controller.ControllerParams`).
 
-:func:`inprocess_slaves` makes the slaves of a :class:`~.scene_system.SceneSystem` built with
-``in_process=True``.
+:func:`inprocess_slaves` makes the slaves that stand in for the FMUs of a
+:class:`~.scene_system.SceneSystem` (the FMU files still describe the system: instance names,
+variables, wiring; they are not loaded).
 """
 
 from __future__ import annotations
@@ -198,7 +199,7 @@ class ControllerSlave(_ArraySlave):
 
 
 def inprocess_slaves(ss: SceneSystem) -> dict[str, Slave]:
-    """The in-process slaves of a scene's system (``scene_system(..., in_process=True)``).
+    """In-process slaves standing in for the FMUs of a scene's system (built from the scene).
 
     Returns
     -------

@@ -40,7 +40,8 @@ else:  # pragma: no cover
 from drillcosim.cosim.master.cosimulation import CoSimulation, Result
 from drillcosim.cosim.master.errors import CosimError
 
-__all__ = ["EXIT_DIVERGED", "EXIT_OK", "RunOutcome", "parse_set", "run_scene", "run_system"]
+__all__ = ["EXIT_DIVERGED", "EXIT_OK", "RunOutcome", "parse_set", "run_scene", "run_system",
+           "simulate_into"]
 
 EXIT_OK = 0
 EXIT_DIVERGED = 1
@@ -127,6 +128,38 @@ def _failure(err: CosimError | None, result: Result) -> dict[str, Any] | None:
                        f"{err.fmu_message or err.message}"}
 
 
+def simulate_into(system, outputs: Sequence[str], output_ticks: int, stop: float, out: Path,
+                  progress: bool | None) -> tuple[Result, dict[str, Any] | None, Path]:
+    """Run ``system`` to ``stop`` [s], recording ``outputs`` every ``output_ticks`` base steps
+    into ``out/results.csv`` (written atomically, :class:`cosim.master.recorder.Recorder`).
+
+    Returns
+    -------
+    (Result, dict or None, Path)
+        The result, the failure (time, quantity, value, message) if the run stopped early,
+        and the CSV path.
+
+    Raises
+    ------
+    CosimError
+        If the run failed before its first step (an earlier ``results.csv`` is kept); its
+        message ends with the FMU's own message when it logged one.
+    """
+    csv = out / "results.csv"
+    err: CosimError | None = None
+    try:
+        result = CoSimulation(system).run(stop_time=stop, outputs=outputs,
+                                          output_ticks=output_ticks, progress=progress,
+                                          csv_path=csv)
+    except CosimError as exc:
+        err = exc
+        result = exc.result
+        if result is None or not math.isfinite(result.end_time) or \
+                result.end_time <= system.start_time:
+            raise
+    return result, _failure(err, result), csv
+
+
 def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
                progress: bool | None = None, plots: bool = True) -> RunOutcome:
     """Run a :class:`cosim.scenario.scene_system.SceneSystem` and write results, summary and plots.
@@ -164,19 +197,8 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
     stop = ss.stop_time if stop_time is None else float(stop_time)
     if not (math.isfinite(stop) and stop > 0):
         raise ValueError(f"stop time: a finite number > 0 [s], got {stop!r}")
-    csv = out / "results.csv"
-    err: CosimError | None = None
-    try:
-        result = CoSimulation(ss.system).run(stop_time=stop, outputs=ss.outputs,
-                                             output_ticks=ss.settings.output_ticks,
-                                             progress=progress, csv_path=csv)
-    except CosimError as exc:
-        err = exc
-        result = exc.result
-        if result is None or not math.isfinite(result.end_time) or \
-                result.end_time <= ss.system.start_time:
-            raise
-    failure = _failure(err, result)
+    result, failure, csv = simulate_into(ss.system, ss.outputs, ss.settings.output_ticks, stop,
+                                         out, progress)
     scene = ss.scene
     spans = span_info(scene)
     n_sites = len(scene.plant.actuator_joints)

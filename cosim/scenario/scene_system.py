@@ -92,8 +92,8 @@ __all__ = [
     "cosim_schema_markdown",
     "cosim_settings",
     "default_fmu_dir",
-    "scene_controller",
     "ensure_fmus",
+    "scene_controller",
     "scene_system",
     "span_info",
 ]
@@ -414,8 +414,7 @@ def _plant_outputs(scene: Scene) -> list[str]:
 def scene_system(scene: Scene, fmu_dir: str | Path | None = None, *,
                  plant_fmu: str | Path | None = None,
                  controller_fmu: str | Path | None = None,
-                 plant_overrides: Mapping[str, Any] | None = None,
-                 in_process: bool = False) -> SceneSystem:
+                 plant_overrides: Mapping[str, Any] | None = None) -> SceneSystem:
     """Build the co-simulation system of a scene.
 
     Parameters
@@ -430,9 +429,6 @@ def scene_system(scene: Scene, fmu_dir: str | Path | None = None, *,
         Plant parameters overridden on top of the scene file (the nested dict
         given to :func:`plant.scene.load_scene`); passed to the plant FMU as
         flattened ``section.key`` parameters (scalars only).
-    in_process : bool
-        No FMU files (their paths are None): the system is run with the in-process slaves of
-        :func:`cosim.scenario.inprocess.inprocess_slaves`.
 
     Returns
     -------
@@ -458,9 +454,8 @@ def scene_system(scene: Scene, fmu_dir: str | Path | None = None, *,
                          f"{len(CONTROLLER_SITES)} sites, the plant has {n_sites}")
     need = ([] if plant_fmu else ["DrillstringPlant"]) + \
         ([] if controller_fmu or not enabled else ["StrainController"])
-    paths = ensure_fmus(fmu_dir, need) if need and not in_process else {}
-    plant_path = None if in_process else Path(plant_fmu) if plant_fmu else \
-        paths["DrillstringPlant"]
+    paths = ensure_fmus(fmu_dir, need) if need else {}
+    plant_path = Path(plant_fmu) if plant_fmu else paths["DrillstringPlant"]
     plant_params: dict[str, float | int | bool | str] = {"scene": scene_reference(scene)}
     plant_params.update(_flatten(plant_overrides or {}, scene.source))
     fmus = [FmuSpec(PLANT, plant_path, plant_params)]
@@ -468,8 +463,7 @@ def scene_system(scene: Scene, fmu_dir: str | Path | None = None, *,
     outputs = [f"{PLANT}.{n}" for n in _plant_outputs(scene)]
     order: tuple[str, ...] = (PLANT,)
     if enabled:
-        ctrl_path = None if in_process else Path(controller_fmu) if controller_fmu else \
-            paths["StrainController"]
+        ctrl_path = Path(controller_fmu) if controller_fmu else paths["StrainController"]
         fmus.append(FmuSpec(CONTROLLER, ctrl_path, dict(ctrl), settings.controller_sample_ticks))
         for s in CONTROLLER_SITES:
             for a in AXES:

@@ -251,12 +251,14 @@ def simulate_point(sc, over: Mapping[str, Any], opts: PointOptions, engine: str 
 
     if engine not in ENGINES:
         raise ValueError(f"engine = {engine!r}: 'fmu' or 'python'")
-    in_process = engine == "python"      # the scene object is used as it is
+    # the FMU files describe the system; in process, slaves built from the scene object (which
+    # holds the overrides already) stand in for them
+    in_process = engine == "python"
     plant_over = {} if in_process else {k: v for k, v in over.items()
                                         if k not in ("cosim", "controller")}
-    ss = scene_system(sc, fmu_dir, plant_overrides=plant_over, in_process=in_process)
+    ss = scene_system(sc, fmu_dir, plant_overrides=plant_over)
     slaves = None
-    if engine == "python":
+    if in_process:
         from drillcosim.cosim.scenario.inprocess import inprocess_slaves
 
         slaves = inprocess_slaves(ss)
