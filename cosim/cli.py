@@ -96,13 +96,14 @@ def _cmd_build(args: argparse.Namespace) -> int:
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from drillcosim.cosim.master.errors import FMI2_ERROR, CosimError
-    from drillcosim.cosim.scenario.run import run_scene
+    from drillcosim.cosim.scenario.run import simulate_scene
 
     try:
-        outcome = run_scene(args.scene, stop_time=args.stop_time, step=args.step,
-                            delay=args.delay, gain=args.gain, sets=args.set, out_dir=args.out,
-                            fmu_dir=args.fmu_dir, progress=False if args.no_progress else None,
-                            plots=not args.no_plots)
+        outcome = simulate_scene(args.scene, stop_time=args.stop_time, step=args.step,
+                                 delay=args.delay, gain=args.gain, sets=args.set,
+                                 out_dir=args.out, fmu_dir=args.fmu_dir,
+                                 progress=False if args.no_progress else None,
+                                 plots=not args.no_plots)
     except CosimError as exc:  # failed before the first step: earlier files are kept
         if exc.call == "fmi2ExitInitializationMode" and exc.status == FMI2_ERROR:
             # the FMU rejected its parameters (its message names them): bad input
@@ -116,7 +117,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from drillcosim.cosim.scenario.run import parse_set
-    from drillcosim.cosim.study.sweep import judging_note, run_sweep, sweep_from_args
+    from drillcosim.cosim.study.sweep import execute_sweep, judging_note, sweep_from_args
 
     spec = sweep_from_args(args.scene, args.gain, args.delay, args.step, args.stop_time,
                            args.engine, parse_set(args.set))
@@ -124,9 +125,9 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     if note:
         print(f"drillcosim sweep: note: {note}", file=sys.stderr)
     out = args.out or f"out/sweep_{spec.scene.rsplit('/', 1)[-1].removesuffix('.toml')}"
-    res = run_sweep(spec, out, workers=args.workers, scheduler=args.scheduler,
-                    progress=False if args.no_progress else None,
-                    retry_errors=args.retry_errors)
+    res = execute_sweep(spec, out, workers=args.workers, scheduler=args.scheduler,
+                        progress=False if args.no_progress else None,
+                        retry_errors=args.retry_errors)
     print(f"ran {res.n_run} of {res.n_points} points ({res.n_skipped} already done) in "
           f"{res.wall_time:.1f} s")
     print(res.summary())
@@ -204,7 +205,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="stop time [s] (default: the scene's)")
     p.add_argument("--engine", choices=("fmu", "python"), default="fmu",
                    help="fmu: plant + controller FMUs in the master (default); python: the same "
-                        "loop in-process without FMI (faster)")
+                        "models as in-process slaves of the same master (no FMI boundary, same "
+                        "numbers)")
     p.add_argument("--workers", type=int, metavar="N",
                    help="local worker processes (default: all cores; 0: in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS",

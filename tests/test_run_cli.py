@@ -15,7 +15,7 @@ import pytest
 
 from drillcosim.cosim.cli import main
 from drillcosim.cosim.master.errors import CosimError
-from drillcosim.cosim.scenario.run import run_system
+from drillcosim.cosim.scenario.run import simulate_system
 from drillcosim.cosim.scenario.scene_system import ensure_fmus, scene_system
 from drillcosim.cosim.scenario.summary import SUMMARY_KEYS
 from drillcosim.plant.scene import load_scene
@@ -118,7 +118,7 @@ def test_failure_before_the_first_step_keeps_earlier_files(good_run, fmu_dir, ca
         ss.system, fmus=[bad, ss.system.fmu("controller")]))
     with pytest.raises(CosimError) as info, \
             caplog.at_level("DEBUG", "drillcosim.cosim.master.fmi_log"):
-        run_system(ss, out, stop_time=0.1, progress=False)
+        simulate_system(ss, out, stop_time=0.1, progress=False)
     err = info.value
     # the plant FMU (native wrapper) refuses the parameter at initialization with fmi2Error;
     # the error names FMU and call and ends with the FMU's own message naming the parameter,

@@ -19,7 +19,7 @@ from xml.etree import ElementTree as ET
 import numpy as np
 import pytest
 
-from drillcosim.cosim.master.cosimulation import CoSimulation
+from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.master.ssp import NS, export_ssp, unsupported_features
 from drillcosim.cosim.master.system import Connection
 from drillcosim.cosim.scenario.scene_system import scene_system
@@ -115,7 +115,7 @@ def test_libcosim_runs_the_exported_ssp_like_our_master(scene_sys, tmp_path: Pat
     would show at the 1e-2 level on the forces).
     """
     n = 200
-    ours = CoSimulation(scene_sys.system).run(n * 1e-3, scene_sys.outputs).data
+    ours = Master(scene_sys.system).simulate(n * 1e-3, scene_sys.outputs).data
     exp = export_ssp(scene_sys.system, tmp_path / "sys.ssp")
     host = tmp_path / "host.py"
     host.write_text(HOST)

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from drillcosim.cosim.study.grid import Point, parse_list
-from drillcosim.cosim.study.sweep import SweepSpec, execute_point, run_sweep
+from drillcosim.cosim.study.sweep import SweepSpec, execute_sweep, point_row
 from drillcosim.cosim.study.table import COLUMNS, ResultTable, read_table
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -131,7 +131,7 @@ def test_points_open_loop_first_and_keys_unique():
 def test_table_drops_a_half_written_row(tmp_path):
     t = ResultTable(tmp_path)
     p = Point(SCENE, 1e9, 0.0, 1e-3, 1.0, "python")
-    t.append(execute_point(p, fake_runner))
+    t.append(point_row(p, fake_runner))
     with open(t.csv_path, "a") as fh:          # a kill in the middle of a write
         fh.write("paper_closed_loop|python|closed_loop|1e8,paper_clo")
     rows = ResultTable(tmp_path).rows
@@ -143,7 +143,7 @@ def test_table_drops_a_half_written_row(tmp_path):
 def test_duplicate_rows_keep_the_newest_and_the_folder_is_locked(tmp_path):
     t = ResultTable(tmp_path)
     p = Point(SCENE, 1e9, 0.0, 1e-3, 1.0, "python")
-    row = execute_point(p, fake_runner)
+    row = point_row(p, fake_runner)
     t.append(row)
     with open(t.csv_path, "a") as fh:           # what two concurrent writers would leave
         fh.write(t.csv_path.read_text().splitlines(keepends=True)[1])
@@ -158,7 +158,7 @@ def test_duplicate_rows_keep_the_newest_and_the_folder_is_locked(tmp_path):
 
 def test_benefit_from_the_open_loop_row(tmp_path):
     spec = SweepSpec(SCENE, [1.0], [0.0], [1e-3], 1.0, "python")
-    run_sweep(spec, tmp_path, workers=0, runner=fake_runner, progress=False)
+    execute_sweep(spec, tmp_path, workers=0, measure=fake_runner, progress=False)
     rows = {r["kind"]: r for r in read_table(tmp_path)}
     assert rows["closed_loop"]["benefit_long"] == pytest.approx(0.5)
     assert rows["closed_loop"]["benefit_short"] == pytest.approx(0.0)
@@ -171,19 +171,19 @@ def test_benefit_from_the_open_loop_row(tmp_path):
 def test_bad_points_are_recorded_with_their_reason(tmp_path):
     """A raising runner (gain 13) and a real point with invalid input (negative delay)."""
     spec = SweepSpec(SCENE, [1.0, 13.0], [0.0], [1e-3], 1.0, "python")
-    out = run_sweep(spec, tmp_path, workers=1, runner=fake_runner, progress=False)
+    out = execute_sweep(spec, tmp_path, workers=1, measure=fake_runner, progress=False)
     rows = {r["gain"]: r for r in read_table(tmp_path) if r["kind"] == "closed_loop"}
     assert out.n_errors == 1 and out.n_run == 3
     assert rows[13.0]["status"] == "error"
     assert rows[13.0]["reason"].startswith("RuntimeError: injected failure second line")
     assert rows[1.0]["status"] == "ok"
-    bad = execute_point(Point(SCENE, 1e9, -1e-3, 1e-3, 0.01, "python"))
+    bad = point_row(Point(SCENE, 1e9, -1e-3, 1e-3, 0.01, "python"))
     assert bad["status"] == "error" and "actuator_delay" in bad["reason"]
 
 
 def test_a_dying_worker_is_recorded_and_the_sweep_goes_on(tmp_path):
     spec = SweepSpec(SCENE, [1.0, 7.0], [0.0], [1e-3], 1.0, "python")
-    out = run_sweep(spec, tmp_path, workers=1, runner=dying_runner, progress=False)
+    out = execute_sweep(spec, tmp_path, workers=1, measure=dying_runner, progress=False)
     rows = {r["gain"]: r for r in read_table(tmp_path) if r["kind"] == "closed_loop"}
     assert out.n_points == 3 and len(read_table(tmp_path)) == 3
     assert rows[7.0]["status"] == "error" and "died" in rows[7.0]["reason"]
@@ -197,9 +197,9 @@ def test_killed_sweep_resumes_and_skips_finished_points(tmp_path):
     script = (
         "import sys; sys.path.insert(0, {!r})\n"
         "from test_sweep import slow_runner\n"
-        "from drillcosim.cosim.study.sweep import SweepSpec, run_sweep\n"
+        "from drillcosim.cosim.study.sweep import SweepSpec, execute_sweep\n"
         "spec = SweepSpec({!r}, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0], [0.0], [1e-3], 1.0, 'python')\n"
-        "run_sweep(spec, {!r}, workers=0, runner=slow_runner, progress=False)\n"
+        "execute_sweep(spec, {!r}, workers=0, measure=slow_runner, progress=False)\n"
     ).format(str(ROOT / "tests"), SCENE, str(tmp_path))
     proc = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT)
     csv = tmp_path / "results.csv"
@@ -213,11 +213,11 @@ def test_killed_sweep_resumes_and_skips_finished_points(tmp_path):
     before = {r["key"] for r in read_table(tmp_path)}
     assert 2 <= len(before) < 7
     spec = SweepSpec(SCENE, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0], [0.0], [1e-3], 1.0, "python")
-    out = run_sweep(spec, tmp_path, workers=0, runner=fake_runner, progress=False)
+    out = execute_sweep(spec, tmp_path, workers=0, measure=fake_runner, progress=False)
     assert out.n_skipped == len(before) and out.n_run == 7 - len(before)
     rows = read_table(tmp_path)
     assert len(rows) == 7 and len({r["key"] for r in rows}) == 7
-    again = run_sweep(spec, tmp_path, workers=0, runner=fake_runner, progress=False)
+    again = execute_sweep(spec, tmp_path, workers=0, measure=fake_runner, progress=False)
     assert again.n_run == 0 and again.n_skipped == 7
 
 
@@ -256,7 +256,7 @@ def _same_tables(a: list[dict], b: list[dict]) -> None:
 def clean_ordered_run(tmp_path_factory):
     """ORDERED run in this process, points one after another (references first)."""
     folder = tmp_path_factory.mktemp("clean")
-    out = run_sweep(ORDERED, folder, workers=0, runner=ordered_runner, progress=False)
+    out = execute_sweep(ORDERED, folder, workers=0, measure=ordered_runner, progress=False)
     return folder, out
 
 
@@ -288,7 +288,7 @@ def test_table_and_summary_do_not_depend_on_completion_order(clean_ordered_run, 
     barrier = tmp_path / "barrier"
     barrier.mkdir()
     monkeypatch.setenv(ORDER_ENV, f"{barrier}:{order}")
-    out = run_sweep(ORDERED, tmp_path / "sweep", workers=3, runner=ordered_runner,
+    out = execute_sweep(ORDERED, tmp_path / "sweep", workers=3, measure=ordered_runner,
                     progress=False)
     tmp_path = tmp_path / "sweep"
     kinds = [r["kind"] for r in read_table(tmp_path)]      # completion order
@@ -311,8 +311,8 @@ def test_killed_process_group_then_resume_equals_a_clean_run(clean_ordered_run, 
     script = (
         "import sys; sys.path.insert(0, {!r})\n"
         "from test_sweep import ORDERED, ordered_runner\n"
-        "from drillcosim.cosim.study.sweep import run_sweep\n"
-        "run_sweep(ORDERED, {!r}, workers=3, runner=ordered_runner, progress=False)\n"
+        "from drillcosim.cosim.study.sweep import execute_sweep\n"
+        "execute_sweep(ORDERED, {!r}, workers=3, measure=ordered_runner, progress=False)\n"
     ).format(str(ROOT / "tests"), str(tmp_path))
     barrier = tmp_path.parent / f"{tmp_path.name}_barrier"
     barrier.mkdir()
@@ -333,7 +333,7 @@ def test_killed_process_group_then_resume_equals_a_clean_run(clean_ordered_run, 
     assert 3 <= len(before) < 14
     assert any(r["verdict"] == "undecided" and "no completed open-loop reference" in r["reason"]
                for r in before)                 # written before its reference: not judged yet
-    out = run_sweep(ORDERED, tmp_path, workers=0, runner=ordered_runner, progress=False)
+    out = execute_sweep(ORDERED, tmp_path, workers=0, measure=ordered_runner, progress=False)
     assert out.n_skipped == len(before) and out.n_run == 14 - len(before)
     clean_folder, clean = clean_ordered_run
     _same_tables(_table(tmp_path), _table(clean_folder))
@@ -345,7 +345,7 @@ def test_a_stale_derived_column_is_repaired_on_opening(tmp_path):
     """A CSV row written before its reference (an older version kept it forever) is
     re-judged when the table is opened, and the Parquet copy follows."""
     spec = SweepSpec(SCENE, [2.0], [0.0], [1e-3], 2.0, "python")
-    run_sweep(spec, tmp_path, workers=0, runner=ordered_runner, progress=False)
+    execute_sweep(spec, tmp_path, workers=0, measure=ordered_runner, progress=False)
     path = tmp_path / "results.csv"
     text = path.read_text()
     assert ",unstable,0.0," in text
@@ -439,7 +439,7 @@ def test_small_sweep_on_a_dask_local_cluster(tmp_path):
                      options={"force_cap": 1e5})
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
                       dashboard_address=None) as cluster, Client(cluster) as client:
-        out = run_sweep(spec, tmp_path, scheduler=client.scheduler.address, progress=False)
+        out = execute_sweep(spec, tmp_path, scheduler=client.scheduler.address, progress=False)
     assert out.n_run == 5 and out.n_errors == 0
     rows = {(r["gain"], r["delay"]): r for r in read_table(tmp_path) if r["kind"] ==
             "closed_loop"}

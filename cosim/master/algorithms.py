@@ -159,7 +159,6 @@ class _Algorithm:
             self.y_names += [f"{plan.name}.{v}" for v in plan.out_names]
         self.y_index = {n: i for i, n in enumerate(self.y_names)}
         self.y = (ctypes.c_double * max(1, offset))()
-        self.n_y = offset
         self.lines = []
         for c in system.connections:
             src_fmu, _ = split_variable(c.source, "source")

@@ -48,7 +48,7 @@ class CosimError(RuntimeError):
         The component's own message about the failure (its newest Discard/Error/Fatal log
         message, one line), also the end of ``message``.
     result : object or None
-        Set by :class:`cosim.master.CoSimulation` to the partial result recorded
+        Set by :class:`cosim.master.Master` to the partial result recorded
         until the failure.
     """
 

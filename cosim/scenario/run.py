@@ -37,19 +37,19 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-from drillcosim.cosim.master.cosimulation import CoSimulation, Result
 from drillcosim.cosim.master.errors import CosimError
+from drillcosim.cosim.master.master import Master, Result
 
-__all__ = ["EXIT_DIVERGED", "EXIT_OK", "RunOutcome", "parse_set", "run_scene", "run_system",
-           "simulate_into"]
+__all__ = ["EXIT_DIVERGED", "EXIT_OK", "SceneOutcome", "parse_set", "simulate_into",
+           "simulate_scene", "simulate_system"]
 
 EXIT_OK = 0
 EXIT_DIVERGED = 1
 
 
 @dataclass(frozen=True)
-class RunOutcome:
-    """What :func:`run_scene` produced.
+class SceneOutcome:
+    """What :func:`simulate_scene` produced.
 
     Attributes
     ----------
@@ -148,7 +148,7 @@ def simulate_into(system, outputs: Sequence[str], output_ticks: int, stop: float
     csv = out / "results.csv"
     err: CosimError | None = None
     try:
-        result = CoSimulation(system).run(stop_time=stop, outputs=outputs,
+        result = Master(system).simulate(stop_time=stop, outputs=outputs,
                                           output_ticks=output_ticks, progress=progress,
                                           csv_path=csv)
     except CosimError as exc:
@@ -160,8 +160,8 @@ def simulate_into(system, outputs: Sequence[str], output_ticks: int, stop: float
     return result, _failure(err, result), csv
 
 
-def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
-               progress: bool | None = None, plots: bool = True) -> RunOutcome:
+def simulate_system(ss, out_dir: str | Path, stop_time: float | None = None,
+                    progress: bool | None = None, plots: bool = True) -> SceneOutcome:
     """Run a :class:`cosim.scenario.scene_system.SceneSystem` and write results, summary and plots.
 
     Parameters
@@ -178,7 +178,7 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
 
     Returns
     -------
-    RunOutcome
+    SceneOutcome
         ``exit_code`` 1 if the run stopped before ``stop_time``.
 
     Raises
@@ -188,7 +188,6 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
     CosimError
         If the run failed before its first step (earlier files are kept).
     """
-    from .plots import plot_run
     from .scene_system import scene_controller, span_info
     from .summary import summarize, write_json
 
@@ -213,24 +212,27 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
     summary["cosim"] = {**vars(ss.settings), "output_interval": ss.settings.output_interval}
     files = [csv, write_json(summary, out / "summary.json")]
     if plots and len(result.data) > 1:
+        from .plots import plot_run  # matplotlib: imported only when plotting
+
         files += plot_run(result.data, out, scene.plant.contact.clearance, spans, n_sites,
                           title=scene.name, switch_on_time=switch or None)
     if failure is not None:
         msg = (f"run stopped at t = {result.end_time:.6g} s of {stop:g} s: "
                f"{failure['message']}; partial results in {out}")
-        return RunOutcome(EXIT_DIVERGED, msg, out, summary, tuple(files))
+        return SceneOutcome(EXIT_DIVERGED, msg, out, summary, tuple(files))
     pngs = [Path(f).name for f in files if str(f).endswith(".png")]
     where = f"results.csv, summary.json{' and plots ' + ', '.join(pngs) if pngs else ''} in {out}"
     msg = (f"{scene.name}: {result.end_time:g} s simulated in {result.wall_time:.1f} s "
            f"(real-time factor {result.real_time_factor:.3g}); {where}")
-    return RunOutcome(EXIT_OK, msg, out, summary, tuple(files))
+    return SceneOutcome(EXIT_OK, msg, out, summary, tuple(files))
 
 
-def run_scene(scene: str | os.PathLike = "paper_closed_loop", *, stop_time: float | None = None,
-              step: float | None = None, delay: float | None = None, gain: float | None = None,
-              sets: Sequence[str] = (), out_dir: str | Path | None = None,
-              fmu_dir: str | Path | None = None, progress: bool | None = None,
-              plots: bool = True) -> RunOutcome:
+def simulate_scene(scene: str | os.PathLike = "paper_closed_loop", *,
+                   stop_time: float | None = None, step: float | None = None,
+                   delay: float | None = None, gain: float | None = None,
+                   sets: Sequence[str] = (), out_dir: str | Path | None = None,
+                   fmu_dir: str | Path | None = None, progress: bool | None = None,
+                   plots: bool = True) -> SceneOutcome:
     """Load a scene with overrides, run it and write the output folder.
 
     Parameters
@@ -260,7 +262,7 @@ def run_scene(scene: str | os.PathLike = "paper_closed_loop", *, stop_time: floa
 
     Returns
     -------
-    RunOutcome
+    SceneOutcome
 
     Raises
     ------
@@ -282,4 +284,4 @@ def run_scene(scene: str | os.PathLike = "paper_closed_loop", *, stop_time: floa
     plant_over = {k: v for k, v in over.items() if k not in ("cosim", "controller")}
     ss = scene_system(sc, fmu_dir, plant_overrides=plant_over)
     out = Path(out_dir) if out_dir is not None else Path("out") / sc.name
-    return run_system(ss, out, progress=progress, plots=plots)
+    return simulate_system(ss, out, progress=progress, plots=plots)

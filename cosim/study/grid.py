@@ -101,7 +101,7 @@ def point_key(scene: str, engine: str, kind: str, gain: float, delay: float, ste
 
 @dataclass(frozen=True)
 class Point:
-    """One co-simulation of a sweep (all the arguments of a point runner).
+    """One co-simulation of a sweep (all the arguments of a point measurement).
 
     Attributes
     ----------
@@ -120,7 +120,7 @@ class Point:
     overrides : str
         JSON of extra scene overrides (nested dict), "" for none.
     options : tuple of (str, float)
-        Metric options for the runner (see :class:`cosim.study.point.PointOptions`).
+        Metric options for the measurement (see :class:`cosim.study.point.PointOptions`).
     """
 
     scene: str
@@ -140,7 +140,7 @@ class Point:
                          self.stop_time, self.overrides)
 
     def kwargs(self) -> dict[str, Any]:
-        """Keyword arguments of :func:`cosim.study.point.run_point`."""
+        """Keyword arguments of :func:`cosim.study.point.measure_point`."""
         return {"scene": self.scene, "gain": self.gain, "delay": self.delay, "step": self.step,
                 "stop_time": self.stop_time, "engine": self.engine,
                 "open_loop": self.kind == "open_loop",

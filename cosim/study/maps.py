@@ -83,7 +83,7 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
     Parameters
     ----------
     folder : path-like
-        A :func:`cosim.study.sweep.run_sweep` output folder.
+        A :func:`cosim.study.sweep.execute_sweep` output folder.
     predict : bool
         Overlay the linear prediction (computed once, cached in ``prediction.json``).
 

@@ -1,6 +1,6 @@
 """One sweep point: a co-simulation of a scene at (gain, delay, step) and its metrics.
 
-:func:`run_point` is a plain module-level function of picklable arguments that
+:func:`measure_point` is a plain module-level function of picklable arguments that
 returns a flat dict, so it runs unchanged in a process pool or on a
 dask.distributed worker. The scene's system
 (:func:`cosim.scenario.scene_system.scene_system`) is run by the master
@@ -50,7 +50,7 @@ import numpy as np
 
 from drillcosim.cosim.scenario.scene_system import AXES, CONTROLLER, PLANT
 
-__all__ = ["ENGINES", "PointOptions", "error_row", "metrics", "point_scene", "run_point",
+__all__ = ["ENGINES", "PointOptions", "error_row", "metrics", "point_scene", "measure_point",
            "simulate_point"]
 
 SPANS = ("long", "short")
@@ -297,10 +297,10 @@ def error_row(exc: BaseException, wall_time: float = math.nan) -> dict[str, Any]
             f"{msg}{where}"[:500], "wall_time": wall_time}
 
 
-def run_point(scene: str, gain: float, delay: float, step: float, stop_time: float,
-              engine: str = "fmu", *, open_loop: bool = False,
-              overrides: Mapping[str, Any] | None = None, fmu_dir: str | None = None,
-              **options: float) -> dict[str, Any]:
+def measure_point(scene: str, gain: float, delay: float, step: float, stop_time: float,
+                  engine: str = "fmu", *, open_loop: bool = False,
+                  overrides: Mapping[str, Any] | None = None, fmu_dir: str | None = None,
+                  **options: float) -> dict[str, Any]:
     """Run one sweep point and measure it.
 
     Parameters
@@ -337,7 +337,7 @@ def run_point(scene: str, gain: float, delay: float, step: float, stop_time: flo
     ------
     Exception
         Bad input or an FMU failure before the first step (the sweep records it
-        as an ``error`` row, see :func:`cosim.study.sweep.run_sweep`).
+        as an ``error`` row, see :func:`cosim.study.sweep.execute_sweep`).
     """
     from drillcosim.cosim.scenario.scene_system import span_info
 

@@ -1,7 +1,7 @@
 """Parameter sweeps over controller gain x actuator delay x communication step.
 
 ``drillcosim sweep SCENE --gain LIST --delay LIST --step LIST`` runs one
-co-simulation per point (:func:`cosim.study.point.run_point`), plus one
+co-simulation per point (:func:`cosim.study.point.measure_point`), plus one
 open-loop reference per step for the control benefit, and records each point
 as it finishes in ``OUT/results.csv`` / ``results.parquet``
 (:mod:`cosim.study.table`). Re-running the same sweep into the same folder
@@ -29,17 +29,18 @@ from pathlib import Path
 from typing import Any
 
 from .grid import Point, SweepSpec, parse_list
-from .point import error_row, run_point
+from .point import error_row, measure_point
 from .table import ResultTable, verdict_counts
 
-__all__ = ["SweepOutcome", "execute_point", "parse_list", "run_sweep", "SweepSpec"]
+__all__ = ["SweepOutcome", "point_row", "parse_list", "execute_sweep", "SweepSpec"]
 
-Runner = Callable[..., dict]
+#: A point measurement: ``measure(**point.kwargs()) -> dict`` (module-level, picklable).
+Measure = Callable[..., dict]
 
 
 @dataclass(frozen=True)
 class SweepOutcome:
-    """What :func:`run_sweep` did, and the verdicts of the sweep's points.
+    """What :func:`execute_sweep` did, and the verdicts of the sweep's points.
 
     Attributes
     ----------
@@ -68,11 +69,6 @@ class SweepOutcome:
         """Points recorded with status ``error``."""
         return self.counts.get("error", 0)
 
-    @property
-    def n_unstable(self) -> int:
-        """Points judged unstable (diverged, or growing faster than open loop)."""
-        return self.counts.get("unstable", 0)
-
     def summary(self) -> str:
         """One line of verdict counts (a function of the table only)."""
         parts = [f"{n} {v}" for v, n in self.counts.items() if n]
@@ -80,7 +76,7 @@ class SweepOutcome:
                 f"{self.folder / 'results.csv'} and results.parquet")
 
 
-def execute_point(point: Point, runner: Runner = run_point) -> dict[str, Any]:
+def point_row(point: Point, measure: Measure = measure_point) -> dict[str, Any]:
     """Run a point and return its full table row; exceptions become an ``error`` row.
 
     Module-level and free of closures, so it pickles to process-pool and dask
@@ -91,7 +87,7 @@ def execute_point(point: Point, runner: Runner = run_point) -> dict[str, Any]:
             "kind": point.kind, "gain": point.gain, "delay": point.delay,
             "step": point.step, "stop_time": point.stop_time}
     try:
-        row = dict(runner(**point.kwargs()))
+        row = dict(measure(**point.kwargs()))
     except Exception as exc:  # one bad point never stops the sweep
         row = error_row(exc, time.perf_counter() - wall0)
     row.update(base)
@@ -106,7 +102,7 @@ def _lost_row(point: Point, reason: str) -> dict[str, Any]:
     return row
 
 
-def _local(points: list[Point], runner: Runner, workers: int
+def _local(points: list[Point], measure: Measure, workers: int
            ) -> Iterator[dict[str, Any]]:
     """Process pool; a dead worker breaks the pool: restart it, retry each point once."""
     import multiprocessing
@@ -116,7 +112,7 @@ def _local(points: list[Point], runner: Runner, workers: int
     while todo:
         pool = ProcessPoolExecutor(max_workers=min(workers, len(todo)),
                                    mp_context=multiprocessing.get_context("spawn"))
-        futures = {pool.submit(execute_point, p, runner): p for p in todo}
+        futures = {pool.submit(point_row, p, measure): p for p in todo}
         todo = []
         try:
             pending = set(futures)
@@ -139,13 +135,13 @@ def _local(points: list[Point], runner: Runner, workers: int
             pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _dask(points: list[Point], runner: Runner, scheduler: Any
+def _dask(points: list[Point], measure: Measure, scheduler: Any
           ) -> Iterator[dict[str, Any]]:
     from distributed import Client, as_completed
 
     client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
     try:
-        futures = {client.submit(execute_point, p, runner, pure=False): p for p in points}
+        futures = {client.submit(point_row, p, measure, pure=False): p for p in points}
         for fut in as_completed(futures):
             p = futures[fut]
             try:
@@ -157,14 +153,14 @@ def _dask(points: list[Point], runner: Runner, scheduler: Any
             client.close()
 
 
-def _inline(points: list[Point], runner: Runner) -> Iterator[dict[str, Any]]:
+def _inline(points: list[Point], measure: Measure) -> Iterator[dict[str, Any]]:
     for p in points:
-        yield execute_point(p, runner)
+        yield point_row(p, measure)
 
 
-def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int | None = None,
-              scheduler: Any = None, progress: bool | None = None,
-              runner: Runner = run_point, retry_errors: bool = False) -> SweepOutcome:
+def execute_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int | None = None,
+                  scheduler: Any = None, progress: bool | None = None,
+                  measure: Measure = measure_point, retry_errors: bool = False) -> SweepOutcome:
     """Run (or resume) a sweep and record every point in ``out_dir``.
 
     Parameters
@@ -179,8 +175,8 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int | Non
         Submit to this dask.distributed cluster instead of a local pool.
     progress : bool or None
         Progress bar counting points (None: only on a TTY).
-    runner : callable
-        Point runner (module-level, picklable), default :func:`run_point`.
+    measure : callable
+        Point measurement (module-level, picklable), default :func:`measure_point`.
     retry_errors : bool
         Re-run points recorded as ``error``.
 
@@ -202,11 +198,11 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int | Non
     (Path(out_dir) / "sweep.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
     n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
     if scheduler is not None:
-        rows = _dask(todo, runner, scheduler)
+        rows = _dask(todo, measure, scheduler)
     elif n_workers == 0 or not todo:
-        rows = _inline(todo, runner)
+        rows = _inline(todo, measure)
     else:
-        rows = _local(todo, runner, n_workers)
+        rows = _local(todo, measure, n_workers)
     bar = tqdm(total=len(points), initial=len(points) - len(todo), unit="point",
                desc="sweep", disable=None if progress is None else not progress)
     try:

@@ -1,7 +1,7 @@
 """The sweep's results table: ``results.csv``, and ``results.parquet`` with the same rows.
 
-Each row is one finished point. Its *measured* columns come from the point runner
-(:func:`cosim.study.point.run_point`); its *derived* columns (``verdict``, ``stable``,
+Each row is one finished point. Its *measured* columns come from the point measurement
+(:func:`cosim.study.point.measure_point`); its *derived* columns (``verdict``, ``stable``,
 ``growth_excess``, ``benefit_<span>`` and, for completed runs, ``reason``) are a function
 of that row and the open-loop reference row of the same scene, engine, step, stop time and
 overrides (:func:`derive`), never of the order the points finished in. Whenever a row is

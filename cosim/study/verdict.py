@@ -12,7 +12,7 @@ The rules, in this order (``docs/delay_study.md``, "Verdicts"):
    (:func:`judging_window`, derived from the scene).
 3. ``undecided`` without a completed open-loop reference, or without a measurable growth rate.
 4. With ``excess = growth - growth_open`` and ``noise`` the standard error of that difference
-   (the two slope fits' standard errors combined; 0 if the runner reports none):
+   (the two slope fits' standard errors combined; 0 if the measurement reports none):
    ``unstable`` if ``excess > GROWTH_MARGIN + NOISE_FACTOR * noise``, ``stable`` if
    ``excess < GROWTH_MARGIN - NOISE_FACTOR * noise``, else ``undecided`` (the excess is
    within the noise of the margin).
@@ -212,7 +212,7 @@ def judge(row: Mapping[str, Any], reference: Mapping[str, Any] | None
     if not math.isfinite(excess):
         return "undecided", "growth rate not measurable (too few envelope windows)", excess
     noise = math.hypot(noise, _number(reference, "growth_noise"))
-    if not math.isfinite(noise):     # a runner that does not report it: the fit at face value
+    if not math.isfinite(noise):     # a measurement that does not report it: the fit at face value
         noise = 0.0
     band = NOISE_FACTOR * noise
     about = f"strain envelope grows {excess:.3g} +- {noise:.2g} 1/s faster than open loop"

@@ -1,4 +1,12 @@
-"""Facade: run a :class:`~cosim.master.system.SystemSpec` and return a :class:`Result`."""
+"""The master: simulate a :class:`~cosim.master.system.SystemSpec` to a stop time and return
+its recorded :class:`Result`.
+
+:class:`Master` puts the pieces together for one simulation: an
+:class:`~cosim.master.execution.Execution` (time, slaves, algorithm), the
+:class:`~cosim.master.recorder.Recorder` (and a progress bar), the caller's observers and
+manipulators; a divergence ends the run with :attr:`Result.diverged` set, an FMU failure
+raises :class:`~cosim.master.errors.CosimError` carrying the partial result.
+"""
 
 from __future__ import annotations
 
@@ -12,7 +20,6 @@ import numpy as np
 
 from .errors import CosimError, DivergenceError
 from .execution import Execution
-from .progress import ProgressObserver
 from .recorder import Recorder
 from .slave import Slave
 from .system import SystemSpec
@@ -29,7 +36,7 @@ class Divergence:
 
 @dataclass(frozen=True)
 class Result:
-    """Outcome of :meth:`CoSimulation.run`.
+    """Outcome of :meth:`Master.simulate`.
 
     Attributes
     ----------
@@ -55,8 +62,8 @@ class Result:
     csv_path: Path | None = None
 
 
-class CoSimulation:
-    """Run a co-simulation system.
+class Master:
+    """Simulate a co-simulation system.
 
     Parameters
     ----------
@@ -70,7 +77,7 @@ class CoSimulation:
         self.system = system
         self.slaves = slaves
 
-    def run(self, stop_time: float | None = None, outputs: Sequence[str] = (),
+    def simulate(self, stop_time: float | None = None, outputs: Sequence[str] = (),
             output_interval: float | None = None, progress: bool | None = False,
             csv_path: str | Path | None = None, flush_every: int = 1000,
             observers: Sequence[Any] = (), manipulators: Sequence[Any] = (),
@@ -138,6 +145,8 @@ class CoSimulation:
                 execution.add_manipulator(man)
             execution.add_observer(recorder)
             if progress is not False:
+                from .progress import ProgressObserver  # tqdm: imported only when used
+
                 execution.add_observer(ProgressObserver(stop, disable=None if progress
                                                         is None else not progress))
             execution.initialize()
