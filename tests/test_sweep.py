@@ -119,6 +119,12 @@ def test_parse_list_forms():
         parse_list("0,1", "--step", positive=True)
 
 
+def test_a_stop_time_that_is_not_a_whole_number_of_steps_is_refused():
+    with pytest.raises(ValueError, match="6 s: not a whole number of steps of 0.00035 s"):
+        SweepSpec(SCENE, [1e9], [0.0], [1e-4, 3.5e-4], 6.0, "python").points()
+    assert len(SweepSpec(SCENE, [1e9], [0.0], [1e-4, 4e-4], 6.0, "python").points()) == 4
+
+
 def test_points_open_loop_first_and_keys_unique():
     spec = SweepSpec(SCENE, [1e8, 1e9], [0.0, 1e-4], [2.5e-4, 5e-4], 1.0, "python")
     pts = spec.points()
@@ -372,7 +378,15 @@ def test_judge_rules():
     assert verdict(growth_rate=1.0 + GROWTH_MARGIN + band + 1e-9)[0] == "unstable"
     assert verdict(growth_rate=1.0 + GROWTH_MARGIN + band - 1e-9)[0] == "undecided"
     assert verdict(growth_rate=1.0 + GROWTH_MARGIN - band + 1e-9)[0] == "undecided"
-    assert verdict(growth_rate=1.0 + GROWTH_MARGIN - band - 1e-9) == ("stable", "")
+    # below the margin: stable only within the noise of no extra growth
+    v, why = verdict(growth_rate=1.0 + GROWTH_MARGIN - band - 1e-9)
+    assert v == "undecided" and "less than the 0.5 1/s margin" in why
+    assert verdict(growth_rate=1.0 + band + 1e-9)[0] == "undecided"
+    assert verdict(growth_rate=1.0 + band - 1e-9) == ("stable", "")
+    assert verdict(growth_rate=0.2) == ("stable", "")      # less growth than open loop
+    # a noisy window: the margin's band reaches below zero, nothing is stable
+    noisy = {"growth_noise": 0.3, "reference": {**ref, "growth_noise": 0.0}}
+    assert verdict(growth_rate=1.0, **noisy)[0] == "undecided"
     v, why = verdict(growth_rate=9.0, end_time=5.0)          # too short wins over growth
     assert v == "undecided" and why.startswith("too short") and "5.9 s" in why
     assert verdict(growth_rate=1.0, reference=None) == (

@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from drillcosim.cosim.master.system import integer_multiple
+
 __all__ = ["Point", "SweepSpec", "parse_list", "point_key"]
 
 KINDS = ("closed_loop", "open_loop")
@@ -188,6 +190,11 @@ class SweepSpec:
             raise ValueError(f"engine = {self.engine!r}: 'fmu' or 'python'")
         if not (self.stop_time > 0 and math.isfinite(self.stop_time)):
             raise ValueError(f"stop time: a finite number > 0 [s], got {self.stop_time!r}")
+        for h in self.steps:
+            if integer_multiple(self.stop_time, h) is None:
+                raise ValueError(f"stop time {self.stop_time:g} s: not a whole number of steps "
+                                 f"of {h:g} s ({self.stop_time / h:.6g}); choose a stop time "
+                                 "every step divides")
         over = json.dumps(dict(self.overrides), sort_keys=True) if self.overrides else ""
         opts = tuple(sorted((k, float(v)) for k, v in self.options.items()))
         common = {"stop_time": float(self.stop_time), "engine": self.engine,

@@ -232,8 +232,10 @@ def sweep_from_args(scene: str, gain: str, delay: str, step: str, stop_time: flo
     if stop_time is None:
         stop_time = cosim_settings(load_scene(scene, overrides=dict(sets or {}) or None)
                                    ).stop_time
-    return SweepSpec(scene, gains, delays, steps, float(stop_time), engine,
+    spec = SweepSpec(scene, gains, delays, steps, float(stop_time), engine,
                      dict(sets or {}), True, dict(options or {}))
+    spec.points()                   # bad combinations fail here, before anything runs
+    return spec
 
 
 

@@ -12,10 +12,12 @@ The rules, in this order (``docs/delay_study.md``, "Verdicts"):
    (:func:`judging_window`, derived from the scene).
 3. ``undecided`` without a completed open-loop reference, or without a measurable growth rate.
 4. With ``excess = growth - growth_open`` and ``noise`` the standard error of that difference
-   (the two slope fits' standard errors combined; 0 if the measurement reports none):
-   ``unstable`` if ``excess > GROWTH_MARGIN + NOISE_FACTOR * noise``, ``stable`` if
-   ``excess < GROWTH_MARGIN - NOISE_FACTOR * noise``, else ``undecided`` (the excess is
-   within the noise of the margin).
+   (the two slope fits' standard errors combined; 0 if the measurement reports none) and
+   ``band = NOISE_FACTOR * noise``: ``unstable`` if ``excess > GROWTH_MARGIN + band`` (clearly
+   above the margin); ``stable`` if ``excess <= band`` and ``excess < GROWTH_MARGIN - band``
+   (no extra growth beyond the noise, and clearly below the margin); else ``undecided``:
+   within the noise of the margin, or a significant excess below it (a slow instability or
+   a different forced build-up: run longer, compare with the linear prediction).
 
 The open-loop run itself gets ``reference`` (``unstable`` if it diverged). The verdict of a row is
 a function of that row and its reference row only: :func:`judge` is what the results table
@@ -218,7 +220,11 @@ def judge(row: Mapping[str, Any], reference: Mapping[str, Any] | None
     about = f"strain envelope grows {excess:.3g} +- {noise:.2g} 1/s faster than open loop"
     if excess > GROWTH_MARGIN + band:
         return "unstable", f"{about} (> {GROWTH_MARGIN:g} 1/s)", excess
-    if excess < GROWTH_MARGIN - band:
+    if excess <= band and excess < GROWTH_MARGIN - band:
         return "stable", "", excess
-    return "undecided", (f"{about}: within the noise of the {GROWTH_MARGIN:g} 1/s margin "
-                         "(run longer)"), excess
+    if excess >= GROWTH_MARGIN - band:
+        return "undecided", (f"{about}: within the noise of the {GROWTH_MARGIN:g} 1/s margin "
+                             "(run longer)"), excess
+    return "undecided", (f"{about}: more than the noise, less than the {GROWTH_MARGIN:g} 1/s "
+                         "margin (a slow instability or another forced build-up: run longer, "
+                         "compare with the prediction)"), excess
