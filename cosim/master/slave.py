@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import abc
 import ctypes
+import functools
 import math
 import shutil
 from collections.abc import Sequence
@@ -45,7 +46,9 @@ class Slave(abc.ABC):
     4. :meth:`bind` ``(outputs, y, offset, inputs, u)``, once after :meth:`instantiate`:
        from then on :meth:`read_outputs` writes output ``outputs[i]`` to ``y[offset + i]``
        and :meth:`write_inputs` takes input ``inputs[i]`` from ``u[i]`` (``y``, ``u``: the
-       master's ``ctypes.c_double`` arrays, owned by the master).
+       master's ``ctypes.c_double`` arrays, owned by the master). :meth:`bind` may replace
+       the three hot methods by equivalent callables on the instance (the master looks them
+       up after binding).
     5. The hot calls :meth:`write_inputs` ``()``, :meth:`do_step` ``(t, h)`` (advance from
        ``t`` by ``h`` [s] with the inputs held) and :meth:`read_outputs` ``()`` return an FMI 2
        status (0 OK, 1 Warning, 2 Discard, 3 Error, 4 Fatal) and do not raise for a failure of
@@ -249,15 +252,17 @@ class FmuSlave(Slave):
         comp = self.component
         n_out, n_in = len(outputs), len(inputs)
         y_p = c_double_ptr(y, offset)
-        get, put, step = self.c_get_real, self.c_set_real, self.c_do_step
-        self._read = (get, comp, out_p, n_out, y_p) if n_out else None
-        self._write = (put, comp, in_p, n_in, u) if n_in else None
-        self._step = (step, comp)
+        self._step = (self.c_do_step, comp)
+        # the hot calls become the library functions with their arguments bound (no Python
+        # frame per call)
+        if n_out:
+            self.read_outputs = functools.partial(self.c_get_real, comp, out_p, n_out, y_p)
+        if n_in:
+            self.write_inputs = functools.partial(self.c_set_real, comp, in_p, n_in, u)
 
     def write_inputs(self) -> int:
-        """``fmi2SetReal`` of all bound inputs."""
-        w = self._write
-        return 0 if w is None else w[0](w[1], w[2], w[3], w[4])
+        """``fmi2SetReal`` of all bound inputs (nothing bound: nothing to do)."""
+        return 0
 
     def do_step(self, t: float, h: float) -> int:
         """``fmi2DoStep(t, h, noSetFMUStatePriorToCurrentPoint = false)``."""
@@ -265,9 +270,8 @@ class FmuSlave(Slave):
         return s[0](s[1], t, h, 0)
 
     def read_outputs(self) -> int:
-        """``fmi2GetReal`` of all bound outputs."""
-        r = self._read
-        return 0 if r is None else r[0](r[1], r[2], r[3], r[4])
+        """``fmi2GetReal`` of all bound outputs (nothing bound: nothing to do)."""
+        return 0
 
     def take_problem(self) -> str | None:
         """The newest Discard/Error/Fatal message the FMU logged and nobody reported yet."""
@@ -342,6 +346,8 @@ class FmuSlave(Slave):
                 pass
         self.instantiated = self.initialized = False
         self._bound = ()
+        self.__dict__.pop("read_outputs", None)
+        self.__dict__.pop("write_inputs", None)
         if self._own_dir:
             shutil.rmtree(self.unzip_dir, ignore_errors=True)
 
