@@ -410,7 +410,7 @@ class LoopModel:
         **kwargs
             Override any field (e.g. ``algorithm="jacobi"``, ``method="rk4"``).
         """
-        from drillcosim.cosim.scenario.scene_system import controller_parameters, cosim_settings
+        from drillcosim.cosim.scenario.scene_system import cosim_settings, scene_controller
         from drillcosim.plant.scene import load_scene
 
         sc = load_scene(scene, overrides=dict(overrides) if overrides else None) \
@@ -422,7 +422,7 @@ class LoopModel:
         opts: dict[str, Any] = {
             "algorithm": st.algorithm, "order": tuple(st.order), "coupling": st.coupling,
             "sensor_delay": st.sensor_delay,
-            "lag_time_constant": float(controller_parameters(sc)["lag_time_constant"]),
+            "lag_time_constant": scene_controller(sc).lag_time_constant,
         }
         if kwargs.get("method") == "rk4" and "max_step" not in kwargs:
             kwargs["max_step"] = stable_step
