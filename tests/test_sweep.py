@@ -142,6 +142,8 @@ def test_table_drops_a_half_written_row(tmp_path):
         fh.write("paper_closed_loop|python|closed_loop|1e8,paper_clo")
     rows = ResultTable(tmp_path).rows
     assert [r["key"] for r in rows] == [p.key]
+    assert not t.csv_path.read_text().endswith("\n")     # a reader writes nothing
+    assert [r["key"] for r in ResultTable(tmp_path).load(repair=True)] == [p.key]
     assert t.csv_path.read_text().endswith("\n")
     assert t.csv_path.read_text().count("\n") == 2       # header + 1 row, repaired
 
@@ -347,9 +349,9 @@ def test_killed_process_group_then_resume_equals_a_clean_run(clean_ordered_run, 
         clean.summary().replace(str(clean_folder), "")
 
 
-def test_a_stale_derived_column_is_repaired_on_opening(tmp_path):
+def test_a_stale_derived_column_is_repaired_by_the_next_sweep(tmp_path):
     """A CSV row written before its reference (an older version kept it forever) is
-    re-judged when the table is opened, and the Parquet copy follows."""
+    re-judged when read, and the files are repaired by the next (resumed) sweep."""
     spec = SweepSpec(SCENE, [2.0], [0.0], [1e-3], 2.0, "python")
     execute_sweep(spec, tmp_path, workers=0, measure=ordered_runner, progress=False)
     path = tmp_path / "results.csv"
@@ -358,7 +360,9 @@ def test_a_stale_derived_column_is_repaired_on_opening(tmp_path):
     path.write_text(text.replace(",unstable,0.0,", ",stable,1.0,"))
     rows = {r["kind"]: r for r in read_table(tmp_path)}
     assert rows["closed_loop"]["verdict"] == "unstable"
-    assert ",unstable,0.0," in path.read_text()
+    assert ",stable,1.0," in path.read_text()                  # read only
+    out = execute_sweep(spec, tmp_path, workers=0, measure=ordered_runner, progress=False)
+    assert out.n_run == 0 and ",unstable,0.0," in path.read_text()
     _table(tmp_path)
 
 

@@ -190,7 +190,7 @@ def execute_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int |
     points = spec.points()
     table = ResultTable(out_dir)
     lock = table.lock()
-    table.rows = table.load()        # re-read under the lock
+    table.rows = table.load(repair=True)     # re-read and repaired under the lock
     done = table.keys(include_errors=not retry_errors)
     todo = [p for p in points if p.key not in done]
     meta = {"spec": {k: (list(v) if isinstance(v, (list, tuple)) else v)

@@ -12,10 +12,11 @@ row's changed (its reference arrived), the CSV is rewritten atomically
 same rows after every change, so both files hold the same table.
 
 A kill can at worst leave a partial last CSV line, or a Parquet copy one row behind:
-opening the table (:class:`ResultTable`, also :func:`read_table`) drops the partial line,
-keeps the newest of duplicate keys, recomputes the derived columns and rewrites whichever
-file differs from the result. A resumed sweep thus re-runs that point and re-judges the
-rows it depends on.
+reading the table (:class:`ResultTable`, :func:`read_table`) drops the partial line, keeps the
+newest of duplicate keys and recomputes the derived columns; a writing sweep (holding the
+folder's lock, :meth:`ResultTable.load` with ``repair=True``) also rewrites whichever file
+differs from the result. A resumed sweep thus re-runs that point and re-judges the rows it
+depends on; a reader never writes (it may run while a sweep appends).
 
 ``benefit_<span> = 1 - rms_<span> / rms_<span>(open loop)`` (1 = all deflection removed,
 0 = none, < 0 = worse); ``growth_excess = growth_rate - growth_rate(open loop)`` [1/s];
@@ -169,12 +170,15 @@ class ResultTable:
         self.rows: list[dict[str, Any]] = self.load()
 
     # -- reading -------------------------------------------------------------------
-    def load(self) -> list[dict[str, Any]]:
-        """Read the CSV (creating it if missing) and bring both files up to date.
+    def load(self, repair: bool = False) -> list[dict[str, Any]]:
+        """Read the CSV: complete rows, newest of a repeated key, derived columns recomputed.
 
-        A partial last line and lines with the wrong number of fields are dropped, the newest
-        row of a repeated key is kept, the derived columns are recomputed; each file is
-        rewritten (atomically) if it differs from the result.
+        Parameters
+        ----------
+        repair : bool
+            Also bring the files up to date (for the sweep holding the folder's lock): create
+            the CSV if missing; rewrite it, and the Parquet copy, atomically where they differ
+            from the rows read (a partial last line, stale derived columns, a lagging copy).
 
         Returns
         -------
@@ -182,7 +186,8 @@ class ResultTable:
             One dict per complete row, numbers as float (NaN for empty cells).
         """
         if not self.csv_path.exists():
-            atomic_write(self.csv_path, _HEADER)
+            if repair:
+                atomic_write(self.csv_path, _HEADER)
             return []
         text = self.csv_path.read_bytes().decode("utf-8", errors="replace")
         lines = text[: text.rfind("\n") + 1].splitlines(keepends=True)
@@ -201,9 +206,9 @@ class ResultTable:
             parsed.pop(row["key"], None)      # a repeated key: the newest row, at its place
             parsed[row["key"]] = row
         rows = derive(list(parsed.values()))
-        if _csv_text(rows) != text:
+        if repair and _csv_text(rows) != text:
             atomic_write(self.csv_path, _csv_text(rows))
-        if rows and not self._parquet_holds(rows):
+        if repair and rows and not self._parquet_holds(rows):
             self._write_parquet(rows)
         return rows
 
@@ -236,12 +241,13 @@ class ResultTable:
         new = full_row(row)
         old = [r for r in self.rows if r["key"] != new["key"]]
         rows = derive([*old, new])
-        if len(old) == len(self.rows) and all(_same(a, b) for a, b in zip(self.rows, rows)):
+        if self.csv_path.exists() and len(old) == len(self.rows) and \
+                all(_same(a, b) for a, b in zip(self.rows, rows)):
             with open(self.csv_path, "a", encoding="utf-8") as fh:
                 fh.write(_line(rows[-1]))
                 fh.flush()
                 os.fsync(fh.fileno())
-        else:   # a replaced row, or rows whose verdict depends on the new one
+        else:   # a new file, a replaced row, or rows whose verdict depends on the new one
             atomic_write(self.csv_path, _csv_text(rows))
         self.rows = rows
         self._write_parquet(rows)
@@ -274,7 +280,7 @@ class ResultTable:
 def read_table(folder_or_file: str | os.PathLike) -> list[dict[str, Any]]:
     """Rows of a sweep (folder, ``results.csv`` or ``results.parquet``), derived columns filled.
 
-    A folder or CSV is opened as a :class:`ResultTable` (which repairs and re-derives it).
+    A folder or CSV is read as a :class:`ResultTable` (rows re-derived; nothing is written).
     """
     p = Path(folder_or_file)
     if p.suffix == ".parquet":
