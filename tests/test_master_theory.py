@@ -196,3 +196,26 @@ def test_jacobi_loop_delay_agrees_with_libcosim(fmus):
     for x in (x_lc[1:], x_us):
         np.testing.assert_allclose(x[2:], x[1:-1] - a * x[:-2], atol=1e-14)
     assert x_lc[1] == 1.0 and x_us[1] == pytest.approx(1.0 - a)
+
+
+# --- exchange timing, multirate ---------------------------------------------------------
+@pytest.mark.parametrize("algorithm,order", [("jacobi", ("src", "probe")),
+                                             ("gauss_seidel", ("src", "probe")),
+                                             ("gauss_seidel", ("probe", "src"))])
+@pytest.mark.parametrize("p_src,p_dst", [(1, 1), (3, 1), (1, 2), (3, 2), (2, 3)])
+def test_linear_coupling_extrapolates_a_ramp_to_the_middle_of_the_target_step(
+        fmus, algorithm, order, p_src, p_dst):
+    """A ramp x = t through a linear-coupling connection: whichever source samples the target
+    sees (cosim.master.algorithms.newest_sample_tick, any periods, either order), their linear
+    extrapolant is the ramp itself, so the probe must hold exactly t_mid = the middle of its
+    own step over the step; a horizon off by a sample would miss it by a source period."""
+    H = 0.01
+    system = SystemSpec(
+        [FmuSpec("src", fmus["mt_integrator"], {"u": 1.0}, sample_period_ticks=p_src),
+         FmuSpec("probe", fmus["mt_gain"], {"k": -1.0}, sample_period_ticks=p_dst)],
+        [Connection("src.x", "probe.u", coupling="linear")], H, algorithm, order)
+    res = Master(system).simulate(60 * H, outputs=["probe.y"], output_interval=p_dst * H)
+    t, y = res.data["time"], res.data["probe.y"]
+    late = t >= 3 * max(p_src, p_dst) * H + p_dst * H     # two samples exist by then
+    assert late.sum() >= 10
+    np.testing.assert_allclose(y[late], t[late] - p_dst * H / 2, rtol=0, atol=1e-12)
