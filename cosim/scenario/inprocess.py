@@ -98,6 +98,25 @@ class _ArraySlave(Slave):
     def close(self) -> None:
         """Nothing to release."""
 
+    can_get_set_state = True
+
+    def get_state(self, time: float):
+        """The model's state (:meth:`_save`), inputs and outputs."""
+        return self._save(), self.u.copy(), self.y.copy()
+
+    def set_state(self, state, time: float) -> None:
+        """Restore a state from :meth:`get_state`."""
+        model, u, y = state
+        self._restore(model)
+        self.u[:], self.y[:] = u, y
+        self.errored = False
+
+    def _save(self):  # pragma: no cover - each subclass has its own
+        raise NotImplementedError
+
+    def _restore(self, state) -> None:  # pragma: no cover
+        raise NotImplementedError
+
 
 class PlantSlave(_ArraySlave):
     """:class:`plant.simulator.PlantSimulator` as a slave (inputs: actuator forces [N];
@@ -109,8 +128,6 @@ class PlantSlave(_ArraySlave):
         Instance name.
     simulator : PlantSimulator
     """
-
-    can_get_set_state = True
 
     def __init__(self, name: str, simulator: PlantSimulator):
         super().__init__(name, simulator.input_names, simulator.model.output_names)
@@ -141,16 +158,12 @@ class PlantSlave(_ArraySlave):
         self.y[:] = sim.outputs()
         return 0
 
-    def get_state(self, time: float):
-        """Simulator state, inputs and outputs."""
-        return self.sim.get_state(), self.u.copy(), self.y.copy(), self._halted
+    def _save(self):
+        return self.sim.get_state(), self._halted
 
-    def set_state(self, state, time: float) -> None:
-        """Restore a state from :meth:`get_state`."""
-        sim_state, u, y, halted = state
+    def _restore(self, state) -> None:
+        sim_state, self._halted = state
         self.sim.set_state(sim_state)
-        self.u[:], self.y[:], self._halted = u, y, halted
-        self.errored = False
 
 
 class ControllerSlave(_ArraySlave):
@@ -163,8 +176,6 @@ class ControllerSlave(_ArraySlave):
         Instance name.
     params : ControllerParams
     """
-
-    can_get_set_state = True
 
     def __init__(self, name: str, params: ControllerParams):
         sites = [(s, a) for s in CONTROLLER_SITES for a in AXES]
@@ -186,16 +197,11 @@ class ControllerSlave(_ArraySlave):
             return FMI2_ERROR
         return 0
 
-    def get_state(self, time: float):
-        """Lag state, inputs and outputs."""
-        return self.law.get_state(), self.u.copy(), self.y.copy()
+    def _save(self):
+        return self.law.get_state()
 
-    def set_state(self, state, time: float) -> None:
-        """Restore a state from :meth:`get_state`."""
-        law, u, y = state
-        self.law.set_state(law)
-        self.u[:], self.y[:] = u, y
-        self.errored = False
+    def _restore(self, state) -> None:
+        self.law.set_state(state)
 
 
 def inprocess_slaves(ss: SceneSystem) -> dict[str, Slave]:
