@@ -250,7 +250,8 @@ def simulate_point(sc, over: Mapping[str, Any], opts: PointOptions, engine: str 
     Raises
     ------
     CosimError
-        A failure before the first step (bad parameters, a missing FMU).
+        A failure before the run started (bad parameters, a missing FMU); a failure while
+        stepping ends the run as diverged (its reason names the slave's own message).
     """
     from drillcosim.cosim.master.errors import CosimError, DivergenceError
     from drillcosim.cosim.master.execution import Execution
@@ -286,7 +287,7 @@ def simulate_point(sc, over: Mapping[str, Any], opts: PointOptions, engine: str 
                   + (f" exceeds the force cap {opts.force_cap:g} N"
                      if math.isfinite(exc.value) else ""))
     except CosimError as exc:
-        if execution is None or execution.tick == 0:
+        if execution is None or not execution.initialized:
             raise
         reason = (f"diverged at t = {exc.time:.6g} s: {exc.fmu_name} {exc.call} failed: "
                   f"{exc.fmu_message or exc.message}")

@@ -1,6 +1,6 @@
 """Parameter sweeps over controller gain x actuator delay x communication step.
 
-``drillcosim sweep SCENE --gain LIST --delay LIST --step LIST`` runs one
+``drillcosim sweep SCENE --gain LIST --delay LIST --step LIST`` simulates one
 co-simulation per point (:func:`cosim.study.point.measure_point`), plus one
 open-loop reference per step for the control benefit, and records each point
 as it finishes in ``OUT/results.csv`` / ``results.parquet``
@@ -32,7 +32,7 @@ from .grid import Point, SweepSpec, parse_list
 from .point import error_row, measure_point
 from .table import ResultTable, verdict_counts
 
-__all__ = ["SweepOutcome", "point_row", "parse_list", "execute_sweep", "SweepSpec"]
+__all__ = ["SweepOutcome", "SweepSpec", "execute_sweep", "judging_note", "parse_list", "point_row"]
 
 #: A point measurement: ``measure(**point.kwargs()) -> dict`` (module-level, picklable).
 Measure = Callable[..., dict]
