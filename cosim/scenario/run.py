@@ -40,7 +40,8 @@ else:  # pragma: no cover
 from drillcosim.cosim.master.cosimulation import CoSimulation, Result
 from drillcosim.cosim.master.errors import CosimError
 
-__all__ = ["EXIT_DIVERGED", "EXIT_OK", "RunOutcome", "parse_set", "run_scene", "run_system"]
+__all__ = ["EXIT_DIVERGED", "EXIT_OK", "RunOutcome", "parse_set", "run_scene", "run_system",
+           "scene_system_from_options", "simulate_into"]
 
 EXIT_OK = 0
 EXIT_DIVERGED = 1
@@ -186,12 +187,61 @@ class _FmuLogging:
         """Nothing to do per step."""
 
 
-def _simulate(ss, stop: float, progress: bool | None, csv_path: Path) -> Result:
+def _simulate(system, outputs: Sequence[str], output_interval: float, stop: float,
+              progress: bool | None, csv_path: Path) -> Result:
     """:meth:`CoSimulation.run` with the FMU-logging observer added."""
-    H = ss.system.base_step
-    return CoSimulation(ss.system).run(
-        stop_time=stop, outputs=ss.outputs, output_interval=max(1, round(ss.output_interval / H))
+    H = system.base_step
+    return CoSimulation(system).run(
+        stop_time=stop, outputs=outputs, output_interval=max(1, round(output_interval / H))
         * H, progress=progress, csv_path=csv_path, observers=[_FmuLogging()])
+
+
+def simulate_into(system, outputs: Sequence[str], output_interval: float, stop: float,
+                  out: Path, progress: bool | None) -> tuple[Result, dict[str, Any] | None, Path]:
+    """Run ``system`` to ``stop`` [s], streaming ``out/results.csv`` (moved into place at the end).
+
+    Returns
+    -------
+    (Result, dict or None, Path)
+        The result, the failure (time, quantity, value, message) if the run stopped early,
+        and the CSV path.
+
+    Raises
+    ------
+    CosimError
+        If the run failed before its first step (earlier files are kept); its message ends
+        with the FMU's own log line when there is one.
+    """
+    from .summary import publish
+
+    staging = out / ".results.running.csv"
+    log = _FmuLog(sys.stdout)
+    err: CosimError | None = None
+    try:
+        with contextlib.redirect_stdout(log):
+            result = _simulate(system, outputs, output_interval, stop, progress, staging)
+    except CosimError as exc:
+        err = exc
+        result = exc.result
+        if result is None or not math.isfinite(result.end_time) or \
+                result.end_time <= system.start_time:
+            with contextlib.suppress(OSError):  # keep the real error visible
+                staging.unlink(missing_ok=True)
+            detail = log.detail(exc.fmu_name)
+            if detail is None:
+                raise
+            full = CosimError(exc.fmu_name, exc.call, exc.time, f"{exc.message}: {detail}",
+                              status=exc.status)
+            full.result = exc.result
+            raise full from exc
+    except BaseException:
+        with contextlib.suppress(OSError):
+            staging.unlink(missing_ok=True)
+        raise
+    csv = out / "results.csv"
+    if staging.exists():
+        publish(staging, csv)
+    return result, _failure(err, result, log), csv
 
 
 def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
@@ -224,41 +274,15 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
     """
     from .plots import plot_run
     from .scene_system import controller_parameters, span_info
-    from .summary import publish, summarize, write_json
+    from .summary import summarize, write_json
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     stop = ss.stop_time if stop_time is None else float(stop_time)
     if not (math.isfinite(stop) and stop > 0):
         raise ValueError(f"stop time: a finite number > 0 [s], got {stop!r}")
-    staging = out / ".results.running.csv"
-    log = _FmuLog(sys.stdout)
-    err: CosimError | None = None
-    try:
-        with contextlib.redirect_stdout(log):
-            result = _simulate(ss, stop, progress, staging)
-    except CosimError as exc:
-        err = exc
-        result = exc.result
-        if result is None or not math.isfinite(result.end_time) or \
-                result.end_time <= ss.system.start_time:
-            with contextlib.suppress(OSError):  # keep the real error visible
-                staging.unlink(missing_ok=True)
-            detail = log.detail(exc.fmu_name)
-            if detail is None:
-                raise
-            full = CosimError(exc.fmu_name, exc.call, exc.time, f"{exc.message}: {detail}",
-                              status=exc.status)
-            full.result = exc.result
-            raise full from exc
-    except BaseException:
-        with contextlib.suppress(OSError):
-            staging.unlink(missing_ok=True)
-        raise
-    csv = out / "results.csv"
-    if staging.exists():
-        publish(staging, csv)
-    failure = _failure(err, result, log)
+    result, failure, csv = simulate_into(ss.system, ss.outputs, ss.output_interval, stop, out,
+                                         progress)
     scene = ss.scene
     spans = span_info(scene)
     n_sites = len(scene.plant.actuator_joints)
@@ -286,11 +310,48 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
     return RunOutcome(EXIT_OK, msg, out, summary, tuple(files))
 
 
+def scene_system_from_options(scene: str | os.PathLike, *, stop_time: float | None = None,
+                              step: float | None = None, delay: float | None = None,
+                              gain: float | None = None, sets: Sequence[str] = (),
+                              fmu_dir: str | Path | None = None,
+                              plant_fmu: str | Path | None = None,
+                              controller_fmu: str | Path | None = None):
+    """Load a scene with the command-line overrides and build its checked system.
+
+    Parameters: as :func:`run_scene`.
+
+    Returns
+    -------
+    SceneSystem
+
+    Raises
+    ------
+    ValueError
+        Bad input (scene, keys, values, an FMU pair that does not fit).
+    """
+    from drillcosim.plant.scene import load_scene
+
+    from .scene_system import scene_system
+
+    over: dict[str, Any] = {}
+    for section, key, value in (("cosim", "stop_time", stop_time), ("cosim", "step", step),
+                                ("cosim", "actuator_delay", delay),
+                                ("controller", "gain", gain)):
+        if value is not None:
+            over.setdefault(section, {})[key] = value
+    over = _merge(over, parse_set(sets))
+    sc = load_scene(scene, overrides=over or None)
+    plant_over = {k: v for k, v in over.items() if k not in ("cosim", "controller", "plant")}
+    return scene_system(sc, fmu_dir, plant_fmu=plant_fmu, controller_fmu=controller_fmu,
+                        plant_overrides=plant_over)
+
+
 def run_scene(scene: str | os.PathLike = "paper_closed_loop", *, stop_time: float | None = None,
               step: float | None = None, delay: float | None = None, gain: float | None = None,
               sets: Sequence[str] = (), out_dir: str | Path | None = None,
               fmu_dir: str | Path | None = None, progress: bool | None = None,
-              plots: bool = True) -> RunOutcome:
+              plots: bool = True, plant_fmu: str | Path | None = None,
+              controller_fmu: str | Path | None = None) -> RunOutcome:
     """Load a scene with overrides, run it and write the output folder.
 
     Parameters
@@ -317,6 +378,9 @@ def run_scene(scene: str | os.PathLike = "paper_closed_loop", *, stop_time: floa
         Progress bar (None: only on a TTY).
     plots : bool
         Write the PNGs.
+    plant_fmu, controller_fmu : path-like, optional
+        FMU files (any maker) used instead of the project's; the pair is checked before the
+        first step (:mod:`cosim.scenario.interface`).
 
     Returns
     -------
@@ -325,21 +389,10 @@ def run_scene(scene: str | os.PathLike = "paper_closed_loop", *, stop_time: floa
     Raises
     ------
     ValueError
-        Bad input (scene, keys, values), one line.
+        Bad input (scene, keys, values, an FMU pair that does not fit), one line per problem.
     """
-    from drillcosim.plant.scene import load_scene
-
-    from .scene_system import scene_system
-
-    over: dict[str, Any] = {}
-    for section, key, value in (("cosim", "stop_time", stop_time), ("cosim", "step", step),
-                                ("cosim", "actuator_delay", delay),
-                                ("controller", "gain", gain)):
-        if value is not None:
-            over.setdefault(section, {})[key] = value
-    over = _merge(over, parse_set(sets))
-    sc = load_scene(scene, overrides=over or None)
-    plant_over = {k: v for k, v in over.items() if k not in ("cosim", "controller")}
-    ss = scene_system(sc, fmu_dir, plant_overrides=plant_over)
-    out = Path(out_dir) if out_dir is not None else Path("out") / sc.name
+    ss = scene_system_from_options(scene, stop_time=stop_time, step=step, delay=delay, gain=gain,
+                                   sets=sets, fmu_dir=fmu_dir, plant_fmu=plant_fmu,
+                                   controller_fmu=controller_fmu)
+    out = Path(out_dir) if out_dir is not None else Path("out") / ss.scene.name
     return run_system(ss, out, progress=progress, plots=plots)
