@@ -136,6 +136,8 @@ def _resolve_path(name_or_path: str | os.PathLike, folder: Path | None) -> Path:
             raise SceneError(f"{p}: scene file not found")
         return p
     cand = (folder or scenes_dir()) / f"{name_or_path}.toml"
+    if not cand.exists() and folder is not None:  # a user's scene may extend a shipped one
+        cand = scenes_dir() / f"{name_or_path}.toml"
     if not cand.exists():
         names = list_scenes(folder)
         raise SceneError(f"scene '{name_or_path}' not found{_suggest(str(name_or_path), names)}")
