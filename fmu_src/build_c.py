@@ -9,7 +9,8 @@ The FMU is made from ``fmu_src/c_controller/`` (no Python at run time):
   -Wextra -Werror``), plus ``-ffp-contract=off`` so no multiply-add is fused (the Python law
   rounds every operation; with fusion the two would differ in the last bit on FMA hardware);
 * ``sources/`` - the C files and the FMI 2.0 headers (listed in ``<SourceFiles>``), so an
-  importer on another platform can compile it (e.g. ``fmpy.util.compile_platform_binary``).
+  importer on another platform can compile it (e.g. ``fmpy.util.compile_platform_binary``);
+* ``documentation/licenses/fmi2-headers.txt`` - the headers' BSD-2-Clause license.
 
 A compiler warning is an error. The FMU is written atomically (temporary file + ``os.replace``).
 """
@@ -94,6 +95,7 @@ def build_c_controller(out_dir: Path | str, cc: str | None = None) -> Path:
                 zf.write(SOURCE_DIR / name, f"sources/{name}")
             for name in FMI_HEADERS:  # beside the C files: #include "fmi2Functions.h" resolves
                 zf.write(SOURCE_DIR / "fmi2" / name, f"sources/{name}")
+            zf.write(SOURCE_DIR / "fmi2" / "LICENSE.txt", "documentation/licenses/fmi2-headers.txt")
         os.replace(part, target)
     finally:
         shutil.rmtree(work, ignore_errors=True)

@@ -11,7 +11,8 @@ co-simulation FMUs can be coupled. The pieces, each with one job (as in libcosim
 * :mod:`.recorder`, :mod:`.progress` - observers (read only);
 * :mod:`.manipulators` - scenario events and fault injection (write only);
 * :mod:`.errors` - the one place FMI statuses become exceptions;
-* :mod:`.ssp` - SSP 1.0 export;
+* :mod:`.ssp` - SSP 1.0 export; :mod:`.ssp_import` - SSP 1.0 import;
+* :mod:`.interface` - the check that connected FMU variables fit (before the first step);
 * :mod:`.cosimulation` - run a system to a stop time and return its recorded result.
 """
 
