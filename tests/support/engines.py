@@ -31,14 +31,16 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["CSV_RESOLUTION", "Comparison", "compare", "ecos_binary", "run_ecos_cli",
+__all__ = ["CSV_RESOLUTION", "LIBCOSIM_HOST", "Comparison", "compare", "ecos_binary", "run_ecos_cli",
            "run_ecos_library", "run_libcosim"]
 
 #: Half a unit of the sixth decimal: how far a value printed by Ecos's CSV (``%f``) may be
 #: from the value the engine held.
 CSV_RESOLUTION = 5e-7
 
-_LIBCOSIM_HOST = textwrap.dedent("""
+#: A libcosimpy host script: ``python host.py SSP STEP_NS N_STEPS JSON_OUTPUTS`` prints
+#: ``RESULT {"ok": ..., "rows": [...]}`` (the outputs after each step).
+LIBCOSIM_HOST = textwrap.dedent("""
     import json, sys
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimObserver import CosimObserver
@@ -106,7 +108,7 @@ def run_libcosim(ssp: Path, step: float, n_steps: int, outputs: Sequence[str], w
     if abs(step_ns * 1e-9 - step) > 1e-15 * step:
         raise ValueError(f"libcosim steps in whole nanoseconds, got {step!r} s")
     host = workdir / "libcosim_host.py"
-    host.write_text(_LIBCOSIM_HOST)
+    host.write_text(LIBCOSIM_HOST)
     proc = subprocess.run([sys.executable, str(host), str(ssp), str(step_ns), str(n_steps),
                            json.dumps(list(outputs))], cwd=workdir, capture_output=True,
                           text=True, timeout=timeout)
