@@ -4,7 +4,9 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 FMUS := build/fmus/DrillstringPlant.fmu build/fmus/StrainController.fmu
+C_FMUS := build/fmus/StrainControllerC.fmu
 SRC := $(shell find plant controller fmu_src -name '*.py' -o -name '*.c' 2>/dev/null)
+C_SRC := $(wildcard fmu_src/c_controller/*.c fmu_src/c_controller/*.h fmu_src/c_controller/*.xml) fmu_src/build_c.py
 
 .PHONY: all install fmus run test lint bench clean
 
@@ -23,7 +25,10 @@ install: $(STAMP)
 $(FMUS) &: $(STAMP) $(SRC) $(wildcard scenes/*.toml)
 	$(BIN)/python -m drillcosim.fmu_src.build --out build/fmus
 
-fmus: $(FMUS)
+$(C_FMUS): $(STAMP) $(C_SRC)
+	$(BIN)/python -m drillcosim.fmu_src.build_c --out build/fmus
+
+fmus: $(FMUS) $(C_FMUS)
 
 run: install fmus
 	$(BIN)/drillcosim run

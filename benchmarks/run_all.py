@@ -292,9 +292,11 @@ def _fmu_and_master_sections(quick: bool) -> list[str]:
     red = _script(["benchmarks/bench_reduced.py", "--stop-time", "3" if quick else "10"], 900)
     rms = "" if quick else _script(["benchmarks/bench_rms_sensitivity.py", "--members", "160",
                                     "--divisors", "1,2", "--no-step-table"], 3600)
+    ctl = _script(["benchmarks/bench_controller_fmus.py", "--steps", steps, "--stop-time",
+                   "1" if quick else "2"], 900)
     return [red, rms, fm, "", "## Master overhead on tiny FMUs (benchmarks/bench_master_overhead.py)", "",
             f"Command: `python benchmarks/bench_master_overhead.py --steps {steps}` (target: "
-            "our master within 1.3x of a hand-written raw fmpy loop).", "", *table, ""]
+            "our master within 1.3x of a hand-written raw fmpy loop).", "", *table, "", ctl]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

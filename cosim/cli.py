@@ -1,10 +1,13 @@
 """The ``drillcosim`` command line.
 
 Sub-commands: ``modes`` (modal analysis next to the analytic values and the paper's Table 1),
-``scenes`` (list the shipped scenes), ``build`` (write the FMUs), ``run`` (co-simulate a scene:
-results.csv, summary.json, plots), ``sweep`` (gain x delay x step stability/benefit table).
+``scenes`` (list the shipped scenes), ``build`` (write the FMUs), ``run`` (co-simulate a scene
+or an SSP file: results.csv, summary.json, plots), ``ssp`` (write a scene's system as an SSP
+file), ``sweep`` (gain x delay x step stability/benefit table).
 Bad input ends with a one-line message on stderr and exit
-code 2, never a traceback; a run that diverges ends with a one-line report and exit code 1.
+code 2, never a traceback (a plant/controller pair that does not fit: one line per problem);
+a run that diverges ends with a one-line report and exit code 1. Warnings of the project
+(e.g. plant inputs no controller output feeds) are printed as one line each.
 """
 
 from __future__ import annotations
@@ -14,7 +17,9 @@ import errno
 import json
 import math
 import sys
+import warnings
 from collections.abc import Sequence
+from pathlib import Path
 
 __all__ = ["main"]
 
@@ -89,9 +94,37 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
 
 def _cmd_build(args: argparse.Namespace) -> int:
     from drillcosim.fmu_src.build import build_all, default_out
+    from drillcosim.fmu_src.build_c import build_c_controller
 
-    build_all(args.out or default_out())  # prints "built <path>" per FMU
+    out = args.out or default_out()
+    build_all(out)  # prints "built <path>" per FMU
+    try:
+        print(f"built {build_c_controller(out)}")
+    except RuntimeError as exc:  # the C controller needs only a C compiler
+        print(f"drillcosim build: StrainControllerC.fmu not built: {exc}", file=sys.stderr)
+        return 1
     return 0
+
+
+def _is_ssp(target: str) -> bool:
+    path = Path(target)
+    return path.suffix.lower() in (".ssp", ".ssd") or (path.is_dir() and
+                                                       (path / "SystemStructure.ssd").is_file())
+
+
+def _simulate_ssp(args: argparse.Namespace):
+    from drillcosim.cosim.scenario.ssp_run import simulate_ssp
+
+    scene_only = [flag for flag, value in (("--delay", args.delay), ("--gain", args.gain),
+                                           ("--set", args.set), ("--fmu-dir", args.fmu_dir),
+                                           ("--plant-fmu", args.plant_fmu),
+                                           ("--controller-fmu", args.controller_fmu))
+                  if value]
+    if scene_only:
+        raise UsageError(f"{args.scene} is an SSP file: it takes --step, --stop-time and "
+                         f"--out, not {', '.join(scene_only)} (options of scenes)")
+    return simulate_ssp(args.scene, stop_time=args.stop_time, step=args.step, out_dir=args.out,
+                   progress=False if args.no_progress else None)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -99,11 +132,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from drillcosim.cosim.scenario.run import simulate_scene
 
     try:
-        outcome = simulate_scene(args.scene, stop_time=args.stop_time, step=args.step,
-                                 delay=args.delay, gain=args.gain, sets=args.set,
-                                 out_dir=args.out, fmu_dir=args.fmu_dir,
-                                 progress=False if args.no_progress else None,
-                                 plots=not args.no_plots)
+        if _is_ssp(args.scene):
+            outcome = _simulate_ssp(args)
+        else:
+            outcome = simulate_scene(args.scene, stop_time=args.stop_time, step=args.step,
+                                     delay=args.delay, gain=args.gain, sets=args.set,
+                                     out_dir=args.out, fmu_dir=args.fmu_dir,
+                                     progress=False if args.no_progress else None,
+                                     plots=not args.no_plots, plant_fmu=args.plant_fmu,
+                                     controller_fmu=args.controller_fmu)
     except CosimError as exc:  # failed before the first step: earlier files are kept
         if exc.call == "fmi2ExitInitializationMode" and exc.status == FMI2_ERROR:
             # the FMU rejected its parameters (its message names them): bad input
@@ -113,6 +150,22 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return 1
     print(outcome.message, file=sys.stderr if outcome.exit_code else sys.stdout)
     return outcome.exit_code
+
+
+def _cmd_ssp(args: argparse.Namespace) -> int:
+    from drillcosim.cosim.scenario.ssp_run import write_scene_ssp
+
+    written = write_scene_ssp(args.scene, args.out, step=args.step, stop_time=args.stop_time,
+                              sets=args.set, fmu_dir=args.fmu_dir, plant_fmu=args.plant_fmu,
+                              controller_fmu=args.controller_fmu,
+                              omit_unsupported=args.omit_unsupported)
+    exp = written.export
+    if exp.omitted:
+        print(f"drillcosim ssp: warning: written without: {'; '.join(exp.omitted)}",
+              file=sys.stderr)
+    print(f"wrote {exp.path} (system '{written.scene}'; Ecos: ecos simulate --path {exp.path} "
+          f"--parameterSet {written.scene} ...)")
+    return 0
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
@@ -152,6 +205,16 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return mod.main((["--quick"] if args.quick else []) + (["--out", args.out] if args.out else []))
 
 
+def _add_fmu_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--fmu-dir", metavar="DIR", help="folder of DrillstringPlant.fmu and "
+                   "StrainController.fmu, used as is (default build/fmus, rebuilt when stale)")
+    p.add_argument("--plant-fmu", metavar="FMU", help="a plant FMU file (any maker) instead "
+                   "of DrillstringPlant.fmu; checked against the controller by name")
+    p.add_argument("--controller-fmu", metavar="FMU", help="a controller FMU file (any maker) "
+                   "instead of StrainController.fmu, e.g. StrainControllerC.fmu; checked "
+                   "against the plant by name")
+
+
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="drillcosim", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True)
@@ -175,9 +238,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="short horizons (< 3 min)")
     p.add_argument("--out", help="report path (default: BENCHMARKS.md of the checkout)")
     p.set_defaults(func=_cmd_bench)
-    p = sub.add_parser("run", help="co-simulate a scene (plant FMU + controller FMU)")
+    p = sub.add_parser("run", help="co-simulate a scene (plant FMU + controller FMU) or an "
+                       "SSP 1.0 file")
     p.add_argument("scene", nargs="?", default="paper_closed_loop",
-                   help="scene name from scenes/ or a path (default: paper_closed_loop)")
+                   help="scene name from scenes/, a scene path, or an SSP file (.ssp, .ssd or "
+                        "an unpacked SSP folder; takes --step, --stop-time, --out) (default: "
+                        "paper_closed_loop)")
     p.add_argument("--stop-time", type=float, metavar="S", help="stop time [s]")
     p.add_argument("--step", type=float, metavar="H", help="communication step [s]")
     p.add_argument("--delay", type=float, metavar="TAU", help="actuator delay [s]")
@@ -186,11 +252,22 @@ def _parser() -> argparse.ArgumentParser:
                    help="override a scene key, e.g. cosim.sensor_delay=0.002 (value in TOML "
                         "syntax; repeatable)")
     p.add_argument("--out", metavar="DIR", help="output folder (default out/<scene>)")
-    p.add_argument("--fmu-dir", metavar="DIR", help="folder of DrillstringPlant.fmu and "
-                   "StrainController.fmu, used as is (default build/fmus, rebuilt when stale)")
+    _add_fmu_options(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.set_defaults(func=_cmd_run)
+    p = sub.add_parser("ssp", help="write a scene's system (FMUs included) as an SSP 1.0 file")
+    p.add_argument("scene", help="scene name from scenes/ or a path")
+    p.add_argument("--out", metavar="FILE", help="the .ssp file (default out/<scene>.ssp)")
+    p.add_argument("--step", type=float, metavar="H", help="communication step [s]")
+    p.add_argument("--stop-time", type=float, metavar="S", help="default stop time [s]")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene key (as for run; repeatable)")
+    _add_fmu_options(p)
+    p.add_argument("--omit-unsupported", action="store_true",
+                   help="write a system with delays, linear coupling or Gauss-Seidel stepping "
+                        "without them (SSP 1.0 cannot hold them; listed as a warning)")
+    p.set_defaults(func=_cmd_ssp)
     p = sub.add_parser("sweep", help="stability/benefit sweep over gain x delay x step",
                        description="LIST: comma-separated values, start:stop:count, or "
                                    "log:start:stop:count (e.g. log:1e6:1e10:5).")
@@ -228,6 +305,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``drillcosim`` console script; returns the exit code."""
     ap = _parser()
     args = ap.parse_args(argv)
+
+    def one_line(message, category, filename, lineno, file=None, line=None):
+        if category.__module__.startswith("drillcosim."):
+            print(f"drillcosim {args.command}: warning: {message}", file=sys.stderr)
+        else:
+            previous(message, category, filename, lineno, file, line)
+
+    previous = warnings.showwarning
+    warnings.showwarning = one_line
     try:
         return int(args.func(args) or 0)
     except (UsageError, ValueError, FileNotFoundError, PermissionError) as exc:
@@ -239,6 +325,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"drillcosim {args.command}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        warnings.showwarning = previous
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -4,6 +4,11 @@
   by the project's build (each in its own subprocess) and validated; every FMU test uses them.
 * ``fmus`` (session): the tiny master-test FMUs of ``tests/support/master_fmus`` (cached across
   sessions under a full key, validated before use, see :mod:`support.master_fmus.build`).
+* ``c_controller_fmu`` (session): ``StrainControllerC.fmu`` (the controller in C99), built and
+  validated once.
+* ``closed_loop_py`` / ``closed_loop_c`` (session): the loop the third-party engines are
+  compared on (:mod:`support.closed_loop`) with the Python / the C controller: its SSP file and
+  our master's result.
 * Two autouse guards: fmpy's logger proxy is restored after every test, and every test leaves
   ``sys.path`` and the host's module namespace as it found them (see
   :func:`_host_namespace_unchanged`).
@@ -28,6 +33,8 @@ from fmpy.logging import addLoggerProxy
 from fmpy.validation import validate_fmu
 
 from drillcosim.fmu_src.build import REGISTRY, build_one
+from drillcosim.fmu_src.build_c import build_c_controller
+from support.closed_loop import ClosedLoop, closed_loop
 from support.master_fmus.build import build_all as build_test_fmus
 
 # fmpy's native logger proxy (logging.so) keeps ONE global target for every FMU in the process:
@@ -129,3 +136,23 @@ def project_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 def fmus() -> dict[str, Path]:
     """``{script name: path}`` of the tiny master-test FMUs (validated)."""
     return build_test_fmus()
+
+
+@pytest.fixture(scope="session")
+def c_controller_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``StrainControllerC.fmu`` (the C99 controller), built once per session, validated."""
+    return _validated(build_c_controller(tmp_path_factory.mktemp("c_controller")))
+
+
+@pytest.fixture(scope="session")
+def closed_loop_py(project_fmus, tmp_path_factory: pytest.TempPathFactory) -> ClosedLoop:
+    """The engine-comparison loop with the Python controller FMU (SSP + our master's result)."""
+    return closed_loop(project_fmus["DrillstringPlant"], project_fmus["StrainController"],
+                       tmp_path_factory.mktemp("closed_loop_py"))
+
+
+@pytest.fixture(scope="session")
+def closed_loop_c(project_fmus, c_controller_fmu, tmp_path_factory) -> ClosedLoop:
+    """The engine-comparison loop with the C controller FMU (SSP + our master's result)."""
+    return closed_loop(project_fmus["DrillstringPlant"], c_controller_fmu,
+                       tmp_path_factory.mktemp("closed_loop_c"), name="closed_loop_c")

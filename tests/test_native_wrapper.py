@@ -468,12 +468,11 @@ def test_fmu_state_get_set_serialize_bit_identical(name: str, native_dir: Path) 
 @pytest.mark.interop
 def test_libcosim_runs_native_fmus_like_our_master(native_dir: Path, tmp_path: Path) -> None:
     pytest.importorskip("libcosimpy")
-    from test_ssp_libcosim import HOST
-
     from drillcosim.cosim.master.master import Master
     from drillcosim.cosim.master.ssp import export_ssp
     from drillcosim.cosim.scenario.scene_system import scene_system
     from drillcosim.plant.scene import load_scene
+    from support.engines import LIBCOSIM_HOST as HOST
 
     sc = load_scene("paper_restricted_actuator", overrides={"controller": {"gain": 5e8}})
     sc = dataclasses.replace(sc, cosim={"step": 1e-3, "controller_sample_period": 2e-3})

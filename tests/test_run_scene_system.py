@@ -1,4 +1,4 @@
-"""Scene -> co-simulation system mapping (no FMU is run or built here)."""
+"""Scene -> co-simulation system mapping (the session's FMUs are read, none is run)."""
 
 from __future__ import annotations
 
@@ -17,8 +17,14 @@ from drillcosim.cosim.scenario.scene_system import (
 )
 from drillcosim.plant.scene import load_scene
 
-FAKE = {"plant_fmu": "/nonexistent/DrillstringPlant.fmu",
-        "controller_fmu": "/nonexistent/StrainController.fmu"}
+FMUS: dict[str, str] = {}
+
+
+@pytest.fixture(autouse=True)
+def _session_fmus(project_fmus) -> None:
+    """scene_system reads the modelDescriptions (the pair is wired and checked by name)."""
+    FMUS.update(plant_fmu=project_fmus["DrillstringPlant"],
+                controller_fmu=project_fmus["StrainController"])
 
 
 def _scene(name: str = "paper_closed_loop", cosim: dict | None = None, **over):
@@ -26,8 +32,15 @@ def _scene(name: str = "paper_closed_loop", cosim: dict | None = None, **over):
     return dataclasses.replace(load_scene(name, overrides=over or None), cosim=dict(cosim or {}))
 
 
+def _fmus(sc) -> dict[str, str]:
+    """The session FMUs (the controller only when the scene's controller is on)."""
+    on = sc.controller.get("enabled", False)
+    return {k: v for k, v in FMUS.items() if on or k == "plant_fmu"}
+
+
 def _system(name: str = "paper_closed_loop", **over):
-    return scene_system(_scene(name, **over), **FAKE)
+    sc = _scene(name, **over)
+    return scene_system(sc, **_fmus(sc))
 
 
 def test_closed_loop_connections_delays_and_parameters() -> None:
@@ -79,11 +92,11 @@ def test_disabled_controller_runs_the_plant_alone() -> None:
 def test_plant_overrides_become_flattened_parameters() -> None:
     sc = _scene(top_drive={"rotary_speed": 10.0})
     ss = scene_system(sc, plant_overrides={"top_drive": {"rotary_speed": 10.0}, "gravity": 0.0},
-                      **FAKE)
+                      **_fmus(sc))
     assert ss.system.fmu("plant").parameters == {
         "scene": "paper_closed_loop", "top_drive.rotary_speed": 10.0, "gravity": 0.0}
     with pytest.raises(ValueError, match=r"stabilizers.heights .*scene file"):
-        scene_system(sc, plant_overrides={"stabilizers": {"heights": [0.0, 30.0]}}, **FAKE)
+        scene_system(sc, plant_overrides={"stabilizers": {"heights": [0.0, 30.0]}}, **_fmus(sc))
 
 
 def test_spans_long_and_short() -> None:

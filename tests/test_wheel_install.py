@@ -67,6 +67,9 @@ def test_wheel_has_one_import_namespace_and_the_package_data(installed) -> None:
     assert tops == {"drillcosim"}
     for needed in ("drillcosim/scenes/paper_open_loop.toml",
                    "drillcosim/fmu_src/wrapper/dcs_fmi2_native.c",
+                   "drillcosim/fmu_src/c_controller/model.c",
+                   "drillcosim/fmu_src/c_controller/modelDescription.xml",
+                   "drillcosim/fmu_src/c_controller/fmi2/fmi2Functions.h",
                    "drillcosim/plant/kernels.py", "drillcosim/cosim/master/execution.py"):
         assert needed in names
     installed_tops = {p.name for p in installed["site"].iterdir()  # bin/: pip --target's scripts
@@ -87,7 +90,8 @@ def test_installed_cli_works_from_an_empty_folder(installed) -> None:
     build = _run(installed, "build")
     assert build.returncode == 0, build.stderr
     fmus = sorted((installed["cache"] / "drillcosim" / "fmus").rglob("*.fmu"))
-    assert [p.name for p in fmus] == ["DrillstringPlant.fmu", "StrainController.fmu"]
+    assert [p.name for p in fmus] == ["DrillstringPlant.fmu", "StrainController.fmu",
+                                      "StrainControllerC.fmu"]
 
     run = _run(installed, "run", "paper_open_loop", "--stop-time", "0.5", "--no-progress")
     assert run.returncode == 0, run.stderr

@@ -15,7 +15,8 @@ co-simulation FMUs can be coupled. The pieces, each with one job (as in libcosim
 * :mod:`.errors` - the one place FMI statuses become exceptions;
 * :mod:`.fmi_log` - FMU log messages through the FMI logger callback;
 * :mod:`.files` - atomic files (every file the project publishes);
-* :mod:`.ssp` - SSP 1.0 export;
+* :mod:`.ssp` - SSP 1.0 export; :mod:`.ssp_import` - SSP 1.0 import;
+* :mod:`.interface` - the check that connected FMU variables fit (before the first step);
 * :mod:`.master` - :class:`~.master.Master`: simulate a system to a stop time and return its
   recorded result.
 """

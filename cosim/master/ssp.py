@@ -9,7 +9,9 @@ libcosimpy) reads:
   ``ssc:Real``, ``ssc:Integer``, ``ssc:Boolean`` or ``ssc:String``);
 * parameter start values as an inline ``ssd:ParameterBindings /
   ssd:ParameterBinding / ssd:ParameterValues / ssv:ParameterSet`` (``Real``,
-  ``Integer``, ``Boolean``, ``String``);
+  ``Integer``, ``Boolean``, ``String``); every component's set carries the same
+  name, the system name (libcosim applies each component's first set; Ecos applies
+  the sets of one name, ``ecos simulate --parameterSet <system name>``);
 * a multirate FMU's period as the OSP annotation ``osp:StepSizeHint`` [s]
   (libcosim rounds it to a multiple of the base step);
 * ``ssd:Connections`` without transformations;
@@ -149,7 +151,7 @@ def ssd_xml(system: SystemSpec, name: str = "drillcosim", description: str = "")
             lines += ["        <ssd:ParameterBindings>", "          <ssd:ParameterBinding>",
                       "            <ssd:ParameterValues>",
                       f'              <ssv:ParameterSet version="1.0" '
-                      f"name={quoteattr(spec.name + '_parameters')}>",
+                      f"name={quoteattr(name)}>",
                       "                <ssv:Parameters>"]
             for key, value in spec.parameters.items():
                 vtype = _SSC_TYPES.get(variables[key].type, "Real")

@@ -40,8 +40,8 @@ else:  # pragma: no cover
 from drillcosim.cosim.master.errors import CosimError
 from drillcosim.cosim.master.master import Master, Result
 
-__all__ = ["EXIT_DIVERGED", "EXIT_OK", "SceneOutcome", "parse_set", "simulate_into",
-           "simulate_scene", "simulate_system"]
+__all__ = ["EXIT_DIVERGED", "EXIT_OK", "SceneOutcome", "parse_set", "scene_system_from_options",
+           "simulate_into", "simulate_scene", "simulate_system"]
 
 EXIT_OK = 0
 EXIT_DIVERGED = 1
@@ -227,12 +227,49 @@ def simulate_system(ss, out_dir: str | Path, stop_time: float | None = None,
     return SceneOutcome(EXIT_OK, msg, out, summary, tuple(files))
 
 
+def scene_system_from_options(scene: str | os.PathLike, *, stop_time: float | None = None,
+                              step: float | None = None, delay: float | None = None,
+                              gain: float | None = None, sets: Sequence[str] = (),
+                              fmu_dir: str | Path | None = None,
+                              plant_fmu: str | Path | None = None,
+                              controller_fmu: str | Path | None = None):
+    """Load a scene with the command-line overrides and build its checked system.
+
+    Parameters: as :func:`simulate_scene`.
+
+    Returns
+    -------
+    SceneSystem
+
+    Raises
+    ------
+    ValueError
+        Bad input (scene, keys, values, an FMU pair that does not fit).
+    """
+    from drillcosim.plant.scene import load_scene
+
+    from .scene_system import scene_system
+
+    over: dict[str, Any] = {}
+    for section, key, value in (("cosim", "stop_time", stop_time), ("cosim", "step", step),
+                                ("cosim", "actuator_delay", delay),
+                                ("controller", "gain", gain)):
+        if value is not None:
+            over.setdefault(section, {})[key] = value
+    over = _merge(over, parse_set(sets))
+    sc = load_scene(scene, overrides=over or None)
+    plant_over = {k: v for k, v in over.items() if k not in ("cosim", "controller", "plant")}
+    return scene_system(sc, fmu_dir, plant_fmu=plant_fmu, controller_fmu=controller_fmu,
+                        plant_overrides=plant_over)
+
+
 def simulate_scene(scene: str | os.PathLike = "paper_closed_loop", *,
                    stop_time: float | None = None, step: float | None = None,
                    delay: float | None = None, gain: float | None = None,
                    sets: Sequence[str] = (), out_dir: str | Path | None = None,
                    fmu_dir: str | Path | None = None, progress: bool | None = None,
-                   plots: bool = True) -> SceneOutcome:
+                   plots: bool = True, plant_fmu: str | Path | None = None,
+                   controller_fmu: str | Path | None = None) -> SceneOutcome:
     """Load a scene with overrides, run it and write the output folder.
 
     Parameters
@@ -259,6 +296,9 @@ def simulate_scene(scene: str | os.PathLike = "paper_closed_loop", *,
         Progress bar (None: only on a TTY).
     plots : bool
         Write the PNGs.
+    plant_fmu, controller_fmu : path-like, optional
+        FMU files (any maker) used instead of the project's; the pair is checked before the
+        first step (:mod:`cosim.scenario.interface`).
 
     Returns
     -------
@@ -267,21 +307,10 @@ def simulate_scene(scene: str | os.PathLike = "paper_closed_loop", *,
     Raises
     ------
     ValueError
-        Bad input (scene, keys, values), one line.
+        Bad input (scene, keys, values, an FMU pair that does not fit), one line per problem.
     """
-    from drillcosim.plant.scene import load_scene
-
-    from .scene_system import scene_system
-
-    over: dict[str, Any] = {}
-    for section, key, value in (("cosim", "stop_time", stop_time), ("cosim", "step", step),
-                                ("cosim", "actuator_delay", delay),
-                                ("controller", "gain", gain)):
-        if value is not None:
-            over.setdefault(section, {})[key] = value
-    over = _merge(over, parse_set(sets))
-    sc = load_scene(scene, overrides=over or None)
-    plant_over = {k: v for k, v in over.items() if k not in ("cosim", "controller")}
-    ss = scene_system(sc, fmu_dir, plant_overrides=plant_over)
-    out = Path(out_dir) if out_dir is not None else Path("out") / sc.name
+    ss = scene_system_from_options(scene, stop_time=stop_time, step=step, delay=delay, gain=gain,
+                                   sets=sets, fmu_dir=fmu_dir, plant_fmu=plant_fmu,
+                                   controller_fmu=controller_fmu)
+    out = Path(out_dir) if out_dir is not None else Path("out") / ss.scene.name
     return simulate_system(ss, out, progress=progress, plots=plots)

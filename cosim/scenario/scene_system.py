@@ -10,26 +10,36 @@ by name both ways:
 * actuators: ``controller.actuator<s>_force_<C|E>`` ->
   ``plant.actuator<s>_force_<C|E>`` (delay ``actuator_delay``),
 
-for the sites ``s = 1, 2`` the controller handles. When ``[controller] enabled``
-is false the plant runs alone (its actuator inputs stay at their start value 0).
+for every input of one FMU that the other declares (:mod:`cosim.scenario.interface`: the
+pair is checked before the first step, every problem in one line; inputs of sites the
+controller does not serve keep their start value, with a warning). When
+``[controller] enabled`` is false the plant runs alone (its actuator inputs stay at their
+start value 0).
 
 The FMUs are taken from ``build/fmus/`` (or the folder given) and built there
-with :func:`fmu_src.build.build_all` if missing or older than their sources.
+with :func:`fmu_src.build.build_all` if missing or older than their sources. Other FMU
+files (any maker) are used as they are when given: ``[plant] fmu = "path"`` /
+``[controller] fmu = "path"`` in the scene (relative to the scene file's folder), or the
+``plant_fmu`` / ``controller_fmu`` arguments (``drillcosim run --plant-fmu P
+--controller-fmu C``), which take precedence.
 
 Parameters passed to the FMUs
 -----------------------------
 plant
     ``scene`` (String): the scene name when the scene file is a shipped one
-    (``scenes/<name>.toml``), else its absolute path; plus any plant parameter
-    given in ``plant_overrides`` as a flattened ``section.key`` (scalar values
-    only, e.g. ``top_drive.rotary_speed``).
+    (``scenes/<name>.toml``), else its absolute path (passed only if the plant FMU declares
+    ``scene``; otherwise a warning says the scene's plant tables are not applied); plus any
+    plant parameter given in ``plant_overrides`` as a flattened ``section.key`` (scalar
+    values only, e.g. ``top_drive.rotary_speed``; the FMU must declare each).
 controller
     ``[controller]`` of the scene, validated by
     :class:`controller.ControllerParams`: ``gain`` [N per unit strain],
     ``mode`` (``"unrestricted"`` -> Integer 0, ``"compressive_only"`` -> 1),
     ``force_limit`` [N], ``symmetric_force_limit`` [N] (``inf`` is passed as
     1e30, the FMU's "no limit"), ``switch_on_time`` [s],
-    ``lag_time_constant`` [s], ``enabled`` (Boolean).
+    ``lag_time_constant`` [s], ``enabled`` (Boolean). Each is passed if the controller FMU
+    declares it; a key the scene sets explicitly that the FMU lacks is an interface problem,
+    a default it lacks is not passed.
 
 The ``[cosim]`` table of a scene
 --------------------------------
@@ -64,6 +74,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import warnings
 import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
@@ -71,6 +82,12 @@ from pathlib import Path
 from typing import Any
 
 from drillcosim.controller import MODES, ControllerParams
+from drillcosim.cosim.master.interface import (
+    FmuInterface,
+    InterfaceError,
+    check_system,
+    read_interface,
+)
 from drillcosim.cosim.master.system import (
     ALGORITHMS,
     COUPLINGS,
@@ -81,6 +98,8 @@ from drillcosim.cosim.master.system import (
 )
 from drillcosim.plant.observables import output_names
 from drillcosim.plant.scene import Scene, scenes_dir
+
+from .interface import InterfaceWarning, connections_of, wire_pair
 
 __all__ = [
     "CONTROLLER",
@@ -246,10 +265,10 @@ def scene_controller(scene: Scene) -> ControllerParams:
     """
     names = [f.name for f in fields(ControllerParams)]
     for key in scene.controller:
-        if key not in names:
+        if key not in names and key != "fmu":
             raise ValueError(f"{scene.source}: [controller] unknown key '{key}'"
-                             f"{_suggest(key, names)}")
-    raw = {"enabled": False, **scene.controller}
+                             f"{_suggest(key, [*names, 'fmu'])}")
+    raw = {"enabled": False, **{k: v for k, v in scene.controller.items() if k != "fmu"}}
     try:
         return ControllerParams(**raw)
     except (TypeError, ValueError) as exc:
@@ -393,7 +412,8 @@ def ensure_fmus(fmu_dir: str | Path | None = None, names: Sequence[str] = (
     return paths
 
 
-def _plant_outputs(scene: Scene) -> list[str]:
+def _plant_outputs(scene: Scene, declared: Sequence[str]) -> list[str]:
+    """The scene's plant outputs to record, those the plant FMU declares (in this order)."""
     plant = scene.plant
     names = [r[0] for r in output_names(scene.model == "full3d", list(plant.contact_bodies),
                                         len(plant.actuator_joints))]
@@ -406,16 +426,44 @@ def _plant_outputs(scene: Scene) -> list[str]:
                "bit_rotary_speed", "total_energy", *scene.outputs]
     out = []
     for n in wanted:
-        if n in names and n not in out:
+        if n in names and n in declared and n not in out:
             out.append(n)
     return out
+
+
+def _scene_fmu(scene: Scene, table: str, given: str | Path | None) -> Path | None:
+    """An FMU file chosen by argument, else by the scene's ``[<table>] fmu`` (None: default).
+
+    A relative path in the scene is resolved against the scene file's folder.
+    """
+    if given:
+        return Path(given)
+    raw = scene.plant_fmu if table == "plant" else scene.controller
+    if table == "plant":
+        for key in raw:
+            if key != "fmu":
+                raise ValueError(f"{scene.source}: [plant] unknown key '{key}'; allowed: fmu "
+                                 "(the plant's own parameters are top-level tables)")
+    if "fmu" not in raw:
+        return None
+    value = raw["fmu"]
+    if not isinstance(value, str) or not value:
+        raise ValueError(f"{scene.source}: [{table}] fmu = {value!r} must be the path of an "
+                         ".fmu file")
+    path = Path(value).expanduser()
+    src = Path(scene.source)
+    if not path.is_absolute() and src.is_file():
+        path = src.resolve().parent / path
+    if not path.is_file():
+        raise FileNotFoundError(f"{scene.source}: [{table}] fmu = {value!r}: no file '{path}'")
+    return path
 
 
 def scene_system(scene: Scene, fmu_dir: str | Path | None = None, *,
                  plant_fmu: str | Path | None = None,
                  controller_fmu: str | Path | None = None,
                  plant_overrides: Mapping[str, Any] | None = None) -> SceneSystem:
-    """Build the co-simulation system of a scene.
+    """Build the co-simulation system of a scene and check its FMU pair.
 
     Parameters
     ----------
@@ -424,7 +472,8 @@ def scene_system(scene: Scene, fmu_dir: str | Path | None = None, *,
         Folder of ``DrillstringPlant.fmu`` and ``StrainController.fmu``
         (default ``build/fmus/``); missing or stale FMUs are built there.
     plant_fmu, controller_fmu : path-like, optional
-        Use these FMU files instead (nothing is built for them).
+        Use these FMU files instead (nothing is built for them); they take precedence over
+        ``[plant] fmu`` / ``[controller] fmu`` of the scene.
     plant_overrides : mapping, optional
         Plant parameters overridden on top of the scene file (the nested dict
         given to :func:`plant.scene.load_scene`); passed to the plant FMU as
@@ -437,47 +486,78 @@ def scene_system(scene: Scene, fmu_dir: str | Path | None = None, *,
     Raises
     ------
     ValueError
-        Invalid ``[cosim]`` or ``[controller]`` keys or values (one line, naming
-        the scene file and the key).
+        Invalid ``[cosim]``, ``[controller]`` or ``[plant]`` keys or values (one line,
+        naming the scene file and the key).
+    cosim.master.interface.InterfaceError
+        The plant and controller FMUs do not fit (a ``ValueError``; one line per problem,
+        each naming both FMUs and the variable).
     FileNotFoundError
         An FMU is missing and cannot be built.
+
+    Warns
+    -----
+    InterfaceWarning
+        Plant inputs of sites the controller does not serve (they keep their start value),
+        or a plant FMU without a ``scene`` parameter.
     """
     settings = cosim_settings(scene)
     ctrl = controller_parameters(scene)
     enabled = bool(ctrl["enabled"])
     n_sites = len(scene.plant.actuator_joints)
+    if controller_fmu and not enabled:
+        raise ValueError(f"{scene.source}: a controller FMU was given ({controller_fmu}) but "
+                         "the scene's controller is off: set controller.enabled=true")
+    plant_fmu = _scene_fmu(scene, "plant", plant_fmu)
+    controller_fmu = _scene_fmu(scene, "controller", controller_fmu) if enabled else None
     if enabled and scene.model != "full3d":
         raise ValueError(f"{scene.source}: the controller needs model = 'full3d', "
                          f"got '{scene.model}'")
-    if enabled and n_sites != len(CONTROLLER_SITES):
+    if enabled and controller_fmu is None and n_sites != len(CONTROLLER_SITES):
         raise ValueError(f"{scene.source}: [actuators] the controller FMU handles "
                          f"{len(CONTROLLER_SITES)} sites, the plant has {n_sites}")
+    overrides = _flatten(plant_overrides or {}, scene.source)
     need = ([] if plant_fmu else ["DrillstringPlant"]) + \
         ([] if controller_fmu or not enabled else ["StrainController"])
     paths = ensure_fmus(fmu_dir, need) if need else {}
-    plant_path = Path(plant_fmu) if plant_fmu else paths["DrillstringPlant"]
-    plant_params: dict[str, float | int | bool | str] = {"scene": scene_reference(scene)}
-    plant_params.update(_flatten(plant_overrides or {}, scene.source))
-    fmus = [FmuSpec(PLANT, plant_path, plant_params)]
+    plant_face = read_interface(PLANT, plant_fmu or paths["DrillstringPlant"])
+    plant_params: dict[str, float | int | bool | str] = {}
+    if "scene" in plant_face.ports:
+        plant_params["scene"] = scene_reference(scene)
+    else:
+        warnings.warn(InterfaceWarning(
+            f"{plant_face.label} has no 'scene' parameter: the plant tables of "
+            f"{scene.source} are not applied to it"), stacklevel=2)
+    plant_params.update(overrides)
+    fmus = [FmuSpec(PLANT, plant_face.path, plant_params)]
     connections: list[Connection] = []
-    outputs = [f"{PLANT}.{n}" for n in _plant_outputs(scene)]
+    outputs = [f"{PLANT}.{n}" for n in _plant_outputs(scene, plant_face.outputs())]
     order: tuple[str, ...] = (PLANT,)
     if enabled:
-        ctrl_path = Path(controller_fmu) if controller_fmu else paths["StrainController"]
-        fmus.append(FmuSpec(CONTROLLER, ctrl_path, dict(ctrl), settings.controller_sample_ticks))
-        for s in CONTROLLER_SITES:
-            for a in AXES:
-                connections.append(Connection(f"{PLANT}.strain{s}_{a}",
-                                              f"{CONTROLLER}.strain{s}_{a}",
-                                              settings.sensor_delay, settings.coupling))
-                connections.append(Connection(f"{CONTROLLER}.actuator{s}_force_{a}",
-                                              f"{PLANT}.actuator{s}_force_{a}",
-                                              settings.actuator_delay, settings.coupling))
-                outputs.append(f"{CONTROLLER}.actuator{s}_force_{a}")
+        ctrl_face = read_interface(CONTROLLER, controller_fmu or paths["StrainController"])
+        fmus.append(FmuSpec(CONTROLLER, ctrl_face.path,
+                            {k: v for k, v in ctrl.items() if k in ctrl_face.ports},
+                            settings.controller_sample_ticks))
+        wiring = wire_pair(plant_face, ctrl_face, fmus, _lacking(scene, ctrl_face))
+        connections = connections_of(wiring, {CONTROLLER: settings.sensor_delay,
+                                              PLANT: settings.actuator_delay}, settings.coupling)
+        outputs += [s for s, t in wiring.connections if s.startswith(f"{CONTROLLER}.")]
         order = settings.order
+    elif overrides:
+        # the plant alone: its start values are checked the same way
+        problems = check_system(fmus, (), {PLANT: plant_face}).problems
+        if problems:
+            raise InterfaceError(f"{plant_face.label} cannot take the scene's settings",
+                                 problems)
     system = SystemSpec(fmus, connections, settings.step, settings.algorithm, order,
                         0.0, settings.stop_time)
     return SceneSystem(scene, system, settings, tuple(outputs))
+
+
+def _lacking(scene: Scene, ctrl_face: FmuInterface) -> list[str]:
+    """``[controller]`` keys the scene sets explicitly that the controller FMU does not declare."""
+    return [f"{ctrl_face.label} has no parameter '{key}' for [controller] {key} of "
+            f"{scene.source}" for key in scene.controller
+            if key not in ("enabled", "fmu") and key not in ctrl_face.ports]
 
 
 def cosim_schema_markdown() -> str:
@@ -486,7 +566,13 @@ def cosim_schema_markdown() -> str:
     Meant to replace the placeholder section "## [controller] and [cosim]" written
     by :func:`plant.scene.schema_markdown`.
     """
-    lines = ["## [controller]", "",
+    lines = ["## [plant]", "",
+             "Which plant FMU runs the scene (`cosim.scenario.scene_system`).", "",
+             "| key | default | unit | meaning |", "|---|---|---|---|",
+             "| fmu | - | - | path of a plant FMU (any maker; relative to the scene file's "
+             "folder) instead of the built DrillstringPlant.fmu; `drillcosim run --plant-fmu` "
+             "overrides it |", "",
+             "## [controller]", "",
              "Strain P-feedback controller (`controller.ControllerParams`; passed to "
              "StrainController.fmu).", "",
              "| key | default | unit | meaning |", "|---|---|---|---|"]
@@ -500,16 +586,28 @@ def cosim_schema_markdown() -> str:
         "switch_on_time": "controller output is zero before this time",
         "lag_time_constant": "first-order actuator lag; 0 = none",
         "enabled": "false = open loop (the plant runs alone)",
+        "fmu": "path of a controller FMU (any maker; relative to the scene file's folder) "
+               "instead of the built StrainController.fmu; `drillcosim run --controller-fmu` "
+               "overrides it",
     }
-    defaults = {f.name: f.default for f in fields(ControllerParams)}
+    defaults: dict[str, Any] = {f.name: f.default for f in fields(ControllerParams)}
     defaults["enabled"] = False
+    ctrl_units["fmu"] = "-"
     for name in ctrl_units:
+        if name == "fmu":
+            lines.append(f"| fmu | - | - | {ctrl_text['fmu']} |")
+            continue
         d = defaults[name]
         ds = ("inf" if isinstance(d, float) and math.isinf(d) else
               str(d).lower() if isinstance(d, bool) else f'"{d}"' if isinstance(d, str)
               else f"{d:g}")
         lines.append(f"| {name} | {ds} | {ctrl_units[name]} | {ctrl_text[name]} |")
-    lines += ["", "## [cosim]", "",
+    lines += ["", "The plant and controller FMUs connect by name; before the first step the pair "
+              "is checked (causality, type, unit, nothing connected twice, start values), "
+              "every problem in one line naming both FMUs and the variable (exit code 2). "
+              "Plant inputs of sites the controller does not serve keep their start value, "
+              "with a warning naming them ([interop.md](interop.md)).",
+              "", "## [cosim]", "",
               "Co-simulation settings (`cosim.scenario.scene_system.cosim_settings`).", "",
               "| key | default | unit | meaning |", "|---|---|---|---|"]
     for key, (default, unit, text) in COSIM_KEYS.items():
