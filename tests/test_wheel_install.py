@@ -66,7 +66,9 @@ def test_wheel_has_one_import_namespace_and_the_package_data(installed) -> None:
     tops = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
     assert tops == {"drillcosim"}
     for needed in ("drillcosim/scenes/paper_open_loop.toml",
-                   "drillcosim/fmu_src/wrapper/dcs_fmi2_native.c",
+                   "drillcosim/fmu_src/wrapper/fmi2_functions.c",
+                   "drillcosim/fmu_src/wrapper/fmi2/fmi2Functions.h",
+                   "drillcosim/fmu_src/wrapper/fmi2/LICENSE.txt",
                    "drillcosim/plant/kernels.py", "drillcosim/cosim/master/execution.py"):
         assert needed in names
     installed_tops = {p.name for p in installed["site"].iterdir()  # bin/: pip --target's scripts
