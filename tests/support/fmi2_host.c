@@ -6,7 +6,8 @@
  * SET is "r:VR=VALUE" (Real), "i:VR=VALUE" (Integer) or "s:VR=TEXT" (String), applied in
  * initialization mode. Prints "BAD <status>" for a doStep with a negative step first (it must
  * be refused, not crash), then one line per communication point (the start included):
- * time and the outputs, "%.17g" comma-separated. Exit status: 0 all calls OK, 3 fmi2Instantiate
+ * time and the outputs, "%.17g" comma-separated. Communication points are k * STEP, each step
+ * size the difference of two (as fmpy.simulate_fmu steps). Exit status: 0 all calls OK, 3 fmi2Instantiate
  * returned NULL, 4 a call returned fmi2Error or worse, 2 bad usage or a missing library.
  * The logger prints "[instance status category] message" to stderr.
  */
@@ -105,8 +106,8 @@ int main(int argc, char **argv)
             printf("BAD %d\n", (int)fmi2DoStep(c, 0.0, -1.0, fmi2True));
         for (k = 0; k <= n_steps && st < fmi2Error; k++) {
             size_t j;
-            if (k > 0)
-                st = fmi2DoStep(c, (k - 1) * h, h, fmi2True);
+            if (k > 0) /* time counted in steps, step = difference (as fmpy does) */
+                st = fmi2DoStep(c, (k - 1) * h, k * h - (k - 1) * h, fmi2True);
             if (st < fmi2Error && n_out > 0)
                 st = fmi2GetReal(c, out, n_out, y);
             if (st < fmi2Error) {
