@@ -1,0 +1,235 @@
+"""The FMU boundary (issue 14.1): the plant FMU in fmpy next to the plant alone, and where the time goes.
+
+    python benchmarks/bench_fmu_boundary.py [--stop-time 10] [--repeat 5]
+        [--baseline DIR] [--out benchmarks/results/fmu_boundary.md]
+
+All in one process, candidates interleaved, best of ``--repeat`` (the machine is shared):
+
+1. ``paper_open_loop`` for ``--stop-time`` s at 1 ms: the plant alone (``plant.simulator.simulate``,
+   the compiled recording loop) next to the plant FMU through ``fmpy.simulate_fmu`` (all 23
+   outputs recorded). Both reuse what a second run in a process reuses (the model's stable step;
+   the numba cache); both include everything else (the FMU: unzip, instantiate, initialize).
+2. Per step of 1 ms, the layers of that FMU run: the physics alone, ``PlantSimulator.do_step`` +
+   outputs (Python), the FMU's ``fmi2DoStep`` called straight through ctypes (our wrapper +
+   adapter), fmpy's ``doStep`` + ``getReal`` of the outputs, ``fmpy.simulate_fmu``.
+3. ``paper_closed_loop`` through our master (``cosim.master.Execution``) at the scene's 0.25 ms
+   step, per step, for the FMUs built from this checkout and, with ``--baseline DIR``, for FMUs of
+   an earlier build (e.g. the main branch's ``build/fmus``) side by side.
+4. Cold start of the plant FMU in a fresh process after first use: instantiate (imports),
+   initialize (model build, numba cache loads), first doStep, best of 3.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+import numpy as np  # noqa: E402
+from fmpy import extract, read_model_description, simulate_fmu  # noqa: E402
+from fmpy.fmi2 import FMU2Slave  # noqa: E402
+
+from drillcosim.cosim.master.execution import Execution  # noqa: E402
+from drillcosim.cosim.scenario.scene_system import scene_system  # noqa: E402
+from drillcosim.fmu_src.build import build_all  # noqa: E402
+from drillcosim.plant.model import DrillstringModel  # noqa: E402
+from drillcosim.plant.scene import load_scene  # noqa: E402
+from drillcosim.plant.simulator import PlantSimulator, simulate  # noqa: E402
+
+H = 1e-3
+
+
+def _model() -> DrillstringModel:
+    sc = load_scene("paper_open_loop", overrides={"model": "full3d"})  # = the FMU's default
+    return DrillstringModel(sc.plant, sc.model)
+
+
+def plant_alone(model: DrillstringModel, stop: float) -> float:
+    """Wall time [s] of ``simulate`` (compiled recording loop, all outputs) for ``stop`` s."""
+    t0 = time.perf_counter()
+    simulate(model, stop, H)
+    return time.perf_counter() - t0
+
+
+def plant_fmu(fmu: Path, stop: float) -> float:
+    """Wall time [s] of ``fmpy.simulate_fmu`` of the plant FMU for ``stop`` s at 1 ms."""
+    t0 = time.perf_counter()
+    simulate_fmu(str(fmu), stop_time=stop, step_size=H, output_interval=H)
+    return time.perf_counter() - t0
+
+
+def _slave(fmu: Path, unzip: str) -> tuple[FMU2Slave, list[int]]:
+    md = read_model_description(str(fmu))
+    s = FMU2Slave(guid=md.guid, unzipDirectory=unzip,
+                  modelIdentifier=md.coSimulation.modelIdentifier, instanceName="bench")
+    s.instantiate()
+    s.setupExperiment(startTime=0.0)
+    s.enterInitializationMode()
+    s.exitInitializationMode()
+    return s, [v.valueReference for v in md.modelVariables if v.causality == "output"]
+
+
+def layers(model: DrillstringModel, fmu: Path, n: int) -> dict[str, float]:
+    """Per-step wall time [us] of each layer of the FMU run (one pass each)."""
+    out = {}
+    t0 = time.perf_counter()
+    simulate(model, n * H, H)
+    out["physics: compiled recording loop (plant alone)"] = time.perf_counter() - t0
+    sim = PlantSimulator(model)
+    idx = np.arange(len(model.output_names))
+    y = np.zeros(len(idx))
+    t0 = time.perf_counter()
+    for k in range(n):
+        sim.do_step(k * H, H)
+        sim.outputs().take(idx, out=y)
+    out["PlantSimulator.do_step + outputs (Python loop)"] = time.perf_counter() - t0
+    unzip = extract(str(fmu))
+    s, outs = _slave(fmu, unzip)
+    do_step, c = s.dll.fmi2DoStep, s.component
+    t0 = time.perf_counter()
+    for k in range(n):
+        do_step(c, k * H, H, 1)
+    out["FMU fmi2DoStep through ctypes (our wrapper + adapter)"] = time.perf_counter() - t0
+    s.terminate()
+    s.freeInstance()
+    s, outs = _slave(fmu, unzip)
+    t0 = time.perf_counter()
+    for k in range(n):
+        s.doStep(k * H, H)
+        s.getReal(outs)
+    out["fmpy FMU2Slave.doStep + getReal(23 outputs)"] = time.perf_counter() - t0
+    s.terminate()
+    s.freeInstance()
+    shutil.rmtree(unzip, ignore_errors=True)
+    out["fmpy.simulate_fmu (whole run)"] = plant_fmu(fmu, n * H)
+    return {k: v / n * 1e6 for k, v in out.items()}
+
+
+def closed_loop(fmu_dir: Path, stop: float) -> float:
+    """Wall time [s] of ``paper_closed_loop`` through Execution (0.25 ms, no recording)."""
+    ss = scene_system(load_scene("paper_closed_loop"), fmu_dir)
+    with Execution(ss.system) as ex:
+        ex.initialize()
+        t0 = time.perf_counter()
+        ex.simulate_until(stop)
+        return time.perf_counter() - t0
+
+
+COLD = """
+import sys, time
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave
+md = read_model_description(sys.argv[1]); d = extract(sys.argv[1])
+t0 = time.perf_counter()
+s = FMU2Slave(guid=md.guid, unzipDirectory=d, modelIdentifier=md.coSimulation.modelIdentifier,
+              instanceName="p")
+s.instantiate(); t1 = time.perf_counter()
+s.setupExperiment(startTime=0.0); s.enterInitializationMode(); s.exitInitializationMode()
+t2 = time.perf_counter(); s.doStep(0.0, 1e-3); t3 = time.perf_counter()
+print(t1 - t0, t2 - t1, t3 - t2)
+"""
+
+
+def cold_start(fmu: Path, repeat: int = 3) -> tuple[float, float, float]:
+    """Best (instantiate, initialize, first doStep) [s] in fresh processes after first use."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    runs = []
+    for _ in range(repeat + 1):  # the first one may still fill caches: dropped
+        out = subprocess.run([sys.executable, "-c", COLD, str(fmu)], capture_output=True,
+                             text=True, check=True, env=env).stdout.split()
+        runs.append(tuple(float(x) for x in out[-3:]))
+    return min(runs[1:], key=sum)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--stop-time", type=float, default=10.0, help="open loop [s]")
+    ap.add_argument("--closed-stop-time", type=float, default=2.0, help="closed loop [s]")
+    ap.add_argument("--repeat", type=int, default=5, help="interleaved repetitions (best kept)")
+    ap.add_argument("--baseline", type=Path, default=None,
+                    help="folder with FMUs of an earlier build, measured side by side")
+    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "fmu_boundary.md"))
+    args = ap.parse_args(argv)
+    stop = args.stop_time
+    fmu_dir = Path(tempfile.mkdtemp(prefix="bench_fmus_"))
+    build_all(fmu_dir)
+    plant = fmu_dir / "DrillstringPlant.fmu"
+    dirs = {"this build": fmu_dir}
+    if args.baseline is not None:
+        dirs["baseline"] = args.baseline.resolve()
+    model = _model()
+    for d in dirs.values():  # warm: numba caches, the model's stable step
+        plant_fmu(d / "DrillstringPlant.fmu", 0.01)
+        closed_loop(d, 0.01)
+    plant_alone(model, 0.01)
+
+    wall: dict[str, list[float]] = {"alone": []}
+    for name in dirs:
+        wall[f"fmu {name}"] = []
+        wall[f"closed {name}"] = []
+    for _ in range(args.repeat):
+        wall["alone"].append(plant_alone(model, stop))
+        for name, d in dirs.items():
+            wall[f"fmu {name}"].append(plant_fmu(d / "DrillstringPlant.fmu", stop))
+            wall[f"closed {name}"].append(closed_loop(d, args.closed_stop_time))
+    best = {k: min(v) for k, v in wall.items()}
+    per_layer = layers(model, plant, 3000)
+    cold = {name: cold_start(d / "DrillstringPlant.fmu") for name, d in dirs.items()}
+    shutil.rmtree(fmu_dir, ignore_errors=True)
+
+    n_cl = args.closed_stop_time / 2.5e-4
+    lines = [
+        "## FMU boundary (benchmarks/bench_fmu_boundary.py)",
+        "",
+        f"Command: `python benchmarks/bench_fmu_boundary.py --stop-time {stop:g} --repeat "
+        f"{args.repeat}{' --baseline ' + str(args.baseline) if args.baseline else ''}`; "
+        f"{time.strftime('%Y-%m-%d %H:%M')}; {platform.platform()}, {os.cpu_count()} cores, "
+        f"Python {platform.python_version()}, load average {os.getloadavg()[0]:.1f} at the end; "
+        f"best of {args.repeat} interleaved runs.",
+        "",
+        f"paper_open_loop, {stop:g} s at 1 ms, all outputs recorded:",
+        "",
+        "| run | wall [s] | real-time factor | vs the plant alone |",
+        "|---|---:|---:|---:|",
+        f"| plant alone (`plant.simulator.simulate`, compiled recording loop) | "
+        f"{best['alone']:.3f} | {stop / best['alone']:.1f} | 1.00 |",
+    ]
+    for name in dirs:
+        b = best[f"fmu {name}"]
+        lines.append(f"| plant FMU through `fmpy.simulate_fmu` ({name}) | {b:.3f} | "
+                     f"{stop / b:.1f} | {best['alone'] / b:.2f} |")
+    lines += ["", "Where a 1 ms step of the plant FMU goes (this build, 3 s, one pass each):", "",
+              "| layer | us per step |", "|---|---:|"]
+    lines += [f"| {k} | {v:.1f} |" for k, v in per_layer.items()]
+    lines += ["", f"paper_closed_loop through `cosim.master.Execution` at 0.25 ms "
+              f"({args.closed_stop_time:g} s, {n_cl:.0f} steps, no recording):", "",
+              "| FMUs | wall [s] | us per step | real-time factor |", "|---|---:|---:|---:|"]
+    for name in dirs:
+        b = best[f"closed {name}"]
+        lines.append(f"| {name} | {b:.3f} | {b / n_cl * 1e6:.1f} | "
+                     f"{args.closed_stop_time / b:.2f} |")
+    lines += ["", "Cold start of the plant FMU in a fresh process after first use (best of 3):",
+              "", "| FMUs | instantiate (imports) [s] | initialize (model build) [s] | "
+              "first doStep [s] | total [s] |", "|---|---:|---:|---:|---:|"]
+    for name, (a, b, c) in cold.items():
+        lines.append(f"| {name} | {a:.3f} | {b:.3f} | {c:.3f} | {a + b + c:.3f} |")
+    text = "\n".join(lines) + "\n"
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, out)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
