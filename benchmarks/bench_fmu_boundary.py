@@ -15,8 +15,11 @@ All in one process, candidates interleaved, best of ``--repeat`` (the machine is
 3. ``paper_closed_loop`` through our master (``cosim.master.Execution``) at the scene's 0.25 ms
    step, per step, for the FMUs built from this checkout and, with ``--baseline DIR``, for FMUs of
    an earlier build (e.g. the main branch's ``build/fmus``) side by side.
-4. Cold start of the plant FMU in a fresh process after first use: instantiate (imports),
-   initialize (model build, numba cache loads), first doStep, best of 3.
+4. One FMI call through ctypes (getReal of all outputs, setReal of all inputs, the controller's
+   doStep), for both FMUs, this build and the baseline.
+5. Cold start of the plant FMU in a fresh process after first use: instantiate (imports),
+   initialize (model build, numba cache loads), first doStep, best of 3; next to the plant alone
+   in a fresh process (imports, model + simulator, first step): the FMU layer's share.
 """
 
 from __future__ import annotations
@@ -113,6 +116,45 @@ def layers(model: DrillstringModel, fmu: Path, n: int) -> dict[str, float]:
     return {k: v / n * 1e6 for k, v in out.items()}
 
 
+def per_call(fmu: Path, n: int = 20000, repeat: int = 5) -> dict[str, float]:
+    """us per raw ctypes call (preallocated arrays) in step mode: getReal of every output,
+    setReal of every input, and (controller only) doStep; best of ``repeat`` x ``n``."""
+    import ctypes
+
+    md = read_model_description(str(fmu))
+    unzip = extract(str(fmu))
+    s, outs = _slave(fmu, unzip)
+    ins = [v.valueReference for v in md.modelVariables if v.causality == "input"]
+    vo = (ctypes.c_uint * len(outs))(*outs)
+    yo = (ctypes.c_double * len(outs))()
+    vi = (ctypes.c_uint * len(ins))(*ins)
+    ui = (ctypes.c_double * len(ins))()
+    c, dll = s.component, s.dll
+    calls = {f"getReal({len(outs)} outputs)": lambda: dll.fmi2GetReal(c, vo, len(outs), yo),
+             f"setReal({len(ins)} inputs)": lambda: dll.fmi2SetReal(c, vi, len(ins), ui)}
+    if "Controller" in fmu.name:
+        t = [0.0]
+
+        def step() -> None:
+            dll.fmi2DoStep(c, t[0], 1e-3, 1)
+            t[0] += 1e-3
+
+        calls["doStep"] = step
+    out = {}
+    for name, call in calls.items():
+        best = float("inf")
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            for _ in range(n):
+                call()
+            best = min(best, time.perf_counter() - t0)
+        out[name] = best / n * 1e6
+    s.terminate()
+    s.freeInstance()
+    shutil.rmtree(unzip, ignore_errors=True)
+    return out
+
+
 def closed_loop(fmu_dir: Path, stop: float) -> float:
     """Wall time [s] of ``paper_closed_loop`` through Execution (0.25 ms, no recording)."""
     ss = scene_system(load_scene("paper_closed_loop"), fmu_dir)
@@ -138,13 +180,30 @@ print(t1 - t0, t2 - t1, t3 - t2)
 """
 
 
-def cold_start(fmu: Path, repeat: int = 3) -> tuple[float, float, float]:
-    """Best (instantiate, initialize, first doStep) [s] in fresh processes after first use."""
+COLD_ALONE = """
+import time
+t0 = time.perf_counter()
+from drillcosim.plant.model import DrillstringModel
+from drillcosim.plant.scene import load_scene
+from drillcosim.plant.simulator import PlantSimulator
+t1 = time.perf_counter()
+sc = load_scene("paper_open_loop", overrides={"model": "full3d"})
+sim = PlantSimulator(DrillstringModel(sc.plant, sc.model))
+t2 = time.perf_counter(); sim.do_step(0.0, 1e-3); sim.outputs(); t3 = time.perf_counter()
+print(t1 - t0, t2 - t1, t3 - t2)
+"""
+
+
+def cold_start(fmu: Path | None, repeat: int = 3) -> tuple[float, float, float]:
+    """Best (imports, build, first step) [s] in fresh processes after first use: the FMU
+    (instantiate, initialize, first doStep) or, for ``fmu=None``, the plant alone."""
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    cmd = [sys.executable, "-c", COLD_ALONE] if fmu is None else [sys.executable, "-c", COLD,
+                                                                   str(fmu)]
     runs = []
     for _ in range(repeat + 1):  # the first one may still fill caches: dropped
-        out = subprocess.run([sys.executable, "-c", COLD, str(fmu)], capture_output=True,
-                             text=True, check=True, env=env).stdout.split()
+        out = subprocess.run(cmd, capture_output=True, text=True, check=True,
+                             env=env).stdout.split()
         runs.append(tuple(float(x) for x in out[-3:]))
     return min(runs[1:], key=sum)
 
@@ -182,7 +241,11 @@ def main(argv: list[str] | None = None) -> int:
             wall[f"closed {name}"].append(closed_loop(d, args.closed_stop_time))
     best = {k: min(v) for k, v in wall.items()}
     per_layer = layers(model, plant, 3000)
-    cold = {name: cold_start(d / "DrillstringPlant.fmu") for name, d in dirs.items()}
+    calls = {(fmu_name, name): per_call(d / f"{fmu_name}.fmu")
+             for name, d in dirs.items() for fmu_name in ("DrillstringPlant", "StrainController")}
+    cold = {f"plant FMU, {name}": cold_start(d / "DrillstringPlant.fmu")
+            for name, d in dirs.items()}
+    cold["plant alone (imports, model + simulator, first do_step)"] = cold_start(None)
     shutil.rmtree(fmu_dir, ignore_errors=True)
 
     n_cl = args.closed_stop_time / 2.5e-4
@@ -209,6 +272,13 @@ def main(argv: list[str] | None = None) -> int:
     lines += ["", "Where a 1 ms step of the plant FMU goes (this build, 3 s, one pass each):", "",
               "| layer | us per step |", "|---|---:|"]
     lines += [f"| {k} | {v:.1f} |" for k, v in per_layer.items()]
+    lines += ["", "One FMI call through ctypes with preallocated arrays (step mode, best of 5 x "
+              "20 000), us:", "", "| FMU | call | " + " | ".join(dirs) + " |",
+              "|---|---|" + "---:|" * len(dirs)]
+    for fmu_name in ("DrillstringPlant", "StrainController"):
+        for call in calls[(fmu_name, "this build")]:
+            lines.append(f"| {fmu_name} | {call} | " + " | ".join(
+                f"{calls[(fmu_name, name)][call]:.2f}" for name in dirs) + " |")
     lines += ["", f"paper_closed_loop through `cosim.master.Execution` at 0.25 ms "
               f"({args.closed_stop_time:g} s, {n_cl:.0f} steps, no recording):", "",
               "| FMUs | wall [s] | us per step | real-time factor |", "|---|---:|---:|---:|"]
@@ -216,17 +286,15 @@ def main(argv: list[str] | None = None) -> int:
         b = best[f"closed {name}"]
         lines.append(f"| {name} | {b:.3f} | {b / n_cl * 1e6:.1f} | "
                      f"{args.closed_stop_time / b:.2f} |")
-    lines += ["", "Cold start of the plant FMU in a fresh process after first use (best of 3):",
-              "", "| FMUs | instantiate (imports) [s] | initialize (model build) [s] | "
+    lines += ["", "Cold start in a fresh process after first use (best of 3), the FMU through fmpy "
+              "(read_model_description and unzip not counted):", "",
+              "| run | instantiate (imports) [s] | initialize (model build) [s] | "
               "first doStep [s] | total [s] |", "|---|---:|---:|---:|---:|"]
     for name, (a, b, c) in cold.items():
         lines.append(f"| {name} | {a:.3f} | {b:.3f} | {c:.3f} | {a + b + c:.3f} |")
     text = "\n".join(lines) + "\n"
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, out)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(text)
     print(text)
     return 0
 

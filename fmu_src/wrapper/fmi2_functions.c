@@ -173,42 +173,36 @@ FMI2_Export fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranc
     return end(in, status);
 }
 
-FMI2_Export fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+/* A lifecycle call: the slave's method, then state `next` unless the status is above `worst`. */
+static fmi2Status transition(fmi2Component c, int mask, const char *fn, DcsCall call,
+                             DcsState next, fmi2Status worst)
 {
     DcsInstance *in;
-    fmi2Status status = begin(c, MASK_fmi2EnterInitializationMode,
-                              "fmi2EnterInitializationMode", &in);
+    fmi2Status status = begin(c, mask, fn, &in);
     if (status == fmi2OK) {
-        status = dcs_slave_call(in, DCS_ENTER_INITIALIZATION_MODE);
-        if (status <= fmi2Warning)
-            in->state = DCS_INITIALIZATION_MODE;
+        status = dcs_slave_call(in, call);
+        if (status <= worst)
+            in->state = next;
     }
     return end(in, status);
+}
+
+FMI2_Export fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    return transition(c, MASK_fmi2EnterInitializationMode, "fmi2EnterInitializationMode",
+                      DCS_ENTER_INITIALIZATION_MODE, DCS_INITIALIZATION_MODE, fmi2Warning);
 }
 
 FMI2_Export fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
-    DcsInstance *in;
-    fmi2Status status = begin(c, MASK_fmi2ExitInitializationMode,
-                              "fmi2ExitInitializationMode", &in);
-    if (status == fmi2OK) {
-        status = dcs_slave_call(in, DCS_EXIT_INITIALIZATION_MODE);
-        if (status <= fmi2Warning)
-            in->state = DCS_STEP_COMPLETE;
-    }
-    return end(in, status);
+    return transition(c, MASK_fmi2ExitInitializationMode, "fmi2ExitInitializationMode",
+                      DCS_EXIT_INITIALIZATION_MODE, DCS_STEP_COMPLETE, fmi2Warning);
 }
 
 FMI2_Export fmi2Status fmi2Terminate(fmi2Component c)
 {
-    DcsInstance *in;
-    fmi2Status status = begin(c, MASK_fmi2Terminate, "fmi2Terminate", &in);
-    if (status == fmi2OK) {
-        status = dcs_slave_call(in, DCS_TERMINATE);
-        if (status != fmi2Fatal)
-            in->state = DCS_TERMINATED;
-    }
-    return end(in, status);
+    return transition(c, MASK_fmi2Terminate, "fmi2Terminate", DCS_TERMINATE, DCS_TERMINATED,
+                      fmi2Error); /* terminated unless fatal */
 }
 
 FMI2_Export fmi2Status fmi2Reset(fmi2Component c)
