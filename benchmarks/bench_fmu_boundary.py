@@ -55,18 +55,21 @@ def _model() -> DrillstringModel:
     return DrillstringModel(sc.plant, sc.model)
 
 
-def plant_alone(model: DrillstringModel, stop: float) -> float:
-    """Wall time [s] of ``simulate`` (compiled recording loop, all outputs) for ``stop`` s."""
-    t0 = time.perf_counter()
-    simulate(model, stop, H)
-    return time.perf_counter() - t0
+def timed(fn, *args) -> tuple[float, float]:
+    """(wall, CPU time of this process) [s] of ``fn(*args)``."""
+    w0, c0 = time.perf_counter(), time.process_time()
+    fn(*args)
+    return time.perf_counter() - w0, time.process_time() - c0
 
 
-def plant_fmu(fmu: Path, stop: float) -> float:
-    """Wall time [s] of ``fmpy.simulate_fmu`` of the plant FMU for ``stop`` s at 1 ms."""
-    t0 = time.perf_counter()
-    simulate_fmu(str(fmu), stop_time=stop, step_size=H, output_interval=H)
-    return time.perf_counter() - t0
+def plant_alone(model: DrillstringModel, stop: float) -> tuple[float, float]:
+    """(wall, CPU) [s] of ``simulate`` (compiled recording loop, all outputs) for ``stop`` s."""
+    return timed(simulate, model, stop, H)
+
+
+def plant_fmu(fmu: Path, stop: float) -> tuple[float, float]:
+    """(wall, CPU) [s] of ``fmpy.simulate_fmu`` of the plant FMU for ``stop`` s at 1 ms."""
+    return timed(lambda: simulate_fmu(str(fmu), stop_time=stop, step_size=H, output_interval=H))
 
 
 def _slave(fmu: Path, unzip: str) -> tuple[FMU2Slave, list[int]]:
@@ -112,7 +115,7 @@ def layers(model: DrillstringModel, fmu: Path, n: int) -> dict[str, float]:
     s.terminate()
     s.freeInstance()
     shutil.rmtree(unzip, ignore_errors=True)
-    out["fmpy.simulate_fmu (whole run)"] = plant_fmu(fmu, n * H)
+    out["fmpy.simulate_fmu (whole run)"] = plant_fmu(fmu, n * H)[0]
     return {k: v / n * 1e6 for k, v in out.items()}
 
 
@@ -155,14 +158,12 @@ def per_call(fmu: Path, n: int = 20000, repeat: int = 5) -> dict[str, float]:
     return out
 
 
-def closed_loop(fmu_dir: Path, stop: float) -> float:
-    """Wall time [s] of ``paper_closed_loop`` through Execution (0.25 ms, no recording)."""
+def closed_loop(fmu_dir: Path, stop: float) -> tuple[float, float]:
+    """(wall, CPU) [s] of ``paper_closed_loop`` through Execution (0.25 ms, no recording)."""
     ss = scene_system(load_scene("paper_closed_loop"), fmu_dir)
     with Execution(ss.system) as ex:
         ex.initialize()
-        t0 = time.perf_counter()
-        ex.simulate_until(stop)
-        return time.perf_counter() - t0
+        return timed(ex.simulate_until, stop)
 
 
 COLD = """
@@ -230,16 +231,17 @@ def main(argv: list[str] | None = None) -> int:
         closed_loop(d, 0.01)
     plant_alone(model, 0.01)
 
-    wall: dict[str, list[float]] = {"alone": []}
+    runs: dict[str, list[tuple[float, float]]] = {"alone": []}
     for name in dirs:
-        wall[f"fmu {name}"] = []
-        wall[f"closed {name}"] = []
+        runs[f"fmu {name}"] = []
+        runs[f"closed {name}"] = []
     for _ in range(args.repeat):
-        wall["alone"].append(plant_alone(model, stop))
+        runs["alone"].append(plant_alone(model, stop))
         for name, d in dirs.items():
-            wall[f"fmu {name}"].append(plant_fmu(d / "DrillstringPlant.fmu", stop))
-            wall[f"closed {name}"].append(closed_loop(d, args.closed_stop_time))
-    best = {k: min(v) for k, v in wall.items()}
+            runs[f"fmu {name}"].append(plant_fmu(d / "DrillstringPlant.fmu", stop))
+            runs[f"closed {name}"].append(closed_loop(d, args.closed_stop_time))
+    best = {k: min(w for w, _c in v) for k, v in runs.items()}  # wall
+    cpu = {k: min(c for _w, c in v) for k, v in runs.items()}
     per_layer = layers(model, plant, 3000)
     calls = {(fmu_name, name): per_call(d / f"{fmu_name}.fmu")
              for name, d in dirs.items() for fmu_name in ("DrillstringPlant", "StrainController")}
@@ -256,19 +258,22 @@ def main(argv: list[str] | None = None) -> int:
         f"{args.repeat}{' --baseline ' + str(args.baseline) if args.baseline else ''}`; "
         f"{time.strftime('%Y-%m-%d %H:%M')}; {platform.platform()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}, load average {os.getloadavg()[0]:.1f} at the end; "
-        f"best of {args.repeat} interleaved runs.",
+        f"best of {args.repeat} interleaved runs (wall and this process's CPU time, each the "
+        f"best of its runs: on a shared machine CPU time is the steadier of the two).",
         "",
         f"paper_open_loop, {stop:g} s at 1 ms, all outputs recorded:",
         "",
-        "| run | wall [s] | real-time factor | vs the plant alone |",
-        "|---|---:|---:|---:|",
+        "| run | wall [s] | real-time factor | vs the plant alone (wall) | CPU [s] | "
+        "vs the plant alone (CPU) |",
+        "|---|---:|---:|---:|---:|---:|",
         f"| plant alone (`plant.simulator.simulate`, compiled recording loop) | "
-        f"{best['alone']:.3f} | {stop / best['alone']:.1f} | 1.00 |",
+        f"{best['alone']:.3f} | {stop / best['alone']:.1f} | 1.00 | {cpu['alone']:.3f} | 1.00 |",
     ]
     for name in dirs:
-        b = best[f"fmu {name}"]
+        b, c = best[f"fmu {name}"], cpu[f"fmu {name}"]
         lines.append(f"| plant FMU through `fmpy.simulate_fmu` ({name}) | {b:.3f} | "
-                     f"{stop / b:.1f} | {best['alone'] / b:.2f} |")
+                     f"{stop / b:.1f} | {best['alone'] / b:.2f} | {c:.3f} | "
+                     f"{cpu['alone'] / c:.2f} |")
     lines += ["", "Where a 1 ms step of the plant FMU goes (this build, 3 s, one pass each):", "",
               "| layer | us per step |", "|---|---:|"]
     lines += [f"| {k} | {v:.1f} |" for k, v in per_layer.items()]
@@ -281,11 +286,12 @@ def main(argv: list[str] | None = None) -> int:
                 f"{calls[(fmu_name, name)][call]:.2f}" for name in dirs) + " |")
     lines += ["", f"paper_closed_loop through `cosim.master.Execution` at 0.25 ms "
               f"({args.closed_stop_time:g} s, {n_cl:.0f} steps, no recording):", "",
-              "| FMUs | wall [s] | us per step | real-time factor |", "|---|---:|---:|---:|"]
+              "| FMUs | wall [s] | us per step (wall) | real-time factor | us per step (CPU) |",
+              "|---|---:|---:|---:|---:|"]
     for name in dirs:
-        b = best[f"closed {name}"]
+        b, c = best[f"closed {name}"], cpu[f"closed {name}"]
         lines.append(f"| {name} | {b:.3f} | {b / n_cl * 1e6:.1f} | "
-                     f"{args.closed_stop_time / b:.2f} |")
+                     f"{args.closed_stop_time / b:.2f} | {c / n_cl * 1e6:.1f} |")
     lines += ["", "Cold start in a fresh process after first use (best of 3), the FMU through fmpy "
               "(read_model_description and unzip not counted):", "",
               "| run | instantiate (imports) [s] | initialize (model build) [s] | "
