@@ -286,6 +286,10 @@ def _fmu_and_master_sections(quick: bool) -> list[str]:
     fm = _script(["benchmarks/bench_fmu_master.py", "--stop-time", stop, "--memory-stop-time",
                   stop, "--out", str(out)], 1800)
     fm = out.read_text() if out.exists() and not fm.startswith("(") else fm
+    out_b = ROOT / "benchmarks" / "results" / "fmu_boundary.md"
+    fb = _script(["benchmarks/bench_fmu_boundary.py", "--stop-time", "3" if quick else "10",
+                  "--repeat", "3" if quick else "5", "--out", str(out_b)], 1800)
+    fb = out_b.read_text() if out_b.exists() and not fb.startswith("(") else fb
     steps = "5000" if quick else "20000"
     mo = _script(["benchmarks/bench_master_overhead.py", "--steps", steps], 1800)
     table = [ln for ln in mo.splitlines() if ln.startswith("|") or " steps of " in ln]
@@ -294,7 +298,7 @@ def _fmu_and_master_sections(quick: bool) -> list[str]:
                                     "--divisors", "1,2", "--no-step-table"], 3600)
     ctl = _script(["benchmarks/bench_controller_fmus.py", "--steps", steps, "--stop-time",
                    "1" if quick else "2"], 900)
-    return [red, rms, fm, "", "## Master overhead on tiny FMUs (benchmarks/bench_master_overhead.py)", "",
+    return [red, rms, fm, fb, "", "## Master overhead on tiny FMUs (benchmarks/bench_master_overhead.py)", "",
             f"Command: `python benchmarks/bench_master_overhead.py --steps {steps}` (target: "
             "our master within 1.3x of a hand-written raw fmpy loop).", "", *table, "", ctl]
 

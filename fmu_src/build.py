@@ -1,6 +1,6 @@
 """Build the project's FMUs with pythonfmu: ``python -m drillcosim.fmu_src.build --out DIR``.
 
-Every FMU is described by one :class:`FmuSpec` in :data:`REGISTRY`. ``build_all``
+Every FMU is described by one :class:`FmuRecipe` in :data:`REGISTRY`. ``build_all``
 builds each registered FMU whose adapter script exists (an entry whose script is
 missing is skipped with a printed note) and returns the written paths.
 
@@ -29,25 +29,22 @@ class attribute ``DIRECT_FEEDTHROUGH`` (output name -> input names; an output no
 listed gets no ``dependencies`` attribute, meaning "depends on all"), and
 ``<InitialUnknowns>`` for outputs whose ``initial`` is not ``exact``.
 
-FMI wrapper (``--wrapper``)
----------------------------
-``native`` (the default) replaces pythonfmu's prebuilt C++ wrapper
-``binaries/linux64/<name>.so`` by our C wrapper (:mod:`fmu_src.wrapper`,
-compiled here against the running Python: needs a C compiler, ``$CC`` or
-``gcc``, and a shared libpython; linux64 only), which returns fmi2Error for
-exceptions and for statuses the adapter reports, and survives exceptions; see
-that module for the status convention. ``pythonfmu`` (the fallback) keeps
-pythonfmu's binary, which can report errors only as fmi2Discard (or fmi2Fatal).
-Choose with ``--wrapper``, ``build_one(..., wrapper=...)`` or, for a process,
-``$DRILLCOSIM_FMU_WRAPPER``. Without a C compiler the native build stops with a
-one-line message naming the fallback.
+FMI wrapper
+-----------
+pythonfmu's prebuilt C++ binary ``binaries/linux64/<name>.so`` is replaced by our C wrapper
+(:mod:`fmu_src.wrapper`, compiled here against the running Python: needs a C compiler, ``$CC``
+or ``gcc``), which returns fmi2Error for exceptions and for statuses the adapter reports,
+survives exceptions, finds a Python in hosts without one and moves Real inputs/outputs without
+Python calls; pythonfmu's other binaries (win64) are dropped: they could report no error.
+Without a C compiler the build stops with a one-line message.
 
 Registering the plant FMU
 -------------------------
 Add (or edit) one entry in :data:`REGISTRY`, e.g.::
 
-    FmuSpec(name="DrillstringPlant", script="fmu_src/drillstring_plant_fmu.py",
-            vendored=(("plant", "_dcs_plant_0_1_0"),), extra_files=("scenes/x.toml",))
+    FmuRecipe(name="DrillstringPlant", script="fmu_src/drillstring_plant_fmu.py",
+              vendored=(("plant", "_dcs_plant_0_1_0"),), extra_files=("scenes/x.toml",),
+              requires=("numpy", "scipy", "numba"))
 
 ``name`` must equal the adapter class name (= modelIdentifier = file stem of
 the ``.fmu``); the adapter imports ``_dcs_plant_0_1_0``; ``extra_files`` (paths
@@ -73,18 +70,15 @@ from xml.etree import ElementTree as ET
 
 __all__ = [
     "DEFAULT_OUT",
-    "WRAPPERS",
     "REGISTRY",
     "ROOT",
     "UNIT_DEFINITIONS",
-    "FmuSpec",
-    "WrapperUnavailableError",
+    "FmuRecipe",
     "build_all",
     "build_one",
-    "default_wrapper",
     "finalize_model_description",
     "main",
-    "wrapper_of",
+    "stale",
 ]
 
 #: The drillcosim package root: the repository in a checkout (editable install), the installed
@@ -158,50 +152,6 @@ UNIT_DEFINITIONS: dict[str, dict[str, int]] = {
     "J": {"kg": 1, "m": 2, "s": -2},
 }
 
-#: FMI wrappers ``build_one`` can ship; the first is the default.
-WRAPPERS: tuple[str, ...] = ("native", "pythonfmu")
-
-
-class WrapperUnavailableError(RuntimeError):
-    """The native wrapper cannot be built here (no C compiler or no shared libpython)."""
-
-
-def _wrapper(wrapper: str | None) -> str:
-    """The wrapper to use: ``wrapper``, else ``$DRILLCOSIM_FMU_WRAPPER``, else native."""
-    chosen = wrapper or os.environ.get("DRILLCOSIM_FMU_WRAPPER") or WRAPPERS[0]
-    if chosen not in WRAPPERS:
-        raise ValueError(f"wrapper {chosen!r} is not one of {', '.join(WRAPPERS)}")
-    return chosen
-
-
-def default_wrapper() -> str:
-    """The wrapper a build without ``wrapper=`` uses (``$DRILLCOSIM_FMU_WRAPPER`` or native)."""
-    return _wrapper(None)
-
-
-def wrapper_of(fmu: Path | str) -> str:
-    """The wrapper an FMU was built with: "native" if it ships ``resources/slaveclass.txt``."""
-    with zipfile.ZipFile(fmu) as zf:
-        return "native" if "resources/slaveclass.txt" in zf.namelist() else "pythonfmu"
-
-
-def _check_native_prerequisites() -> None:
-    """Raise :class:`WrapperUnavailableError` (one line) if the native wrapper cannot be built."""
-    from drillcosim.fmu_src.wrapper import libpython_path
-
-    cc = os.environ.get("CC") or "gcc"
-    fallback = ("build with --wrapper pythonfmu (or DRILLCOSIM_FMU_WRAPPER=pythonfmu) "
-                "for pythonfmu's prebuilt binary")
-    if shutil.which(cc) is None:
-        raise WrapperUnavailableError(f"the native FMI wrapper needs a C compiler and {cc!r} "
-                                 f"(from $CC or the default gcc) was not found; install "
-                                 f"one or {fallback}")
-    try:
-        libpython_path()
-    except RuntimeError as exc:
-        raise WrapperUnavailableError(f"{exc}; {fallback}") from None
-
-
 _DEFAULT_OPTIONS: tuple[tuple[str, bool], ...] = (
     ("canGetAndSetFMUstate", True),
     ("canSerializeFMUstate", True),
@@ -209,8 +159,9 @@ _DEFAULT_OPTIONS: tuple[tuple[str, bool], ...] = (
 
 
 @dataclass(frozen=True)
-class FmuSpec:
-    """One FMU to build.
+class FmuRecipe:
+    """How to build one FMU (not to be confused with :class:`cosim.master.system.FmuSpec`, an
+    FMU placed in a co-simulation system).
 
     Parameters
     ----------
@@ -228,6 +179,12 @@ class FmuSpec:
         Further files or folders (relative to the root) copied into ``resources/``.
     options : tuple of (str, bool)
         pythonfmu model options (``<CoSimulation>`` capability flags).
+    requires : tuple of str
+        Modules (import names) a Python must have to run the FMU; a host without Python
+        checks its candidates for them (``resources/python_requires.txt``).
+    exclude : tuple of str
+        Files of the vendored packages (relative to the root) left out of the FMU: code the
+        FMU never imports (tests' and benchmarks' reference implementations, analysis tools).
     """
 
     name: str
@@ -235,6 +192,8 @@ class FmuSpec:
     vendored: tuple[tuple[str, str], ...] = ()
     extra_files: tuple[str, ...] = ()
     options: tuple[tuple[str, bool], ...] = field(default=_DEFAULT_OPTIONS)
+    requires: tuple[str, ...] = ()
+    exclude: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not self.name.isidentifier():
@@ -243,12 +202,30 @@ class FmuSpec:
             if not (vname.isidentifier() and vname.startswith("_dcs_")):
                 raise ValueError(f"vendored name {vname!r} must be an identifier starting "
                                  f"with '_dcs_' (e.g. '_dcs_plant_0_1_0')")
+        for module in self.requires:
+            if not all(part.isidentifier() for part in module.split(".")):
+                raise ValueError(f"requires: {module!r} is not an import name")
 
     @property
     def script_path(self) -> Path:
         """Path: absolute path of the adapter script."""
         path = Path(self.script)
         return path if path.is_absolute() else ROOT / path
+
+    def sources(self) -> list[Path]:
+        """Every file the FMU is made of: the adapter, the shipped package files, the extra
+        files, the wrapper's C sources and this build module."""
+        from drillcosim.fmu_src.wrapper import sources as wrapper_sources
+
+        excluded = {(ROOT / e).resolve() for e in self.exclude}
+        files = [self.script_path, Path(__file__).resolve(), *wrapper_sources()]
+        for package, _ in self.vendored:
+            files += [p for p in sorted((ROOT / package).rglob("*.py"))
+                      if "__pycache__" not in p.parts and p.resolve() not in excluded]
+        for extra in self.extra_files:
+            path = ROOT / extra
+            files += sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+        return files
 
     @property
     def slave_module(self) -> str:
@@ -258,20 +235,25 @@ class FmuSpec:
         return f"_dcs_{self.script_path.stem}_{__version__.replace('.', '_')}"
 
 
-#: The FMUs of the project. The plant entry is skipped until its adapter exists.
-REGISTRY: tuple[FmuSpec, ...] = (
-    FmuSpec(
+#: The FMUs of the project.
+REGISTRY: tuple[FmuRecipe, ...] = (
+    FmuRecipe(
         name="StrainController",
         script="fmu_src/strain_controller_fmu.py",
         vendored=(("controller", "_dcs_controller_0_1_0"),
                   ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
+        requires=("numpy",),
     ),
-    FmuSpec(
+    FmuRecipe(
         name="DrillstringPlant",
         script="fmu_src/drillstring_plant_fmu.py",
         vendored=(("plant", "_dcs_plant_0_1_0"),
                   ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
         extra_files=("scenes",),
+        requires=("numpy", "scipy", "numba"),
+        # the numpy reference rhs (tests, benchmarks) and the linear/modal analysis (study
+        # layer): the FMU never imports them (tested)
+        exclude=("plant/numpy_rhs.py", "plant/linearize.py", "plant/modal.py"),
     ),
 )
 
@@ -398,10 +380,26 @@ def _rewrite_zip_member(fmu: Path, member: str, data: bytes) -> None:
 
 
 # -------------------------------------------------------------------------- worker
-def _build_in_this_process(spec: FmuSpec, workdir: Path, wrapper: str = "native") -> Path:
+def _vendor(recipe: FmuRecipe, package: str, dst: Path) -> None:
+    """Copy one vendored package to ``dst`` without caches and the recipe's excluded files."""
+    src = ROOT / package
+    if not (src / "__init__.py").is_file():
+        raise FileNotFoundError(f"vendored package {src} has no __init__.py")
+    excluded = {(ROOT / e).resolve() for e in recipe.exclude}
+
+    def ignore(folder: str, names: list[str]) -> set[str]:
+        return {n for n in names if n == "__pycache__" or n.endswith(".pyc")
+                or (Path(folder) / n).resolve() in excluded}
+
+    shutil.copytree(src, dst, ignore=ignore)
+
+
+def _build_in_this_process(recipe: FmuRecipe, workdir: Path) -> Path:
     """Build one FMU into ``workdir/out`` (run in a dedicated subprocess)."""
     import pythonfmu
     from pythonfmu import FmuBuilder
+
+    from drillcosim.fmu_src.wrapper import compile_wrapper, install_native_wrapper
 
     staging = workdir / "vendor"
     staging.mkdir(parents=True)
@@ -409,6 +407,8 @@ def _build_in_this_process(spec: FmuSpec, workdir: Path, wrapper: str = "native"
     if expected != PYTHONFMU_VENDORED:
         raise RuntimeError(f"pythonfmu {pythonfmu.__version__} is installed; the adapters import "
                            f"{PYTHONFMU_VENDORED} (install the pinned version)")
+    # the wrapper first: without a compiler nothing else is worth doing
+    library = compile_wrapper(workdir / "dcs_fmi2_native.so")
     # pythonfmu under its vendored name: shipped (runtime), and aliased here so the adapter's
     # classes derive from the very Fmi2Slave the builder checks for
     vend_pfmu = staging / PYTHONFMU_VENDORED
@@ -419,34 +419,30 @@ def _build_in_this_process(spec: FmuSpec, workdir: Path, wrapper: str = "native"
         if name == "pythonfmu" or name.startswith("pythonfmu."):
             sys.modules[PYTHONFMU_VENDORED + name[len("pythonfmu"):]] = module
     project_files: list[Path] = [vend_pfmu]
-    for package, vname in spec.vendored:
-        src = ROOT / package
-        if not (src / "__init__.py").is_file():
-            raise FileNotFoundError(f"vendored package {src} has no __init__.py")
-        dst = staging / vname
-        shutil.copytree(src, dst, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
-        project_files.append(dst)
-    for extra in spec.extra_files:
+    for package, vname in recipe.vendored:
+        _vendor(recipe, package, staging / vname)
+        project_files.append(staging / vname)
+    for extra in recipe.extra_files:
         path = ROOT / extra
         if not path.exists():
-            raise FileNotFoundError(f"extra file {path} of {spec.name} does not exist")
+            raise FileNotFoundError(f"extra file {path} of {recipe.name} does not exist")
         project_files.append(path)
 
-    source = spec.script_path.read_text()
+    source = recipe.script_path.read_text()
     if re.search(r"^\s*(from|import)\s+pythonfmu\b", source, re.M):
-        raise RuntimeError(f"{spec.script_path}: import pythonfmu as {PYTHONFMU_VENDORED} (the "
-                           f"FMU ships it under that name only)")
-    script = staging / f"{spec.slave_module}.py"
-    shutil.copy2(spec.script_path, script)
+        raise RuntimeError(f"{recipe.script_path}: import pythonfmu as {PYTHONFMU_VENDORED} "
+                           f"(the FMU ships it under that name only)")
+    script = staging / f"{recipe.slave_module}.py"
+    shutil.copy2(recipe.script_path, script)
     sys.path.insert(0, str(staging))  # so pythonfmu can import the adapter at build time
     fmu = FmuBuilder.build_FMU(script, dest=workdir / "out",
-                               project_files=project_files, **dict(spec.options))
+                               project_files=project_files, **dict(recipe.options))
     fmu = Path(fmu)
-    if fmu.name != f"{spec.name}.fmu":
-        raise RuntimeError(f"pythonfmu built {fmu.name}, expected {spec.name}.fmu: the "
-                           f"adapter class must be named {spec.name}")
+    if fmu.name != f"{recipe.name}.fmu":
+        raise RuntimeError(f"pythonfmu built {fmu.name}, expected {recipe.name}.fmu: the "
+                           f"adapter class must be named {recipe.name}")
 
-    cls = getattr(sys.modules[spec.slave_module], spec.name)
+    cls = getattr(sys.modules[recipe.slave_module], recipe.name)
     with zipfile.ZipFile(fmu) as zf:
         names = set(zf.namelist())
         xml = zf.read("modelDescription.xml")
@@ -459,83 +455,77 @@ def _build_in_this_process(spec: FmuSpec, workdir: Path, wrapper: str = "native"
     if f"resources/{PYTHONFMU_VENDORED}/fmi2slave.py" not in names:
         raise RuntimeError(f"{fmu.name}: resources/{PYTHONFMU_VENDORED}/ missing")
 
-    for package, vname in spec.vendored:
+    for package, vname in recipe.vendored:
         if f"resources/{vname}/__init__.py" not in names:
             raise RuntimeError(f"{fmu.name}: resources/{vname}/ missing")
         if any(n.startswith(f"resources/{package}/") for n in names):
             raise RuntimeError(f"{fmu.name}: unversioned resources/{package}/ would shadow")
-    if wrapper == "native":
-        from drillcosim.fmu_src.wrapper import compile_wrapper, install_native_wrapper
-
-        library = compile_wrapper(workdir / "dcs_fmi2_native.so")
-        install_native_wrapper(fmu, spec.name, library)
+    install_native_wrapper(fmu, recipe.name, library, recipe.requires)
     return fmu
 
 
 # ------------------------------------------------------------------------- public
-def build_one(spec: FmuSpec, out_dir: Path | str = DEFAULT_OUT,
-              wrapper: str | None = None) -> Path:
+def _check_compiler() -> None:
+    """Raise RuntimeError (one line) if there is no C compiler for the wrapper."""
+    cc = os.environ.get("CC") or "gcc"
+    if shutil.which(cc) is None:
+        raise RuntimeError(f"building the FMUs needs a C compiler and {cc!r} (from $CC or the "
+                           f"default gcc) was not found: install one (Debian: apt install gcc)")
+
+
+def build_one(recipe: FmuRecipe, out_dir: Path | str = DEFAULT_OUT) -> Path:
     """Build one FMU atomically into ``out_dir``.
 
     Parameters
     ----------
-    spec : FmuSpec
+    recipe : FmuRecipe
         What to build.
     out_dir : path-like
         Target folder (created if missing).
-    wrapper : {"pythonfmu", "native"}, optional
-        FMI wrapper (see the module docstring); default ``$DRILLCOSIM_FMU_WRAPPER``
-        or "native".
 
     Returns
     -------
     pathlib.Path
-        ``out_dir / f"{spec.name}.fmu"``.
+        ``out_dir / f"{recipe.name}.fmu"``.
 
     Raises
     ------
-    WrapperUnavailableError
-        ``wrapper="native"`` without a C compiler or a shared libpython (one line,
-        naming the ``pythonfmu`` fallback).
     RuntimeError
-        If the build subprocess fails (its output is included).
+        Without a C compiler (one line), or if the build subprocess fails (its output is
+        included).
     """
-    wrapper = _wrapper(wrapper)
-    if wrapper == "native":
-        _check_native_prerequisites()
+    _check_compiler()
     out_dir = Path(out_dir).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
-    target = out_dir / f"{spec.name}.fmu"
-    workdir = Path(tempfile.mkdtemp(prefix=f".{spec.name}-", dir=out_dir))
+    target = out_dir / f"{recipe.name}.fmu"
+    workdir = Path(tempfile.mkdtemp(prefix=f".{recipe.name}-", dir=out_dir))
     try:
         env = dict(os.environ)
         env["PYTHONDONTWRITEBYTECODE"] = "1"
-        cmd = [sys.executable, "-m", "drillcosim.fmu_src.build", "--worker-spec",
-               json.dumps(asdict(spec)), "--workdir", str(workdir), "--wrapper", wrapper]
+        cmd = [sys.executable, "-m", "drillcosim.fmu_src.build", "--worker-recipe",
+               json.dumps(asdict(recipe)), "--workdir", str(workdir)]
         # a fresh interpreter in an empty folder: nothing of the calling process (its
         # sys.modules, a shadowing pythonfmu, the working directory) reaches the build
         proc = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True)
         if proc.returncode != 0:
-            raise RuntimeError(f"building {spec.name} failed (exit {proc.returncode}):\n"
+            raise RuntimeError(f"building {recipe.name} failed (exit {proc.returncode}):\n"
                                f"{proc.stdout}\n{proc.stderr}")
-        os.replace(workdir / "out" / f"{spec.name}.fmu", target)
+        os.replace(workdir / "out" / f"{recipe.name}.fmu", target)
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
     return target
 
 
 def build_all(out_dir: Path | str = DEFAULT_OUT,
-              specs: Sequence[FmuSpec] = REGISTRY, wrapper: str | None = None) -> list[Path]:
-    """Build every FMU of ``specs`` whose adapter script exists.
+              recipes: Sequence[FmuRecipe] = REGISTRY) -> list[Path]:
+    """Build every FMU of ``recipes`` whose adapter script exists.
 
     Parameters
     ----------
     out_dir : path-like
         Target folder, default ``build/fmus/`` in the repository.
-    specs : sequence of FmuSpec
+    recipes : sequence of FmuRecipe
         Default :data:`REGISTRY`.
-    wrapper : {"pythonfmu", "native"}, optional
-        FMI wrapper, see :func:`build_one`.
 
     Returns
     -------
@@ -543,22 +533,42 @@ def build_all(out_dir: Path | str = DEFAULT_OUT,
         The FMUs written (skipped entries are not listed).
     """
     built = []
-    for spec in specs:
-        if not spec.script_path.is_file():
-            print(f"note: skipping {spec.name}: adapter {spec.script} does not exist yet")
+    for recipe in recipes:
+        if not recipe.script_path.is_file():
+            print(f"note: skipping {recipe.name}: adapter {recipe.script} does not exist yet")
             continue
-        built.append(build_one(spec, out_dir, wrapper))
+        built.append(build_one(recipe, out_dir))
         print(f"built {built[-1]}")
     return built
 
 
-def _spec_from_json(text: str) -> FmuSpec:
+def stale(fmu: Path | str, recipe: FmuRecipe) -> bool:
+    """Whether ``fmu`` must be (re)built from ``recipe``.
+
+    True if it is missing or unreadable, was made by an earlier build (pythonfmu's binary, or
+    our wrapper before ``resources/python_requires.txt``), or is older than any file it is
+    made of (:meth:`FmuRecipe.sources`).
+    """
+    fmu = Path(fmu)
+    try:
+        with zipfile.ZipFile(fmu) as zf:
+            if "resources/python_requires.txt" not in zf.namelist():
+                return True
+        mtime = fmu.stat().st_mtime
+    except (OSError, zipfile.BadZipFile):
+        return True
+    return any(p.stat().st_mtime > mtime for p in recipe.sources() if p.is_file())
+
+
+def _recipe_from_json(text: str) -> FmuRecipe:
     raw = json.loads(text)
-    return FmuSpec(
+    return FmuRecipe(
         name=raw["name"], script=raw["script"],
         vendored=tuple(tuple(v) for v in raw["vendored"]),
         extra_files=tuple(raw["extra_files"]),
         options=tuple(tuple(o) for o in raw["options"]),
+        requires=tuple(raw["requires"]),
+        exclude=tuple(raw["exclude"]),
     )
 
 
@@ -570,27 +580,22 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help=f"output folder (default {DEFAULT_OUT})")
     parser.add_argument("--only", action="append", default=None, metavar="NAME",
                         help="build only this FMU (repeatable)")
-    parser.add_argument("--wrapper", choices=WRAPPERS, default=None,
-                        help="FMI wrapper: native (default, or $DRILLCOSIM_FMU_WRAPPER; "
-                             "our C wrapper, fmi2Error for errors, needs a C compiler) or "
-                             "pythonfmu (fallback: errors reported as fmi2Discard)")
-    parser.add_argument("--worker-spec", help=argparse.SUPPRESS)
+    parser.add_argument("--worker-recipe", help=argparse.SUPPRESS)
     parser.add_argument("--workdir", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    if args.worker_spec is not None:
-        _build_in_this_process(_spec_from_json(args.worker_spec), args.workdir,
-                               _wrapper(args.wrapper))
+    if args.worker_recipe is not None:
+        _build_in_this_process(_recipe_from_json(args.worker_recipe), args.workdir)
         return 0
-    specs = REGISTRY
+    recipes = REGISTRY
     if args.only:
-        unknown = set(args.only) - {s.name for s in REGISTRY}
+        unknown = set(args.only) - {r.name for r in REGISTRY}
         if unknown:
             parser.error(f"unknown FMU(s) {sorted(unknown)}; registered: "
-                         f"{[s.name for s in REGISTRY]}")
-        specs = tuple(s for s in REGISTRY if s.name in args.only)
+                         f"{[r.name for r in REGISTRY]}")
+        recipes = tuple(r for r in REGISTRY if r.name in args.only)
     try:
-        build_all(args.out, specs, args.wrapper)
-    except WrapperUnavailableError as exc:
+        build_all(args.out, recipes)
+    except RuntimeError as exc:
         print(f"python -m drillcosim.fmu_src.build: {exc}", file=sys.stderr)
         return 1
     return 0

@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
-import subprocess
 import sys
 import tempfile
 import zipfile
@@ -58,19 +57,12 @@ def compile_library(out: Path | str, cc: str | None = None) -> Path:
     RuntimeError
         No compiler, or the compiler failed or printed a warning (its output included).
     """
-    from drillcosim.fmu_src.wrapper import CFLAGS
+    from drillcosim.fmu_src.wrapper import HERE as WRAPPER_DIR
+    from drillcosim.fmu_src.wrapper import compile_shared
 
-    out = Path(out)
-    cc = cc or os.environ.get("CC") or "gcc"
-    if shutil.which(cc) is None:
-        raise RuntimeError(f"C compiler {cc!r} not found (set $CC): {MODEL_IDENTIFIER} needs one")
-    cmd = [cc, *CFLAGS, *EXTRA_CFLAGS, f"-I{SOURCE_DIR / 'fmi2'}",
-           *(str(SOURCE_DIR / f) for f in C_FILES), "-o", str(out), "-lm"]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0 or proc.stderr.strip():
-        raise RuntimeError(f"compiling {MODEL_IDENTIFIER} failed:\n{' '.join(cmd)}\n"
-                           f"{proc.stdout}{proc.stderr}")
-    return out
+    return compile_shared(MODEL_IDENTIFIER, [SOURCE_DIR / f for f in C_FILES], out,
+                          flags=(*EXTRA_CFLAGS, f"-I{WRAPPER_DIR / 'fmi2'}"), libs=("-lm",),
+                          cc=cc)
 
 
 def build_c_controller(out_dir: Path | str, cc: str | None = None) -> Path:
@@ -93,9 +85,10 @@ def build_c_controller(out_dir: Path | str, cc: str | None = None) -> Path:
             zf.write(library, f"binaries/linux64/{MODEL_IDENTIFIER}.so")
             for name in (*C_FILES, *HEADERS):
                 zf.write(SOURCE_DIR / name, f"sources/{name}")
+            fmi2 = Path(__file__).resolve().parent / "wrapper" / "fmi2"  # the official headers
             for name in FMI_HEADERS:  # beside the C files: #include "fmi2Functions.h" resolves
-                zf.write(SOURCE_DIR / "fmi2" / name, f"sources/{name}")
-            zf.write(SOURCE_DIR / "fmi2" / "LICENSE.txt", "documentation/licenses/fmi2-headers.txt")
+                zf.write(fmi2 / name, f"sources/{name}")
+            zf.write(fmi2 / "LICENSE.txt", "documentation/licenses/fmi2-headers.txt")
         os.replace(part, target)
     finally:
         shutil.rmtree(work, ignore_errors=True)

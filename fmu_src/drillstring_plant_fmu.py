@@ -5,7 +5,7 @@ builds ``Scene -> PlantParams -> DrillstringModel -> PlantSimulator`` from the
 vendored copy of the ``plant`` package, and ``doStep`` sets the inputs, calls
 ``PlantSimulator.do_step`` and writes the outputs. The build (``fmu_src/build.py``)
 ships ``plant/`` as ``resources/_dcs_plant_0_1_0/`` and the shipped scenes as
-``resources/scenes/*.toml``. The FMU needs numpy and numba in the host's Python.
+``resources/scenes/*.toml``. The FMU needs numpy, scipy and numba in the Python it runs in.
 
 Numba cache in a stable place
 -----------------------------
@@ -20,13 +20,10 @@ there. The copy is made in a temporary folder beside it and renamed with
 If the folder cannot be written, the package is imported from ``resources/``
 (correct, only slower to start) and a warning is logged at instantiation.
 
-pythonfmu 0.7.0 compiles and executes this file's code anew at every
-instantiation (``Py_CompileString`` + ``PyEval_EvalCode``), and a Python exception
-there crashes the host process (segfault inside ``fmi2Instantiate``; reproduced
-with fmpy once the first unzip folder was deleted and a scene file was read at
-module level). Module-level code therefore reads no files; the vendored package
-is imported once per process (``sys.modules``) and each instance finds the scenes
-through its own ``resources`` argument.
+The wrapper imports this module once per process (``sys.modules``) and the first
+instance's unzip folder may be deleted while later instances run: module-level code
+therefore reads no files, and each instance finds the scenes through its own
+``resources`` argument.
 
 Interface (value references follow the registration order)
 ----------------------------------------------------------
@@ -67,20 +64,18 @@ of them (``model = "auto"`` or ``"axial_torsional"`` resolving to the
 axial-torsional chain, contact disabled, other contact bodies), initialization
 fails with an error naming the missing outputs; they are never silently zero.
 
-Error handling
---------------
-The FMU is built by default with the native FMI wrapper (``fmu_src/wrapper``,
-``python -m drillcosim.fmu_src.build``), which returns the FMI 2.0 statuses directly: every
-message logged through ``_error`` (status fmi2Error, category logStatusError,
-naming the cause; divergence: fmi2Discard, logStatusDiscard) also sets
-``self._fmi2_status`` (the highest status of the call), which that wrapper turns
-into the call's status and resets, and ``exit_initialization_mode`` returns
-``Fmi2Status.error`` when the model cannot be built. Under the native wrapper
-(``self._fmi2_wrapper == "native"``, set by it):
+Parameter errors name the FMU variable: a value set through the FMI API is checked
+against its own range first (``pipe.n_segments = 1 is out of range: allowed [2, 2000]``,
+with the scene's other values of that section); only a conflict with the scene's
+other sections (e.g. contact bodies beyond a reduced ``pipe.n_segments``) names the scene
+file, together with the FMU variables set.
 
+Error handling (the wrapper's status protocol, see ``fmu_src/slave_support``)
+------------------------------------------------------------------------------
 * invalid parameter (out of range, wrong ``scene`` / ``model``, missing outputs):
-  fmi2ExitInitializationMode -> fmi2Error with the message naming it; a doStep
-  after that -> fmi2Error. Free (or ``fmi2Reset``) and use valid parameters;
+  fmi2ExitInitializationMode -> fmi2Error with the message naming it; the instance stays
+  in initialization mode (a doStep is refused). Free (or ``fmi2Reset``) and use valid
+  parameters;
 * non-finite input, non-positive or too large step, wrong communication point ->
   fmi2Error from that doStep, state unchanged; doStep before initialization ->
   fmi2Error (checked by the wrapper itself);
@@ -91,23 +86,11 @@ into the call's status and resets, and ``exit_initialization_mode`` returns
 * unknown value reference, wrong type, setting an output or a fixed parameter after
   initialization, an invalid FMU state -> fmi2Error from that get/set/setFMUstate
   call itself (a get returns NaN / 0 / false / "" for it, a set ignores it);
-* an unexpected exception -> fmi2Error, the instance stays usable.
+* an unexpected exception -> fmi2Error, the instance stays usable. Never fmi2Fatal.
 
-Fallback ``--wrapper pythonfmu`` (pythonfmu 0.7.0's prebuilt binary, checked in its
-C++ source): ``PySlaveInstance`` ignores the return values of
-``setup_experiment``, ``enter_initialization_mode`` and
-``exit_initialization_mode`` and maps ``do_step``'s return value through
-``PyObject_IsTrue`` to fmi2OK / fmi2Discard (so ``do_step`` keeps returning a bool:
-an int status would be misread). Any Python exception becomes fmi2Fatal after
-``cleanPyObject()`` released the instance's Python objects, which
-``fmi2FreeInstance`` releases again (heap corruption, later segfault); fmi2Error
-cannot be returned at all. Hence no exception escapes any callback of this class
-(unexpected ones are caught and reported as an internal error), and under
-pythonfmu each problem above is reported through fmi2Discard: an invalid parameter
-is logged at fmi2ExitInitializationMode (which returns fmi2OK) and every doStep
-returns fmi2Discard repeating it; bad inputs / steps give fmi2Discard, state
-unchanged; a failed get/set/setFMUstate is logged and the next doStep returns
-fmi2Discard naming the call.
+The inputs and outputs live in the shared buffers ``self.inputs`` / ``self.outputs``: in
+step mode the wrapper moves them without Python, and a doStep is one Python call that
+integrates and writes the outputs in place.
 
 FMU state: ``_get_fmu_state`` / ``_set_fmu_state`` add the simulator's time, state
 vector and held inputs (JSON-safe floats, so serialisation is bit-exact) to
@@ -117,9 +100,9 @@ from the instance's rebuilds the model first.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import importlib
-import json
 import math
 import os
 import shutil
@@ -137,14 +120,13 @@ from _dcs_pythonfmu_0_7_0 import (
     DefaultExperiment,
     Fmi2Causality,
     Fmi2Initial,
-    Fmi2Slave,
     Fmi2Variability,
     Integer,
     Real,
     String,
 )
 from _dcs_pythonfmu_0_7_0.enums import Fmi2Status
-from _dcs_slave_support_0_1_0 import access_problem, guarded_access, reject
+from _dcs_slave_support_0_1_0 import DcsSlave
 
 #: Name under which the build vendors ``plant/`` into this FMU's resources.
 VENDORED_PLANT = "_dcs_plant_0_1_0"
@@ -156,6 +138,11 @@ INPUTS: tuple[str, ...] = (
 
 _COMPLETE = "COMPLETE"  # marker written last into a stable copy
 _SIM_KEY = "__dcs_plant_sim__"
+#: Internal step [s] of every (PlantParams, model kind, max_internal_step) built in this
+#: process: the automatic one costs an eigenvalue problem (~50 ms for 30 bodies) that a second
+#: instance with the same parameters (a sweep, a re-run) need not repeat. A pure function of
+#: the key, so results are unchanged.
+_STABLE_STEPS: dict[tuple[Any, ...], float] = {}
 _MODE_KEY = "__dcs_mode__"
 _ERRORS_KEY = "__dcs_errors__"
 
@@ -352,8 +339,7 @@ class _Real(Real):
         return node
 
 
-@guarded_access
-class DrillstringPlant(Fmi2Slave):
+class DrillstringPlant(DcsSlave):
     """FMI 2.0 co-simulation adapter of :class:`plant.simulator.PlantSimulator`."""
 
     author = "drillcosim"
@@ -364,23 +350,17 @@ class DrillstringPlant(Fmi2Slave):
         "Parameters: scene (shipped name or TOML path) first, then every parameter set to a "
         "value different from its start overrides the scene")
 
+    REAL_INPUTS = INPUTS
+    REAL_OUTPUTS = OUTPUTS
     #: Units of the Real variables, written into modelDescription.xml by the build.
     VARIABLE_UNITS: ClassVar[dict[str, str]] = _variable_units()
     #: Outputs change only in doStep: no output depends directly on an input.
     DIRECT_FEEDTHROUGH: ClassVar[dict[str, tuple[str, ...]]] = dict.fromkeys(OUTPUTS, ())
 
-    #: Set to "native" on the instance by our native wrapper (``fmu_src/wrapper``).
-    _fmi2_wrapper: ClassVar[str] = "pythonfmu"
-
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=30.0,
                                                     step_size=1e-3)
-        #: Highest status reported during the current call; read and reset by the
-        #: native wrapper, ignored by pythonfmu.
-        self._fmi2_status: int | None = None
-        for name in INPUTS + OUTPUTS:
-            setattr(self, name, 0.0)
         self.scene = DEFAULT_SCENE
         self.model = "full3d"
         self.max_internal_step = 0.0
@@ -391,10 +371,8 @@ class DrillstringPlant(Fmi2Slave):
         self._sim: Any = None
         self._out_index: np.ndarray = np.zeros(0, dtype=np.int64)
         self._built_key: tuple[Any, ...] | None = None
-        self._init_error: str | None = None  # invalid parameters: every doStep discarded
-        self._call_error: str | None = None  # failed get/set, reported by the next doStep
+        self._init_error: str | None = None  # invalid parameters: every doStep refused
         self._halted: str | None = None  # divergence, until a state is restored
-        self._u = np.zeros(len(INPUTS))
         self._scenes = scenes_folder(self.resources)
 
         cont, fixed = Fmi2Variability.continuous, Fmi2Variability.fixed
@@ -402,12 +380,12 @@ class DrillstringPlant(Fmi2Slave):
         for name in INPUTS:
             site, axis = name[8], name[-1]
             other = {"C": "D", "E": "F"}[axis]
-            self.register_variable(_Real(
+            self.register_real_io(_Real(
                 name, causality=Fmi2Causality.input, variability=cont,
                 description=(f"Actuator force at {sites[site]}, axis {axis}; > 0 opposes "
                              f"positive strain (compressive at {other}, tensile at {axis})")))
         for name, _unit, doc in _OUTPUT_ROWS:
-            self.register_variable(_Real(
+            self.register_real_io(_Real(
                 name, causality=Fmi2Causality.output, variability=cont,
                 initial=Fmi2Initial.calculated, description=doc))
         param = Fmi2Causality.parameter
@@ -433,34 +411,49 @@ class DrillstringPlant(Fmi2Slave):
                 getter=getter, setter=setter), nested=False)
         if _IMPORT_WARNING:
             self.log(f"{self.instance_name}: {_IMPORT_WARNING}", status=Fmi2Status.warning)
-        # fast paths of get_real/set_real in step mode (the hot loop of an importer)
-        self._real_vrs = frozenset(vr for vr, v in self.vars.items() if isinstance(v, Real))
-        self._input_vrs = frozenset(vr for vr, v in self.vars.items()
-                                    if isinstance(v, Real) and v.causality == Fmi2Causality.input)
 
     # ------------------------------------------------------------------ helpers
-    def _error(self, msg: str, status: Fmi2Status = Fmi2Status.error) -> bool:
-        self.log(f"{self.instance_name}: {msg}", status=status)
-        self._fmi2_status = max(self._fmi2_status or 0, int(status))
-        return False
-
     def _key(self) -> tuple[Any, ...]:
         return (self.scene, self.model, self.max_internal_step,
                 *(self._values[row[0]] for row in PARAMETERS))
 
-    def _overrides(self) -> dict[str, Any]:
-        """Nested scene overrides: every parameter whose value differs from its start."""
-        over: dict[str, Any] = {}
+    def _set_through_fmi(self) -> list[tuple[str, str, str, Any]]:
+        """(FMU name, section, field, value) of every parameter that differs from its start.
+
+        Those override the scene (see the module docstring); a value equal to its start never
+        does, so an importer writing every start value changes nothing.
+        """
+        changed = []
         for name, section, field_, default, _unit, _doc, _int in PARAMETERS:
             value = self._values[name]
             if value == default and isinstance(value, bool) == isinstance(default, bool):
                 continue  # at its start value (NaN never is): the scene decides
+            changed.append((name, section, field_, value))
+        return changed
+
+    def _checked_overrides(self, scene: Any) -> dict[str, Any]:
+        """Nested scene overrides of the parameters set through FMI, each checked alone.
+
+        Every section's changed fields are applied together to the scene's values of that
+        section: an out-of-range value raises ValueError naming the FMU variable and its
+        allowed range, never the scene file.
+        """
+        over: dict[str, Any] = {}
+        for _name, section, field_, value in self._set_through_fmi():
             if section:
                 over.setdefault(section, {})[field_] = value
             else:
                 over[field_] = value
+        for section, fields_ in over.items():
+            try:
+                if isinstance(fields_, dict):
+                    dataclasses.replace(getattr(scene.plant, section), **fields_)
+                else:
+                    dataclasses.replace(scene.plant, **{section: fields_})
+            except ValueError as exc:
+                raise ValueError(f"FMU parameter {exc}") from None
         if self.model not in MODEL_CHOICES:
-            raise ValueError(f"model = {self.model!r} is not allowed: one of "
+            raise ValueError(f"FMU parameter model = {self.model!r} is not allowed: one of "
                              f"{', '.join(MODEL_CHOICES)}")
         if self.model != "auto":
             over["model"] = self.model
@@ -470,10 +463,16 @@ class DrillstringPlant(Fmi2Slave):
         """Scene -> PlantParams -> DrillstringModel -> PlantSimulator (ValueError if invalid)."""
         step = self.max_internal_step
         if not (isinstance(step, float) and math.isfinite(step) and step >= 0.0):
-            raise ValueError(f"max_internal_step = {step!r} is out of range: allowed [0, inf) s "
-                             f"(0 = the model's stable step)")
-        scene = _scene_mod.load_scene(self.scene, folder=self._scenes,
-                                      overrides=self._overrides())
+            raise ValueError(f"FMU parameter max_internal_step = {step!r} is out of range: "
+                             f"allowed [0, inf) s (0 = the model's stable step)")
+        base = _scene_mod.load_scene(self.scene, folder=self._scenes)  # the file's own errors
+        overrides = self._checked_overrides(base)
+        try:
+            scene = _scene_mod.load_scene(self.scene, folder=self._scenes, overrides=overrides)
+        except ValueError as exc:  # a combination: the scene's values with the FMU's
+            names = ", ".join(f"{n} = {v!r}" for n, _s, _f, v in self._set_through_fmi())
+            raise ValueError(f"the FMU parameters set ({names or 'model = ' + repr(self.model)})"
+                             f" do not fit scene {self.scene!r}: {exc}") from None
         model = _model_mod.DrillstringModel(scene.plant, scene.model)
         missing = [n for n in OUTPUTS if n not in model.output_names]
         if missing:
@@ -486,7 +485,9 @@ class DrillstringPlant(Fmi2Slave):
         if model.n_sites != len(INPUTS) // 2:
             raise ValueError(f"the model has {model.n_sites} actuator sites; this FMU's inputs "
                              f"need {len(INPUTS) // 2}")
-        sim = _sim_mod.PlantSimulator(model, None if step == 0.0 else step)
+        key = (scene.plant, scene.model, step)
+        sim = _sim_mod.PlantSimulator(model, _STABLE_STEPS.get(key, None if step == 0.0 else step))
+        _STABLE_STEPS.setdefault(key, sim.max_step)
         sim.time = float(self._start_time)
         self._out_index = np.array([model.output_names.index(n) for n in OUTPUTS])
         return sim
@@ -503,9 +504,8 @@ class DrillstringPlant(Fmi2Slave):
             self._sim = self._make_simulator()
         except ValueError as exc:  # SceneError is a ValueError
             self._init_error = f"invalid parameter: {exc}"
-        except Exception as exc:  # noqa: BLE001 - no exception may reach pythonfmu
-            self._init_error = (f"internal error while building the model: {exc!r} "
-                                f"({traceback.format_exc(limit=-1).strip().splitlines()[-1]})")
+        except Exception:  # noqa: BLE001 - a bug: keep its traceback for every later doStep
+            self._init_error = f"internal error while building the model:\n{traceback.format_exc()}"
         if self._init_error is not None:
             self._error(f"initialization failed: {self._init_error}; every doStep will be "
                         f"rejected (re-instantiate or reset with valid parameters)")
@@ -513,9 +513,7 @@ class DrillstringPlant(Fmi2Slave):
             self._write_outputs()
 
     def _write_outputs(self) -> None:
-        values = self._sim.outputs()[self._out_index].tolist()
-        for name, value in zip(OUTPUTS, values):
-            setattr(self, name, value)
+        self._sim.outputs().take(self._out_index, out=self.outputs)
 
     # ---------------------------------------------------------------- FMI calls
     def setup_experiment(self, start_time: float, stop_time: float | None = None,
@@ -525,37 +523,20 @@ class DrillstringPlant(Fmi2Slave):
     def enter_initialization_mode(self) -> None:
         self._mode = "initialization"
 
-    def exit_initialization_mode(self) -> Fmi2Status:
+    def exit_initialization_mode(self) -> None:
         self._mode = "step"
-        self._build()  # logs a failure; see "Error handling" in the module docstring
-        # pythonfmu ignores the return value, the native wrapper returns it
-        return Fmi2Status.ok if self._init_error is None else Fmi2Status.error
+        self._build()  # a failure is logged as fmi2Error; see "Error handling"
 
-    def do_step(self, current_time: float, step_size: float) -> bool:
-        try:
-            return self._do_step(current_time, step_size)
-        except Exception as exc:  # noqa: BLE001 - an exception would be fmi2Fatal + crash
-            return self._error(f"internal error in doStep at t = {current_time!r} s: {exc!r}; "
-                               f"step rejected")
-
-    def _do_step(self, t: float, h: float) -> bool:
-        if self._call_error is not None:
-            msg, self._call_error = self._call_error, None
-            return self._error(f"step rejected: an earlier call failed: {msg}")
-        if self._mode != "step":
-            return self._error("doStep called before initialization "
-                               "(fmi2ExitInitializationMode); step rejected")
+    def do_step(self, current_time: float, step_size: float) -> None:
+        t, h = current_time, step_size
         if self._init_error is not None or self._sim is None:
             return self._error(f"step rejected: {self._init_error}")
         if self._halted is not None:
             return self._error(f"step rejected at t = {t!r} s: the simulation diverged earlier "
                                f"({self._halted}); restore an FMU state saved before "
                                f"(fmi2SetFMUstate) or reset", Fmi2Status.discard)
-        u = self._u
-        for i, name in enumerate(INPUTS):
-            u[i] = getattr(self, name)
         sim = self._sim
-        sim.set_inputs(u)
+        sim.set_inputs(self.inputs)
         result = sim.do_step(t, h)
         if not result.ok:
             if not result.quantity:  # refused before integrating: state unchanged
@@ -565,40 +546,24 @@ class DrillstringPlant(Fmi2Slave):
             return self._error(f"doStep(t = {t!r} s, h = {h!r} s) discarded: {self._halted}",
                                Fmi2Status.discard)
         self._write_outputs()
-        return True
+        return None
 
-    # ------------------------------------------ get/set without exceptions
-    def _accessible(self, vr: int, kind: type, call: str) -> bool:
-        """Whether ``vr`` may be accessed by ``call``; log and flag the error if not."""
-        problem = access_problem(self, vr, kind, call)
+    # ----------------------------------------------------------------- access
+    def _access_problem(self, vr: int, kind: type, call: str) -> str | None:
+        problem = super()._access_problem(vr, kind, call)
         var = self.vars.get(vr)
         if problem is None and (call.startswith("set") and self._mode == "step"
                                 and var.causality == Fmi2Causality.parameter):
             problem = (f"{var.name} (value reference {vr}) is a fixed parameter: it cannot be "
                        f"set after initialization")
-        if problem is not None:
-            return reject(self, call, problem)
-        if (call.startswith("get") and self._mode == "initialization"
-                and var.causality == Fmi2Causality.output):
+        return problem
+
+    def _accessible(self, vr: int, kind: type, call: str) -> bool:
+        ok = super()._accessible(vr, kind, call)
+        if ok and (call.startswith("get") and self._mode == "initialization"
+                   and self.vars[vr].causality == Fmi2Causality.output):
             self._build()  # initial unknowns: computed from the parameters set so far
-        return True
-
-    def get_real(self, vrs: list[int]) -> list[float]:
-        if self._mode == "step" and self._real_vrs.issuperset(vrs):  # every check passes
-            v = self.vars
-            return [float(v[vr].getter()) for vr in vrs]
-        return [float(self.vars[vr].getter()) if self._accessible(vr, Real, "getReal")
-                else math.nan for vr in vrs]
-
-    def set_real(self, vrs: list[int], values: list[float]) -> None:
-        if self._mode == "step" and self._input_vrs.issuperset(vrs):  # every check passes
-            v = self.vars
-            for vr, value in zip(vrs, values):
-                v[vr].setter(float(value))
-            return
-        for vr, value in zip(vrs, values):
-            if self._accessible(vr, Real, "setReal"):
-                self.vars[vr].setter(float(value))
+        return ok
 
     # ------------------------------------------------------------- FMU state
     def _get_fmu_state(self) -> dict[str, Any]:
@@ -620,23 +585,10 @@ class DrillstringPlant(Fmi2Slave):
             halted, start_time = state.pop(_ERRORS_KEY)
             super()._set_fmu_state(state)
             self._mode, self._halted, self._start_time = mode, halted, float(start_time)
-            self._call_error = None
             if sim is not None:
                 self._build()  # no-op unless the restored parameters differ
                 if self._sim is not None:
                     t, y, u = sim
                     self._sim.set_state((t, np.array(y, dtype=float), np.array(u, dtype=float)))
-        except Exception as exc:  # noqa: BLE001 - never let an exception reach pythonfmu
-            problem = f"fmi2SetFMUstate: invalid state: {exc!r}"
-            if self._fmi2_wrapper != "native":  # the native wrapper fails this call itself
-                self._call_error = problem
-            self._error(problem)
-
-    @staticmethod
-    def _fmu_state_from_bytes(state: bytes) -> dict[str, Any]:
-        """Decode a serialized state; bytes that are none give a marker _set_fmu_state rejects."""
-        try:
-            out = json.loads(state.decode("utf-8"))
-            return out if isinstance(out, dict) else {"__invalid_state__": repr(out)[:80]}
-        except Exception as exc:  # noqa: BLE001 - an exception would be fmi2Fatal + crash
-            return {"__invalid_state__": repr(exc)}
+        except Exception as exc:  # noqa: BLE001 - a foreign state is the importer's error
+            self._error(f"fmi2SetFMUstate: invalid state: {exc!r}")

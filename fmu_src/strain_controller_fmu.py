@@ -27,18 +27,10 @@ parameters:
 Integer parameters (and SSP parameter sets), String parameters are often
 unsupported, and pythonfmu cannot declare an Enumeration.
 
-Error handling
---------------
-The FMU is built by default with the native FMI wrapper (``fmu_src/wrapper``,
-``python -m drillcosim.fmu_src.build``), which returns the FMI 2.0 statuses directly: every
-message logged through ``_error`` (status fmi2Error, category logStatusError,
-naming the cause) also sets ``self._fmi2_status`` (the highest status of the
-call), which that wrapper turns into the call's status and resets, and
-``exit_initialization_mode`` returns ``Fmi2Status.error`` for invalid parameters.
-Under the native wrapper (``self._fmi2_wrapper == "native"``, set by it):
-
-* parameter out of range: fmi2ExitInitializationMode -> fmi2Error naming it; a
-  doStep after that -> fmi2Error. Use ``fmi2Reset`` or a new instance;
+Error handling (the wrapper's status protocol, see ``fmu_src/slave_support``)
+------------------------------------------------------------------------------
+* parameter out of range: fmi2ExitInitializationMode -> fmi2Error naming it; the instance
+  stays in initialization mode (a doStep is refused). Use ``fmi2Reset`` or a new instance;
 * non-finite input or time, invalid tunable parameter, fixed parameter changed,
   negative step -> fmi2Error from that doStep (state unchanged, the importer may
   correct the cause and retry); doStep before initialization -> fmi2Error
@@ -46,32 +38,20 @@ Under the native wrapper (``self._fmi2_wrapper == "native"``, set by it):
 * unknown value reference, wrong type, setting an output, a state that is not one
   of this FMU -> fmi2Error from that get/set/setFMUstate call itself (a get
   returns NaN / 0 / false for that reference, a set ignores it);
-* an unexpected exception -> fmi2Error, the instance stays usable.
+* an unexpected exception -> fmi2Error, the instance stays usable. Never fmi2Fatal.
 
-Fallback ``--wrapper pythonfmu``: pythonfmu 0.7.0 can return only two non-OK
-statuses, fmi2Discard (``do_step`` returns False; so ``do_step`` keeps returning a
-bool, an int status would be misread) and fmi2Fatal (any Python exception
-escaping a callback), and it ignores the return value of
-``exit_initialization_mode``. Worse, after an exception its C++ wrapper releases the
-Python objects of the instance once in the error handler and again in
-``fmi2FreeInstance``: freeing an instance that went fatal corrupts the heap and
-segfaults the host later (reproduced with fmpy). Therefore no *anticipated* error
-escapes as an exception here, and under pythonfmu each problem above is reported
-through fmi2Discard: an invalid parameter is logged at fmi2ExitInitializationMode
-(which returns fmi2OK) and every doStep returns fmi2Discard repeating it; bad
-inputs / steps give fmi2Discard, state unchanged; a failed get/set/setFMUstate is
-logged and the next doStep returns fmi2Discard naming it (then the flag clears).
-Genuine bugs still raise, i.e. fmi2Fatal under pythonfmu.
+The Real inputs and outputs live in the shared buffers ``self.inputs`` / ``self.outputs``:
+in step mode the wrapper moves them without Python, and ``fmi2DoStep`` is one Python call.
 
 FMU state (``fmi2Get/SetFMUstate``, serialisable): pythonfmu's default saves the
-registered variables only; ``_get_fmu_state`` / ``_set_fmu_state`` are overridden
-to add the lag state of the controller and the initialization flag (JSON-safe
-Python floats, so serialisation round-trips bit for bit).
+registered variables only (here including the buffered inputs and outputs);
+``_get_fmu_state`` / ``_set_fmu_state`` are overridden to add the lag state of the
+controller and the initialization flag (JSON-safe Python floats, so serialisation
+round-trips bit for bit).
 """
 
 from __future__ import annotations
 
-import json
 from typing import Any, ClassVar
 
 import numpy as np
@@ -82,13 +62,11 @@ from _dcs_pythonfmu_0_7_0 import (
     DefaultExperiment,
     Fmi2Causality,
     Fmi2Initial,
-    Fmi2Slave,
     Fmi2Variability,
     Integer,
     Real,
 )
-from _dcs_pythonfmu_0_7_0.enums import Fmi2Status
-from _dcs_slave_support_0_1_0 import access_problem, guarded_access, reject
+from _dcs_slave_support_0_1_0 import DcsSlave
 
 #: Name under which the build vendors ``controller/`` into this FMU's resources.
 VENDORED_CONTROLLER = "_dcs_controller_0_1_0"
@@ -104,12 +82,7 @@ _INIT_KEY = "__dcs_initialized__"
 _INIT_ERROR_KEY = "__dcs_init_error__"
 
 
-class _NoStrings:
-    """Stand-in type: this FMU has no String variables."""
-
-
-@guarded_access
-class StrainController(Fmi2Slave):
+class StrainController(DcsSlave):
     """FMI 2.0 co-simulation adapter of :class:`controller.StrainController`."""
 
     author = "drillcosim"
@@ -119,6 +92,8 @@ class StrainController(Fmi2Slave):
         "(4 channels: sites 1/2 x gauges C/E); F = gain*strain, F > 0 = compressive at "
         "D / tensile at C; saturation, switch-on time, first-order actuator lag")
 
+    REAL_INPUTS = INPUTS
+    REAL_OUTPUTS = OUTPUTS
     #: Units of the Real variables, written into modelDescription.xml by the build.
     VARIABLE_UNITS: ClassVar[dict[str, str]] = {
         **dict.fromkeys(INPUTS, "1"),
@@ -133,19 +108,11 @@ class StrainController(Fmi2Slave):
     #: point): none for every output, they change only in doStep.
     DIRECT_FEEDTHROUGH: ClassVar[dict[str, tuple[str, ...]]] = dict.fromkeys(OUTPUTS, ())
 
-    #: Set to "native" on the instance by our native wrapper (``fmu_src/wrapper``).
-    _fmi2_wrapper: ClassVar[str] = "pythonfmu"
-
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=30.0,
                                                     step_size=1e-3)
-        #: Highest status reported during the current call; read and reset by the
-        #: native wrapper, ignored by pythonfmu.
-        self._fmi2_status: int | None = None
         defaults = ControllerParams()
-        for name in INPUTS + OUTPUTS:
-            setattr(self, name, 0.0)
         self.gain = defaults.gain
         self.force_limit = defaults.force_limit
         self.symmetric_force_limit = 1e30
@@ -157,20 +124,19 @@ class StrainController(Fmi2Slave):
         self._law = StrainLaw(defaults)
         self._initialized = False
         self._init_error: str | None = None  # invalid parameters at initialization
-        self._call_error: str | None = None  # failed get/set, reported by the next doStep
         self._fixed_values: tuple[Any, ...] = ()
         self._tunable_values: tuple[Any, ...] | None = None
 
         sites = {"1": "site 1 (long span)", "2": "site 2 (short span)"}
         for name in INPUTS:
             site, axis = name[6], name[-1]
-            self.register_variable(Real(
+            self.register_real_io(Real(
                 name, causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
                 description=f"Surface strain at gauge {axis}, {sites[site]}; tensile > 0"))
         for name in OUTPUTS:
             site, axis = name[8], name[-1]
             other = {"C": "D", "E": "F"}[axis]
-            self.register_variable(Real(
+            self.register_real_io(Real(
                 name, causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
                 initial=Fmi2Initial.exact,
                 description=(f"Actuator force at {sites[site]}, axis {axis}; > 0 = compressive "
@@ -215,33 +181,23 @@ class StrainController(Fmi2Slave):
     def _snapshot(self, names: tuple[str, ...]) -> tuple[Any, ...]:
         return tuple(getattr(self, n) for n in names)
 
-    def _error(self, msg: str, status: Fmi2Status = Fmi2Status.error) -> bool:
-        self.log(f"{self.instance_name}: {msg}", status=status)
-        self._fmi2_status = max(self._fmi2_status or 0, int(status))
-        return False
-
     # ---------------------------------------------------------------- FMI calls
-    def exit_initialization_mode(self) -> Fmi2Status:
+    def exit_initialization_mode(self) -> None:
         try:
             params = self._params_from_variables()
         except ValueError as exc:
-            # no exception: see "Error handling" in the module docstring
             self._init_error = f"invalid parameter: {exc}"
             self._initialized = False
             self._error(f"fmi2ExitInitializationMode: {self._init_error}; every doStep "
                         f"will be rejected (reset or re-instantiate with valid parameters)")
-            return Fmi2Status.error  # pythonfmu ignores it, the native wrapper returns it
+            return
         self._init_error = None
         self._law = StrainLaw(params)
         self._fixed_values = self._snapshot(FIXED)
         self._tunable_values = self._snapshot(TUNABLE)
         self._initialized = True
-        return Fmi2Status.ok
 
-    def do_step(self, current_time: float, step_size: float) -> bool:
-        if self._call_error is not None:
-            msg, self._call_error = self._call_error, None
-            return self._error(f"step rejected: an earlier call failed: {msg}")
+    def do_step(self, current_time: float, step_size: float) -> None:
         if self._init_error is not None:
             return self._error(f"step rejected: {self._init_error}")
         if not self._initialized:
@@ -257,29 +213,12 @@ class StrainController(Fmi2Slave):
             except ValueError as exc:
                 return self._error(f"invalid parameter: {exc}; step rejected")
             self._tunable_values = tunable
-        strains = np.array([getattr(self, n) for n in INPUTS])
         try:
-            forces = self._law.step(current_time, step_size, strains)
+            forces = self._law.step(current_time, step_size, self.inputs)
         except ValueError as exc:
             return self._error(f"at t = {current_time!r}: {exc}; step rejected")
-        for name, value in zip(OUTPUTS, forces.tolist()):
-            setattr(self, name, value)
-        return True
-
-    # ------------------------------------------ get/set without exceptions
-    def _accessible(self, vr: int, kind: type, call: str) -> bool:
-        """Whether ``vr`` may be accessed by ``call``; log and flag the error if not."""
-        problem = access_problem(self, vr, kind, call)
-        return True if problem is None else reject(self, call, problem)
-
-    def get_string(self, vrs: list[int]) -> list[str]:
-        for vr in vrs:
-            self._accessible(vr, _NoStrings, "getString")
-        return ["" for _ in vrs]
-
-    def set_string(self, vrs: list[int], values: list[str]) -> None:
-        for vr in vrs:
-            self._accessible(vr, _NoStrings, "setString")
+        self.outputs[:] = forces
+        return None
 
     # ------------------------------------------------------------- FMU state
     def _get_fmu_state(self) -> dict[str, Any]:
@@ -297,25 +236,12 @@ class StrainController(Fmi2Slave):
             init_error = state.pop(_INIT_ERROR_KEY)
             super()._set_fmu_state(state)
             self._law.set_state(law_state)
-        except Exception as exc:  # noqa: BLE001 - an exception would be fmi2Fatal + crash
-            problem = f"fmi2SetFMUstate: not a state of this FMU ({exc!r})"
-            if self._fmi2_wrapper != "native":  # the native wrapper fails this call itself
-                self._call_error = problem
-            self._error(problem)
-            return
-        self._call_error = None  # a restored state: nothing earlier is pending
+        except Exception as exc:  # noqa: BLE001 - a foreign state is the importer's error
+            return self._error(f"fmi2SetFMUstate: not a state of this FMU ({exc!r})")
         self._init_error = init_error
         self._initialized = bool(initialized)
         # the parameters came back with the registered variables: take the fixed ones
         # as the reference and make the next doStep re-validate and apply all of them
         self._fixed_values = self._snapshot(FIXED)
         self._tunable_values = None
-
-    @staticmethod
-    def _fmu_state_from_bytes(state: bytes) -> dict[str, Any]:
-        """Decode a serialized state; bytes that are none give a marker _set_fmu_state rejects."""
-        try:
-            out = json.loads(state.decode("utf-8"))
-            return out if isinstance(out, dict) else {"__invalid_state__": repr(out)[:80]}
-        except Exception as exc:  # noqa: BLE001 - an exception would be fmi2Fatal + crash
-            return {"__invalid_state__": repr(exc)}
+        return None

@@ -10,9 +10,6 @@ The FMU is built the default way, i.e. with the native FMI wrapper
 * unknown value reference / wrong type / setting an output -> fmi2Error from that
   get/set call itself, message naming it; the next doStep is OK;
 * never fmi2Fatal, and freeing an instance after any of these never crashes.
-
-``test_error_paths_then_free_instance_never_crash`` also runs against an FMU built
-with ``wrapper="pythonfmu"`` (the fallback), where these errors are fmi2Discard.
 """
 
 from __future__ import annotations
@@ -35,11 +32,11 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 from drillcosim import controller
-from drillcosim.fmu_src.build import REGISTRY, build_one
+from drillcosim.fmu_src.build import REGISTRY
 from support.fmi_logging import RecordingInstance, fmu_fixtures
 
 ROOT = Path(__file__).resolve().parents[1]
-SPEC = next(s for s in REGISTRY if s.name == "StrainController")
+SPEC = next(r for r in REGISTRY if r.name == "StrainController")
 VENDORED = dict(SPEC.vendored)["controller"]
 INPUTS = ["strain1_C", "strain1_E", "strain2_C", "strain2_E"]
 OUTPUTS = ["actuator1_force_C", "actuator1_force_E", "actuator2_force_C", "actuator2_force_E"]
@@ -496,7 +493,7 @@ FREE_SCRIPT = textwrap.dedent("""
     from fmpy import extract, read_model_description
     from fmpy.fmi1 import FMICallException
     from fmpy.fmi2 import FMU2Slave
-    fmu, fast_exit = sys.argv[1], sys.argv[2] == "fast-exit"
+    fmu = sys.argv[1]
     md = read_model_description(fmu)
     d = extract(fmu)
     def call(f, *args):
@@ -524,41 +521,22 @@ FREE_SCRIPT = textwrap.dedent("""
         s.freeInstance()
         gc.collect()
     print(json.dumps(statuses), flush=True)
-    if fast_exit:
-        os._exit(0)  # pythonfmu 0.7.0 can abort at interpreter exit (see test_native_wrapper)
 """)
 
 
-@pytest.fixture(scope="session")
-def pythonfmu_fmu_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The controller built with pythonfmu's prebuilt binary (``--wrapper pythonfmu``)."""
-    return build_one(SPEC, tmp_path_factory.mktemp("fmus_pythonfmu"), wrapper="pythonfmu")
+def test_error_paths_then_free_instance_never_crash(fmu_path: Path, tmp_path: Path) -> None:
+    """Errors, then free: fmi2Error as documented, never Fatal, never a crash (heap checked).
 
-
-@pytest.mark.parametrize("wrapper", ["native", "pythonfmu"])
-def test_error_paths_then_free_instance_never_crash(
-        wrapper: str, request: pytest.FixtureRequest, tmp_path: Path) -> None:
-    """Errors, then free: statuses as documented, never Fatal, never a crash (heap checked).
-
-    Regression for pythonfmu's double release after a Python exception. The default
-    (native) build reports fmi2Error; the ``wrapper="pythonfmu"`` fallback build, kept
-    here because it is still shipped as ``--wrapper pythonfmu``, reports the same
-    errors as fmi2Discard from doStep (its binary cannot return fmi2Error).
+    Regression for pythonfmu 0.7.0's binary, which released an instance's Python objects
+    twice after an exception (its fallback build is gone; our wrapper runs every FMU).
     """
-    fmu = request.getfixturevalue("fmu_path" if wrapper == "native" else "pythonfmu_fmu_path")
     script = tmp_path / "free.py"
     script.write_text(FREE_SCRIPT)
-    proc = subprocess.run([sys.executable, str(script), str(fmu),
-                           "normal-exit" if wrapper == "native" else "fast-exit"],
+    proc = subprocess.run([sys.executable, str(script), str(fmu_path)],
                           cwd=tmp_path, capture_output=True, text=True, timeout=120,
                           env=dict(os.environ, MALLOC_CHECK_="3"))
     assert proc.returncode == 0, proc.stderr[-2000:]
     st = json.loads(proc.stdout.strip().splitlines()[-1])
-    if wrapper == "native":
-        assert st["exit"] == [ERROR if i % 2 else OK for i in range(12)]
-        assert st["get_set"] == [[ERROR] * 3] * 12
-        assert st["step"] == [[ERROR] * 3] * 12  # NaN input, or not initialised
-    else:
-        assert st["exit"] == [OK] * 12  # pythonfmu ignores the adapter's status
-        assert st["get_set"] == [[OK] * 3] * 12
-        assert st["step"] == [[DISCARD] * 3] * 12
+    assert st["exit"] == [ERROR if i % 2 else OK for i in range(12)]
+    assert st["get_set"] == [[ERROR] * 3] * 12
+    assert st["step"] == [[ERROR] * 3] * 12  # NaN input, or not initialised

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ast
 import json
+import os
 import subprocess
 import sys
 import textwrap
@@ -17,15 +18,12 @@ from fmpy.validation import validate_fmu
 
 from drillcosim.fmu_src.build import (
     REGISTRY,
-    ROOT,
     UNIT_DEFINITIONS,
-    FmuSpec,
-    WrapperUnavailableError,
+    FmuRecipe,
     build_all,
     build_one,
-    default_wrapper,
     finalize_model_description,
-    wrapper_of,
+    stale,
 )
 
 pytestmark = [pytest.mark.needs_cc]
@@ -58,23 +56,22 @@ def test_adapter_imports_the_registered_vendored_name() -> None:
     assert constants["VENDORED_CONTROLLER"] == vendored
 
 
-def test_adapter_class_line_matches_pythonfmu_loader_regex() -> None:
-    # pythonfmu's C++ loader finds the class with ^class (\w+)\(\s*Fmi2Slave\s*\)\s*:
-    text = REGISTRY[0].script_path.read_text()
-    assert "\nclass StrainController(Fmi2Slave):\n" in text
+def test_recipe_rejects_requirements_that_are_no_import_names() -> None:
+    with pytest.raises(ValueError, match="import name"):
+        FmuRecipe(name="X", script="x.py", requires=("numpy>=1",))
 
 
 @pytest.mark.parametrize("bad", ["controller", "_dcs-x", "dcs_controller_0_1_0"])
-def test_spec_rejects_unversioned_or_invalid_vendored_names(bad: str) -> None:
+def test_recipe_rejects_unversioned_or_invalid_vendored_names(bad: str) -> None:
     with pytest.raises(ValueError, match="_dcs_"):
-        FmuSpec(name="X", script="x.py", vendored=(("controller", bad),))
+        FmuRecipe(name="X", script="x.py", vendored=(("controller", bad),))
 
 
 # ---------------------------------------------------------------------------- build
 def test_build_all_builds_existing_and_skips_missing_scripts(
         tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    missing = FmuSpec(name="NotYet", script="fmu_src/not_yet_written_fmu.py")
-    built = build_all(tmp_path, specs=(REGISTRY[0], missing))
+    missing = FmuRecipe(name="NotYet", script="fmu_src/not_yet_written_fmu.py")
+    built = build_all(tmp_path, recipes=(REGISTRY[0], missing))
     assert built == [tmp_path.resolve() / "StrainController.fmu"]
     out = capsys.readouterr().out
     assert "skipping NotYet" in out and "not_yet_written_fmu.py" in out
@@ -95,7 +92,7 @@ def test_build_replaces_atomically_and_keeps_old_fmu_on_failure(tmp_path: Path) 
     target = tmp_path / "StrainController.fmu"
     before = target.read_bytes()
     with pytest.raises(RuntimeError, match="adapter import fails"):
-        build_one(FmuSpec(name="StrainController", script=str(broken)), tmp_path)
+        build_one(FmuRecipe(name="StrainController", script=str(broken)), tmp_path)
     assert target.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["StrainController.fmu", "broken_src"]
 
@@ -110,40 +107,63 @@ def test_build_leaves_the_calling_process_untouched(tmp_path: Path) -> None:
 
 
 def test_cli(tmp_path: Path) -> None:
-    proc = subprocess.run([sys.executable, "-m", "fmu_src.build", "--out", str(tmp_path),
-                           "--only", "StrainController"], cwd=ROOT, capture_output=True,
-                          text=True, timeout=300)
+    proc = subprocess.run([sys.executable, "-m", "drillcosim.fmu_src.build", "--out",
+                           str(tmp_path), "--only", "StrainController"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
-    assert wrapper_of(tmp_path / "StrainController.fmu") == "native"  # the default
-    bad = subprocess.run([sys.executable, "-m", "fmu_src.build", "--out", str(tmp_path),
-                          "--only", "Nope"], cwd=ROOT, capture_output=True, text=True,
-                         timeout=300)
+    with zipfile.ZipFile(tmp_path / "StrainController.fmu") as zf:
+        names = zf.namelist()
+        assert zf.read("resources/python_requires.txt").decode().split() == ["numpy"]
+    # our wrapper only: pythonfmu's binaries (a win64 one that cannot report errors) are gone
+    assert [n for n in names if n.startswith("binaries/")] == [
+        "binaries/linux64/StrainController.so"]
+    bad = subprocess.run([sys.executable, "-m", "drillcosim.fmu_src.build", "--out",
+                          str(tmp_path), "--only", "Nope"], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=300)
     assert bad.returncode == 2 and "unknown FMU" in bad.stderr
+    gone = subprocess.run([sys.executable, "-m", "drillcosim.fmu_src.build", "--out",
+                           str(tmp_path), "--wrapper", "pythonfmu"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    assert gone.returncode == 2 and "--wrapper" in gone.stderr  # the fallback is removed
 
 
-def test_default_wrapper_is_native_and_pythonfmu_is_the_fallback(
+def test_build_without_a_compiler_fails_in_one_line(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.delenv("DRILLCOSIM_FMU_WRAPPER", raising=False)
-    assert default_wrapper() == "native"
-    fmu = build_one(REGISTRY[0], tmp_path / "pythonfmu", wrapper="pythonfmu")
-    assert wrapper_of(fmu) == "pythonfmu" and validate_fmu(str(fmu)) == []
-    monkeypatch.setenv("DRILLCOSIM_FMU_WRAPPER", "pythonfmu")
-    assert default_wrapper() == "pythonfmu"
-
-
-def test_native_build_without_a_compiler_fails_in_one_line_naming_the_fallback(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.delenv("DRILLCOSIM_FMU_WRAPPER", raising=False)
     monkeypatch.setenv("CC", "no-such-compiler-dcs")
-    with pytest.raises(WrapperUnavailableError, match="--wrapper pythonfmu"):
+    with pytest.raises(RuntimeError, match="no-such-compiler-dcs"):
         build_one(REGISTRY[0], tmp_path)
-    proc = subprocess.run([sys.executable, "-m", "fmu_src.build", "--out", str(tmp_path),
-                           "--only", "StrainController"], cwd=ROOT, capture_output=True,
-                          text=True, timeout=300)
+    proc = subprocess.run([sys.executable, "-m", "drillcosim.fmu_src.build", "--out",
+                           str(tmp_path), "--only", "StrainController"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
     assert proc.returncode == 1
     assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr, proc.stderr
-    assert "no-such-compiler-dcs" in proc.stderr and "--wrapper pythonfmu" in proc.stderr
+    assert "no-such-compiler-dcs" in proc.stderr and "C compiler" in proc.stderr
     assert not list(tmp_path.iterdir())  # nothing written
+
+
+def test_stale_knows_what_an_fmu_is_made_of(tmp_path: Path,
+                                            project_fmus: dict[str, Path]) -> None:
+    plant = REGISTRY[1]
+    names = {p.name for p in plant.sources()}
+    assert {"drillstring_plant_fmu.py", "kernels.py", "fmi2_functions.c", "dcs_wrapper.h",
+            "build.py", "paper_open_loop.toml"} <= names
+    assert "numpy_rhs.py" not in names  # excluded from the FMU: not what it is made of
+    fmu = tmp_path / "DrillstringPlant.fmu"
+    fmu.write_bytes(project_fmus["DrillstringPlant"].read_bytes())
+    newest = max(p.stat().st_mtime for p in plant.sources())
+    os.utime(fmu, (newest + 10, newest + 10))
+    assert not stale(fmu, plant)
+    os.utime(fmu, (newest - 10, newest - 10))
+    assert stale(fmu, plant)  # older than a source
+    assert stale(tmp_path / "missing.fmu", plant)
+    old = tmp_path / "old" / "DrillstringPlant.fmu"  # an earlier build's FMU
+    old.parent.mkdir()
+    with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(old, "w") as dst:
+        for info in src.infolist():
+            if info.filename != "resources/python_requires.txt":
+                dst.writestr(info, src.read(info.filename))
+    os.utime(old, (newest + 10, newest + 10))
+    assert stale(old, plant)
 
 
 # ------------------------------------------------------- registering one more FMU
@@ -186,7 +206,7 @@ def test_registering_another_fmu_with_vendored_package_and_extra_file(tmp_path: 
     (pkg / "core.py").write_text("def scale(u, k):\n    return k * u\n")
     (src / "factor.txt").write_text("3.0")
     (src / "dummy_scaler_fmu.py").write_text(DUMMY_ADAPTER)
-    spec = FmuSpec(name="DummyScaler", script=str(src / "dummy_scaler_fmu.py"),
+    spec = FmuRecipe(name="DummyScaler", script=str(src / "dummy_scaler_fmu.py"),
                    vendored=((str(pkg), "_dcs_dummy_0_1_0"),),
                    extra_files=(str(src / "factor.txt"),))
     fmu = build_one(spec, tmp_path / "out")
@@ -268,7 +288,7 @@ def test_an_adapter_importing_generic_pythonfmu_is_refused(tmp_path: Path) -> No
     script = tmp_path / "generic_fmu.py"
     script.write_text(DUMMY_ADAPTER.replace("_dcs_pythonfmu_0_7_0", "pythonfmu"))
     with pytest.raises(RuntimeError, match="_dcs_pythonfmu_0_7_0"):
-        build_one(FmuSpec(name="DummyScaler", script=str(script)), tmp_path / "out")
+        build_one(FmuRecipe(name="DummyScaler", script=str(script)), tmp_path / "out")
 
 
 HOST_THEN_BUILD = textwrap.dedent("""

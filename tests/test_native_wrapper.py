@@ -1,15 +1,11 @@
-"""The native C FMI wrapper (``fmu_src/wrapper``): statuses, safety, equality with pythonfmu.
+"""Our C FMI wrapper (``fmu_src/wrapper``): statuses, calling sequence, buffers, Python discovery.
 
-Both project FMUs are built once per session with ``wrapper="native"`` (the default)
-and once with the ``wrapper="pythonfmu"`` fallback. Runs that compare the two wrappers, misuse and the
-heap check run in subprocesses (a crash shows as a failed exit code, and the two
-wrappers never share a process).
-
-Statuses under the native wrapper (see the adapters' module docstrings):
-out-of-range parameter -> fmi2Error from fmi2ExitInitializationMode naming it;
-non-finite input -> fmi2Error from fmi2DoStep; divergence -> fmi2Discard; doStep
-before initialization, unknown value reference, NULL component -> fmi2Error; a
-Python exception -> fmi2Error and the instance stays usable.
+Statuses (see the adapters' module docstrings): out-of-range parameter -> fmi2Error from
+fmi2ExitInitializationMode naming it; non-finite input -> fmi2Error from fmi2DoStep; divergence
+-> fmi2Discard; a call in a state that does not allow it, unknown value reference, NULL
+component -> fmi2Error; a Python exception -> fmi2Error and the instance stays usable.
+Runs that exercise misuse, the heap check and hosts without Python run in subprocesses (a
+crash shows as a failed exit code).
 """
 
 from __future__ import annotations
@@ -22,6 +18,7 @@ import shutil
 import subprocess
 import sys
 import textwrap
+import venv
 import zipfile
 from pathlib import Path
 
@@ -30,14 +27,15 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.validation import validate_fmu
 
-from drillcosim.fmu_src.build import REGISTRY, FmuSpec, build_one
+from drillcosim.fmu_src.build import REGISTRY, FmuRecipe, build_one
 from drillcosim.fmu_src.wrapper import compile_wrapper
+from support import c_host
 
 pytestmark = [pytest.mark.needs_cc]
 
 ROOT = Path(__file__).resolve().parents[1]
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
-SPECS = {s.name: s for s in REGISTRY}
+RECIPES = {r.name: r for r in REGISTRY}
 ENV = dict(os.environ, OPENBLAS_NUM_THREADS="1")
 
 RAISING_SLAVE = textwrap.dedent('''
@@ -77,16 +75,8 @@ def native_dir(project_fmus: dict[str, Path]) -> Path:
     return project_fmus["DrillstringPlant"].parent
 
 
-@pytest.fixture(scope="session")
-def pyfmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("pythonfmu_fmus")
-    for spec in REGISTRY:
-        build_one(spec, out, wrapper="pythonfmu")
-    return out
-
-
 #: A slave that raises on request; its script is written by the fixture (a unique temp path).
-RAISER = FmuSpec(name="Raiser", script=str(Path(__import__("tempfile").mkdtemp(
+RAISER = FmuRecipe(name="Raiser", script=str(Path(__import__("tempfile").mkdtemp(
     prefix="dcs_raiser_")) / "raiser_slave.py"))
 
 
@@ -95,7 +85,7 @@ def raiser_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
     src = Path(RAISER.script)
     src.parent.mkdir(parents=True, exist_ok=True)
     src.write_text(RAISING_SLAVE)
-    return build_one(RAISER, tmp_path_factory.mktemp("raiser"), wrapper="native")
+    return build_one(RAISER, tmp_path_factory.mktemp("raiser"))
 
 
 def run_script(code: str, *args: str, env: dict | None = None, timeout: int = 600) -> dict:
@@ -142,6 +132,20 @@ PRELUDE = textwrap.dedent("""
 
 
 # ----------------------------------------------------------------------- the library
+#: Every FMI 2.0 function a co-simulation FMU exports (fmi2Functions.h, common + CS part).
+FMI2_CS_FUNCTIONS = {
+    "fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2SetDebugLogging", "fmi2Instantiate",
+    "fmi2FreeInstance", "fmi2SetupExperiment", "fmi2EnterInitializationMode",
+    "fmi2ExitInitializationMode", "fmi2Terminate", "fmi2Reset", "fmi2GetReal",
+    "fmi2GetInteger", "fmi2GetBoolean", "fmi2GetString", "fmi2SetReal", "fmi2SetInteger",
+    "fmi2SetBoolean", "fmi2SetString", "fmi2GetFMUstate", "fmi2SetFMUstate",
+    "fmi2FreeFMUstate", "fmi2SerializedFMUstateSize", "fmi2SerializeFMUstate",
+    "fmi2DeSerializeFMUstate", "fmi2GetDirectionalDerivative", "fmi2SetRealInputDerivatives",
+    "fmi2GetRealOutputDerivatives", "fmi2DoStep", "fmi2CancelStep", "fmi2GetStatus",
+    "fmi2GetRealStatus", "fmi2GetIntegerStatus", "fmi2GetBooleanStatus", "fmi2GetStringStatus",
+}
+
+
 def test_compiles_without_warnings_and_needs_no_libpython(tmp_path: Path) -> None:
     lib = compile_wrapper(tmp_path / "w.so")  # -Wall -Wextra -Werror; stderr must be empty
     undefined = subprocess.run(["nm", "-D", "--undefined-only", str(lib)], capture_output=True,
@@ -153,21 +157,67 @@ def test_compiles_without_warnings_and_needs_no_libpython(tmp_path: Path) -> Non
     exported = subprocess.run(["nm", "-D", "--defined-only", str(lib)], capture_output=True,
                               text=True, check=True).stdout
     names = {ln.split()[-1] for ln in exported.splitlines() if " T " in ln}
-    assert {"fmi2Instantiate", "fmi2DoStep", "fmi2GetReal", "fmi2SerializeFMUstate",
-            "fmi2GetRealStatus", "fmi2GetTypesPlatform"} <= names
-    assert all(n.startswith("fmi2") or n.startswith("_") for n in names), names
+    assert names == FMI2_CS_FUNCTIONS  # exactly the FMI 2.0 co-simulation API, nothing else
+    # of the building machine only the building interpreter is recorded (the last candidate)
+    strings = subprocess.run(["strings", str(lib)], capture_output=True, text=True,
+                             check=True).stdout.splitlines()
+    paths = [s for s in strings if s.startswith("/") and s != "/dev/null"]
+    assert paths == [sys.executable], paths
 
 
-def test_native_fmus_layout_and_validation(native_dir: Path, pyfmu_dir: Path) -> None:
-    for name in SPECS:
+def _c_code(text: str) -> str:
+    """C text without comments, string/char literals, and with continued lines joined."""
+    import re
+
+    text = re.sub(r"/\*.*?\*/", " ", text, flags=re.S)
+    text = re.sub(r"//[^\n]*", " ", text)
+    text = re.sub(r'"(\\.|[^"\\])*"', '""', text)
+    text = re.sub(r"'(\\.|[^'\\])*'", "''", text)
+    return text.replace("\\\n", " ")
+
+
+def test_the_c_sources_have_one_exit_per_function_and_use_the_official_headers() -> None:
+    """Fails on a second ``return`` in a function, a macro with a ``return``, or FMI types
+    declared by us instead of taken from the official headers."""
+    import re
+
+    from drillcosim.fmu_src.wrapper import HERE, SOURCES
+
+    for src in SOURCES:
+        code = _c_code(src.read_text())
+        for line in code.splitlines():
+            if line.lstrip().startswith("#define"):
+                assert not re.search(r"\breturn\b", line), f"{src.name}: {line}"
+        depth, returns, start = 0, 0, 0
+        for m in re.finditer(r"[{}]|\breturn\b", code):
+            if m.group() == "{":
+                if depth == 0:
+                    returns, start = 0, m.start()
+                depth += 1
+            elif m.group() == "}":
+                depth -= 1
+            elif depth > 0:
+                returns += 1
+                head = code[:start].rstrip().splitlines()[-1]
+                assert returns <= 1, f"{src.name}: a second return in {head!r}"
+        assert depth == 0, src.name
+        assert not re.search(r"typedef[^;]*\bfmi2(Status|Component|Real|CallbackFunctions)\b",
+                             code), src.name
+    assert "#include \"fmi2/fmi2Functions.h\"" in (HERE / "dcs_wrapper.h").read_text()
+    license_text = (HERE / "fmi2" / "LICENSE.txt").read_text()
+    assert "tag v2.0.5" in license_text and "Redistribution and use in source" in license_text
+
+
+def test_native_fmus_layout_and_validation(native_dir: Path) -> None:
+    for name, recipe in RECIPES.items():
         fmu = native_dir / f"{name}.fmu"
         assert validate_fmu(str(fmu)) == []
-        with zipfile.ZipFile(fmu) as zn, zipfile.ZipFile(pyfmu_dir / f"{name}.fmu") as zp:
-            assert zn.read("resources/slaveclass.txt").decode().strip() == name
-            assert zn.read(f"binaries/linux64/{name}.so") != zp.read(
-                f"binaries/linux64/{name}.so")
-            assert zn.read("modelDescription.xml").split(b"guid=")[0] == zp.read(
-                "modelDescription.xml").split(b"guid=")[0]
+        with zipfile.ZipFile(fmu) as zf:
+            assert zf.read("resources/slaveclass.txt").decode().strip() == name
+            assert tuple(zf.read("resources/python_requires.txt").decode().split()) == (
+                recipe.requires)
+            assert [n for n in zf.namelist() if n.startswith("binaries/")] == [
+                f"binaries/linux64/{name}.so"]  # no pythonfmu binary (win64) left
 
 
 def test_null_component_and_platform_calls(native_dir: Path, tmp_path: Path) -> None:
@@ -184,48 +234,66 @@ def test_null_component_and_platform_calls(native_dir: Path, tmp_path: Path) -> 
     lib.fmi2FreeInstance(None)  # tolerated
 
 
-# --------------------------------------------------------------- same results as pythonfmu
-SIMULATE = textwrap.dedent("""
-    import json, os, sys
+# ------------------------------------------------------------- the fast Real boundary
+BUFFER_SCRIPT = PRELUDE + textwrap.dedent("""
     import numpy as np
-    from fmpy import simulate_fmu
-    fmu, n, fast_exit = sys.argv[1], int(sys.argv[2]), sys.argv[3] == "fast-exit"
-    dt = 1e-3
-    t = np.arange(n + 1) * dt
-    md_inputs = {"StrainController": ["strain1_C", "strain1_E", "strain2_C", "strain2_E"],
-                 "DrillstringPlant": ["actuator1_force_C", "actuator1_force_E",
-                                      "actuator2_force_C", "actuator2_force_E"]}
-    name = fmu.rsplit("/", 1)[1][:-4]
-    amp = 1e-5 if name == "StrainController" else 300.0
-    sig = np.zeros(n + 1, dtype=[("time", float)] + [(x, float) for x in md_inputs[name]])
-    sig["time"] = t
-    for i, x in enumerate(md_inputs[name]):
-        sig[x] = amp * np.sin(2 * np.pi * 5 * t + i)
-    start = {"lag_time_constant": 2e-3, "gain": 7e8} if name == "StrainController" else {}
-    res = simulate_fmu(fmu, stop_time=n * dt, step_size=dt, output_interval=dt, input=sig,
-                       start_values=start)
-    print(json.dumps({k: res[k].tolist() for k in res.dtype.names}), flush=True)
-    if fast_exit:
-        # pythonfmu 0.7.0 destroys its PyState from the library destructor after Python
-        # has finalized: at exit this sometimes aborts with "corrupted double-linked
-        # list" (seen here under load, and in test_plant_fmu). The native run exits
-        # normally: the native wrapper has no destructor and never finalizes Python.
-        os._exit(0)
+    fmu = sys.argv[1]
+    plant = "DrillstringPlant" in fmu
+    s, vr, d = open_fmu(fmu, "buf")
+    with open(os.path.join(d, "resources", "slavemodule.txt")) as f:
+        mod = sys.modules[f.read().strip()]
+    cls = getattr(mod, "DrillstringPlant" if plant else "StrainController")
+    calls = {"get_real": 0, "set_real": 0, "do_step": 0}
+    for name in calls:  # count the Python calls the wrapper makes
+        def wrap(f, name=name):
+            def counted(self, *a):
+                calls[name] += 1
+                return f(self, *a)
+            return counted
+        setattr(cls, name, wrap(getattr(cls, name)))
+    ins = [vr[n] for n in cls.REAL_INPUTS]
+    outs = [vr[n] for n in cls.REAL_OUTPUTS]
+    param = vr["gravity" if plant else "gain"]
+    s.setupExperiment(startTime=0.0)
+    s.enterInitializationMode()
+    init_outputs = s.getReal(outs)            # initial unknowns: computed by Python
+    init_calls = dict(calls)
+    s.exitInitializationMode()
+    inst = [o for o in __import__("gc").get_objects() if isinstance(o, cls)][0]
+    fast, mixed, inputs = [], [], []
+    amp = 300.0 if plant else 1e-5
+    for k in range(50):
+        u = [amp * math.sin(0.1 * k + i) for i in range(len(ins))]
+        s.setReal(ins, u)                     # inputs only: the C buffer
+        inputs.append([u, inst.inputs.tolist()])
+        s.doStep(k * 1e-3, 1e-3)
+        fast.append(s.getReal(outs + ins))    # outputs and inputs: the C buffers
+        mixed.append(s.getReal(outs + [param]))  # with a parameter: Python's get_real
+    print(json.dumps({"calls": calls, "init_calls": init_calls, "fast": fast, "mixed": mixed,
+                      "inputs": inputs, "python_outputs": inst.outputs.tolist(),
+                      "init_outputs": init_outputs, "errors": [m for m in messages if m[0]]}))
 """)
 
 
 @pytest.mark.parametrize("name", ["StrainController", "DrillstringPlant"])
-def test_simulate_fmu_bit_identical_to_pythonfmu(name: str, native_dir: Path,
-                                                 pyfmu_dir: Path) -> None:
-    n = 300 if name == "DrillstringPlant" else 2000
-    nat = run_script(SIMULATE, str(native_dir / f"{name}.fmu"), str(n), "normal-exit")
-    ref = run_script(SIMULATE, str(pyfmu_dir / f"{name}.fmu"), str(n), "fast-exit")
-    assert nat.keys() == ref.keys() and len(nat["time"]) == n + 1
-    moving = 0
-    for key in ref:
-        np.testing.assert_array_equal(np.array(nat[key]), np.array(ref[key]), err_msg=key)
-        moving += np.ptp(ref[key]) > 0
-    assert moving > 3
+def test_real_inputs_and_outputs_cross_without_python_calls(name: str, native_dir: Path) -> None:
+    """Step mode: getReal/setReal of the buffered variables never call Python; one call a step.
+
+    Fails if the wrapper routes them through the slave's get_real/set_real, or if the C
+    buffers and the slave's arrays disagree (a wrong slot, a stale view).
+    """
+    out = run_script(BUFFER_SCRIPT, str(native_dir / f"{name}.fmu"))
+    assert out["errors"] == []
+    assert out["init_calls"]["get_real"] == 1  # initialization mode goes through Python
+    calls = out["calls"]
+    assert calls == {"get_real": 1 + 50, "set_real": 0, "do_step": 50}  # +50: the mixed gets
+    for (u, seen), fast, mixed in zip(out["inputs"], out["fast"], out["mixed"]):
+        assert u == seen  # setReal wrote the slave's own input array
+        n_out = len(mixed) - 1
+        assert fast[:n_out] == mixed[:n_out]  # the C buffer equals Python's get_real
+        assert fast[n_out:] == u
+    assert out["fast"][-1][:len(out["python_outputs"])] == out["python_outputs"]
+    assert np.ptp(np.array(out["fast"])[:, 0]) > 0
 
 
 # ----------------------------------------------------------------- statuses (subprocess)
@@ -502,75 +570,197 @@ def test_libcosim_runs_native_fmus_like_our_master(native_dir: Path, tmp_path: P
     assert np.max(np.abs(lib[:, forces])) > 0
 
 
-C_HOST = r"""
-#include <dlfcn.h>
-#include <stdarg.h>
-#include <stdio.h>
-#include <stdlib.h>
-typedef void (*logger_t)(void *, const char *, int, const char *, const char *, ...);
-typedef struct { logger_t logger; void *alloc; void *free; void *step; void *env; } cb_t;
-static void logger(void *env, const char *name, int status, const char *cat,
-                   const char *msg, ...) {
-    va_list ap; (void)env;
-    fprintf(stderr, "[%s %d %s] ", name, status, cat);
-    va_start(ap, msg); vfprintf(stderr, msg, ap); va_end(ap); fputc('\n', stderr);
-}
-int main(int argc, char **argv) {
-    void *h = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
-    if (!h) { fprintf(stderr, "%s\n", dlerror()); return 2; }
-    void *(*inst)(const char *, int, const char *, const char *, const cb_t *, int, int) =
-        (void *(*)(const char *, int, const char *, const char *, const cb_t *, int, int))
-        dlsym(h, "fmi2Instantiate");
-    int (*setup)(void *, int, double, double, int, double) =
-        (int (*)(void *, int, double, double, int, double))dlsym(h, "fmi2SetupExperiment");
-    int (*enter)(void *) = (int (*)(void *))dlsym(h, "fmi2EnterInitializationMode");
-    int (*exitm)(void *) = (int (*)(void *))dlsym(h, "fmi2ExitInitializationMode");
-    int (*step)(void *, double, double, int) =
-        (int (*)(void *, double, double, int))dlsym(h, "fmi2DoStep");
-    int (*setr)(void *, const unsigned *, size_t, const double *) =
-        (int (*)(void *, const unsigned *, size_t, const double *))dlsym(h, "fmi2SetReal");
-    int (*getr)(void *, const unsigned *, size_t, double *) =
-        (int (*)(void *, const unsigned *, size_t, double *))dlsym(h, "fmi2GetReal");
-    void (*freei)(void *) = (void (*)(void *))dlsym(h, "fmi2FreeInstance");
-    cb_t cb = {logger, NULL, NULL, NULL, NULL};
-    void *c = inst("chost", 1, "", argv[2], &cb, 0, 1);
-    if (!c) return 3;
-    unsigned in0 = (unsigned)atoi(argv[3]), out0 = (unsigned)atoi(argv[4]);
-    int st = setup(c, 0, 0.0, 0.0, 0, 0.0) | enter(c) | exitm(c);
-    printf("BAD %d\n", step(c, 0.0, -1.0, 1));
-    for (int k = 0; k < 20; k++) {
-        double u = 1e-6 * (k + 1), y;
-        st |= setr(c, &in0, 1, &u) | step(c, k * 1e-3, 1e-3, 1) | getr(c, &out0, 1, &y);
-        printf("%.17g\n", y);
-    }
-    freei(c);
-    printf("STATUS %d\n", st);
-    return 0;
-}
-"""
-
-
-def test_c_host_without_python_loads_libpython_itself(native_dir: Path, tmp_path: Path) -> None:
-    """A plain C program (no Python in the process) runs the native controller FMU."""
+# --------------------------------------------------------------- hosts without Python
+@pytest.fixture(scope="session")
+def host(tmp_path_factory: pytest.TempPathFactory) -> Path:
     if shutil.which("gcc") is None:
         pytest.skip("no gcc")
-    src = tmp_path / "host.c"
-    src.write_text(C_HOST)
-    exe = tmp_path / "host"
-    subprocess.run(["gcc", "-std=c99", "-Wall", "-o", str(exe), str(src), "-ldl"], check=True)
-    fmu = native_dir / "StrainController.fmu"
-    d = Path(extract(str(fmu), unzipdir=str(tmp_path / "unzip")))
-    md = read_model_description(str(fmu))
+    return c_host.compile_host(tmp_path_factory.mktemp("c_host"))
+
+
+@pytest.fixture(scope="session")
+def bare_python(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A Python 3 of this version without numpy (a venv of this interpreter, no packages)."""
+    where = tmp_path_factory.mktemp("bare") / "venv"
+    venv.EnvBuilder(with_pip=False, symlinks=True).create(where)
+    return where / "bin" / "python3"
+
+
+def plain_env(tmp_path: Path, path: str = "/usr/bin:/bin", **extra: str) -> dict[str, str]:
+    """A host's environment: no PYTHON*/DRILLCOSIM_*/VIRTUAL_ENV, a HOME of its own."""
+    env = {k: v for k, v in ENV.items()
+           if not k.startswith(("PYTHON", "DRILLCOSIM", "VIRTUAL_ENV", "XDG_CONFIG"))}
+    env.update(PATH=path, HOME=str(tmp_path / "home"), **extra)
+    return env
+
+
+def controller_run(host: Path, native_dir: Path, tmp_path: Path, env: dict[str, str],
+                   conf: str | None = None) -> subprocess.CompletedProcess:
+    """The controller FMU in the C host: strain1_C = 1e-6 held, 4 steps of 1 ms."""
+    d = c_host.unzip(native_dir / "StrainController.fmu", tmp_path / "unzip")
+    if conf is not None:
+        (d / "drillcosim.conf").write_text(conf)
+    md = read_model_description(str(native_dir / "StrainController.fmu"))
     vr = {v.name: v.valueReference for v in md.modelVariables}
-    env = {k: v for k, v in ENV.items() if not k.startswith(("PYTHON", "VIRTUAL_ENV"))}
-    proc = subprocess.run([str(exe), str(d / "binaries/linux64/StrainController.so"),
-                           (d / "resources").as_uri(), str(vr["strain1_C"]),
-                           str(vr["actuator1_force_C"])], env=env, capture_output=True,
-                          text=True, timeout=120)
+    return c_host.run_host(host, d, "StrainController", 4e-3, 1e-3,
+                           [f"r:{vr['strain1_C']}=1e-6"], [vr["actuator1_force_C"]], env,
+                           tmp_path)
+
+
+def test_c_host_without_python_runs_the_fmu(host: Path, native_dir: Path,
+                                            tmp_path: Path) -> None:
+    """A plain C program (no Python in the process, PYTHONHOME/PYTHONPATH leaking in)."""
+    env = plain_env(tmp_path, PYTHONHOME="/nonexistent", PYTHONPATH="/nonexistent")
+    proc = controller_run(host, native_dir, tmp_path, env)
     assert proc.returncode == 0, (proc.stdout, proc.stderr)
-    lines = proc.stdout.split()
-    assert lines[:2] == ["BAD", str(ERROR)] and lines[-2:] == ["STATUS", "0"]
-    got = [float(x) for x in lines[2:-2]]
-    gain = float(next(v.start for v in md.modelVariables if v.name == "gain"))
-    assert got == [gain * (1e-6 * (k + 1)) for k in range(20)]  # held over the step, no lag
-    assert "[chost 3 logStatusError]" in proc.stderr and "dt = -1.0" in proc.stderr, proc.stderr
+    assert proc.stdout.splitlines()[0] == f"BAD {ERROR}"  # a negative step: refused
+    assert "dt = -1.0" in proc.stderr
+    got = c_host.rows(proc.stdout)
+    gain = 1e9  # the FMU's default; held over the step, no lag
+    assert got == [[k * 1e-3, 0.0 if k == 0 else gain * 1e-6] for k in range(5)]
+
+
+def test_no_usable_python_is_one_message_listing_what_each_candidate_lacked(
+        host: Path, native_dir: Path, bare_python: Path, tmp_path: Path) -> None:
+    env = plain_env(tmp_path, DRILLCOSIM_PYTHON=str(bare_python))
+    proc = controller_run(host, native_dir, tmp_path, env)
+    assert proc.returncode == 3, (proc.stdout, proc.stderr)  # NULL; the host goes on and exits
+    errors = c_host.log_lines(proc.stderr, ERROR)
+    assert len(errors) == 1 and len(c_host.log_lines(proc.stderr)) == 1, proc.stderr
+    text = proc.stderr
+    assert "no usable Python found" in text and "Python 3.11 with numpy" in text
+    assert f"1. $DRILLCOSIM_PYTHON = {bare_python}: Python 3.11" in text
+    assert "lacks numpy (ModuleNotFoundError: No module named 'numpy')" in text
+    assert "an explicit choice: no other candidate is tried" in text
+    assert "How to fix: install numpy into a Python 3.11" in text and "PYTHONHOME" in text
+
+
+@pytest.mark.parametrize("conf", ["python = {good}\n", "# site setup\npython = /nope/python3\n",
+                                  "pithon = typo\n"])
+def test_config_file_in_the_unzip_folder_is_an_explicit_choice(
+        host: Path, native_dir: Path, tmp_path: Path, conf: str) -> None:
+    env = plain_env(tmp_path)
+    proc = controller_run(host, native_dir, tmp_path, env, conf.format(good=sys.executable))
+    cfg = tmp_path / "unzip" / "drillcosim.conf"
+    if "{good}" in conf:
+        assert proc.returncode == 0, proc.stderr
+        assert f"2. config file {cfg}: python = {sys.executable}: Python 3.11" in proc.stderr
+        assert "used" in proc.stderr and "3. on PATH" not in proc.stderr  # PATH not searched
+    else:
+        assert proc.returncode == 3 and len(c_host.log_lines(proc.stderr, ERROR)) == 1
+        assert f"config file {cfg}" in proc.stderr and "explicit choice" in proc.stderr
+        assert ("not found" in proc.stderr) == ("nope" in conf)
+        assert ("no line 'python = /path/to/python3'" in proc.stderr) == ("pithon" in conf)
+
+
+def test_path_candidates_in_order_each_checked_in_a_child(
+        host: Path, native_dir: Path, bare_python: Path, tmp_path: Path) -> None:
+    first = bare_python.parent  # a venv without numpy (pyvenv.cfg beside bin/)
+    second = Path(sys.executable).parent  # this test's venv: has numpy
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "python3").write_text("#!/bin/sh\necho no python here >&2\nexit 7\n")
+    (broken / "python3").chmod(0o755)
+    env = plain_env(tmp_path, path=f"{first}:relative/bin:{broken}:{second}:/usr/bin:/bin")
+    proc = controller_run(host, native_dir, tmp_path, env)
+    assert proc.returncode == 0, proc.stderr
+    report = proc.stderr
+    lines = [ln.strip() for ln in report.splitlines() if ln.strip().startswith("3. on PATH")]
+    assert lines[0].startswith(f"3. on PATH: {first}/python3: Python 3.11")
+    assert "lacks numpy" in lines[0]
+    assert lines[1] == (f"3. on PATH: {broken}/python3: does not run as a Python 3 interpreter "
+                        f"(exit status 7: no python here)")
+    assert lines[2].startswith(f"3. on PATH: {second}/python3: Python 3.11") and "used" in lines[2]
+    assert len(lines) == 3  # the search stops at the first that fits; relative entries skipped
+
+
+def other_python_version() -> str | None:
+    """A runnable Python 3 of another minor version than this one, if the machine has one
+    (``python3.X`` on PATH, or a pyenv installation)."""
+    import glob
+
+    found = [shutil.which(f"python3.{minor}") for minor in (12, 13, 10, 9, 14, 8)]
+    found += sorted(glob.glob(os.path.expanduser("~/.pyenv/versions/3.*/bin/python3")))
+    for exe in filter(None, found):
+        proc = subprocess.run([exe, "-c", "import sys; print(sys.version_info[1])"],
+                              capture_output=True, text=True)
+        if proc.returncode == 0 and proc.stdout.strip() != str(sys.version_info.minor):
+            return exe
+    return None
+
+
+VERSION_SCRIPT = textwrap.dedent("""
+    import ctypes, sys
+    lib = ctypes.CDLL(sys.argv[1])
+    LOG = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p,
+                           ctypes.c_char_p)
+    msgs = []
+    log = LOG(lambda env, name, st, cat, msg: msgs.append((st, msg.decode())))
+    class CB(ctypes.Structure):
+        _fields_ = [("logger", LOG), ("alloc", ctypes.c_void_p), ("free", ctypes.c_void_p),
+                    ("step", ctypes.c_void_p), ("env", ctypes.c_void_p)]
+    lib.fmi2Instantiate.restype = ctypes.c_void_p
+    c = lib.fmi2Instantiate(b"other", 1, b"", sys.argv[2].encode(), ctypes.byref(CB(log)), 0, 0)
+    print("NULL" if c is None else "INSTANCE")
+    for st, m in msgs:
+        print(st, m)
+""")
+
+
+def test_a_python_host_of_another_version_gets_one_clear_message(
+        native_dir: Path, tmp_path: Path) -> None:
+    other = other_python_version()
+    if other is None:
+        pytest.skip("no Python of another minor version on this machine")
+    d = c_host.unzip(native_dir / "StrainController.fmu", tmp_path / "unzip")
+    proc = subprocess.run([other, "-c", VERSION_SCRIPT,
+                           str(d / "binaries/linux64/StrainController.so"),
+                           (d / "resources").as_uri()], capture_output=True, text=True,
+                          timeout=120, env=plain_env(tmp_path, path=os.environ["PATH"]))
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[0] == "NULL" and len(lines) == 2, lines
+    assert lines[1].startswith(f"{ERROR} other: fmi2Instantiate: this process runs Python 3.")
+    assert "but the FMU's wrapper is compiled for Python 3.11" in lines[1]
+
+
+# ----------------------------------------------------------------- calling sequence
+SEQUENCE_SCRIPT = PRELUDE + textwrap.dedent("""
+    fmu = sys.argv[1]
+    s, vr, _ = open_fmu(fmu, "seq")
+    out = {}
+    out["exit_before_enter"] = call(s.exitInitializationMode)
+    out["terminate_before_init"] = call(s.terminate)
+    s.setupExperiment(startTime=0.0)
+    s.enterInitializationMode()
+    out["setup_in_init"] = call(s.setupExperiment, None, 0.0)
+    out["enter_twice"] = call(s.enterInitializationMode)
+    s.exitInitializationMode()
+    out["exit_twice"] = call(s.exitInitializationMode)
+    out["step"] = call(s.doStep, 0.0, 1e-3)
+    out["cancel"] = call(s.cancelStep)
+    s.terminate()
+    out["step_after_terminate"] = call(s.doStep, 1e-3, 1e-3)
+    out["get_after_terminate"] = call(s.getReal, [vr["actuator1_force_C"]])
+    s.reset()
+    out["setup_after_reset"] = call(s.setupExperiment, None, 0.0)
+    out["messages"] = [m for m in messages if m[0]]
+    s.freeInstance()
+    print(json.dumps(out))
+""")
+
+
+def test_calling_sequence_is_the_state_mask_table(native_dir: Path) -> None:
+    out = run_script(SEQUENCE_SCRIPT, str(native_dir / "StrainController.fmu"))
+    refused = ["exit_before_enter", "terminate_before_init", "setup_in_init", "enter_twice",
+               "exit_twice", "cancel", "step_after_terminate"]
+    assert {k: out[k] for k in refused} == dict.fromkeys(refused, ERROR)
+    assert (out["step"], out["get_after_terminate"], out["setup_after_reset"]) == (OK, OK, OK)
+    texts = [m for _s, _c, m in out["messages"]]
+    assert "seq: fmi2ExitInitializationMode is not allowed in state Instantiated (before " \
+           "initialization); allowed in: InitializationMode" in texts
+    assert "seq: fmi2DoStep is not allowed in state Terminated; allowed in: StepComplete" \
+           in texts
+    assert "seq: fmi2CancelStep is not allowed in state StepComplete; not supported by this " \
+           "FMU" in texts
+    assert len(texts) == len(refused)  # one message per refused call

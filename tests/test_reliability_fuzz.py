@@ -18,7 +18,7 @@ on purpose (bugs found and fixed, see ``docs/reliability.md``): undecodable
 serialized states, foreign states, non-finite or out-of-order communication
 points, huge step sizes.
 
-The FMUs are built the default way (native FMI wrapper): misuse gives fmi2Error
+The FMUs run on our C wrapper (the only build): misuse gives fmi2Error
 from the call concerned (3), a diverging plant fmi2Discard (2), never fmi2Fatal.
 """
 

@@ -10,6 +10,7 @@ finder is not loaded). Everything then runs in an empty folder: ``drillcosim sce
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import sysconfig
@@ -26,8 +27,13 @@ pytestmark = [pytest.mark.slow, pytest.mark.needs_cc]
 def installed(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     base = tmp_path_factory.mktemp("wheel")
     dist = base / "dist"
+    # a copy of the sources without build products: setuptools reuses an in-tree build/ folder,
+    # which a checkout that ran `make` has (stale files would land in the wheel)
+    src = base / "src"
+    shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(
+        ".git", ".venv", "build", "out", "*.egg-info", "__pycache__", ".pytest_cache"))
     proc = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps",
-                           "--no-build-isolation", "-w", str(dist), str(ROOT)],
+                           "--no-build-isolation", "-w", str(dist), str(src)],
                           capture_output=True, text=True, cwd=base)
     assert proc.returncode == 0, proc.stderr[-3000:]
     wheel = next(dist.glob("drillcosim-*.whl"))
@@ -66,10 +72,11 @@ def test_wheel_has_one_import_namespace_and_the_package_data(installed) -> None:
     tops = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
     assert tops == {"drillcosim"}
     for needed in ("drillcosim/scenes/paper_open_loop.toml",
-                   "drillcosim/fmu_src/wrapper/dcs_fmi2_native.c",
+                   "drillcosim/fmu_src/wrapper/fmi2_functions.c",
+                   "drillcosim/fmu_src/wrapper/fmi2/fmi2Functions.h",
+                   "drillcosim/fmu_src/wrapper/fmi2/LICENSE.txt",
                    "drillcosim/fmu_src/c_controller/model.c",
                    "drillcosim/fmu_src/c_controller/modelDescription.xml",
-                   "drillcosim/fmu_src/c_controller/fmi2/fmi2Functions.h",
                    "drillcosim/plant/kernels.py", "drillcosim/cosim/master/execution.py"):
         assert needed in names
     installed_tops = {p.name for p in installed["site"].iterdir()  # bin/: pip --target's scripts

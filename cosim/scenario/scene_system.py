@@ -75,7 +75,6 @@ from __future__ import annotations
 import difflib
 import math
 import warnings
-import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -361,32 +360,18 @@ def default_fmu_dir() -> Path:
 
 
 def _stale(fmu: Path, name: str) -> bool:
-    from drillcosim.fmu_src.build import REGISTRY, ROOT, default_wrapper, wrapper_of
+    from drillcosim.fmu_src.build import REGISTRY, stale
 
-    if not fmu.is_file():
-        return True
-    spec = next((s for s in REGISTRY if s.name == name), None)
-    if spec is None:
-        return False
-    try:
-        if wrapper_of(fmu) != default_wrapper():  # e.g. built before native became default
-            return True
-    except (OSError, zipfile.BadZipFile):
-        return True
-    mtime = fmu.stat().st_mtime
-    sources = [spec.script_path, ROOT / "fmu_src" / "wrapper" / "dcs_fmi2_native.c"]
-    for package, _ in spec.vendored:
-        sources += list((ROOT / package).glob("*.py"))
-    return any(p.is_file() and p.stat().st_mtime > mtime for p in sources)
+    recipe = next((r for r in REGISTRY if r.name == name), None)
+    return recipe is not None and stale(fmu, recipe)
 
 
 def ensure_fmus(fmu_dir: str | Path | None = None, names: Sequence[str] = (
         "DrillstringPlant", "StrainController")) -> dict[str, Path]:
     """Paths of the project FMUs in ``fmu_dir``, building missing (or stale) ones.
 
-    In the default folder (``build/fmus``) an FMU older than its adapter, its
-    vendored package or the native wrapper's C source, or built with another FMI
-    wrapper than the default (:func:`fmu_src.build.default_wrapper`), is rebuilt;
+    In the default folder (``build/fmus``) an FMU that :func:`fmu_src.build.stale` calls
+    stale (older than a file it is made of, or made by an earlier build) is rebuilt;
     an explicitly given folder is used as is (built only if missing), so a frozen
     set of FMUs stays frozen.
 

@@ -1,84 +1,164 @@
-"""Guarded FMI get/set for our pythonfmu slaves, shared by both FMU adapters.
+"""The base class of our pythonfmu adapters: one status protocol, guarded access, Real buffers.
 
-Vendored into every FMU as ``_dcs_slave_support_0_1_0`` (see ``fmu_src/build.py``). A bad value
-reference, a wrong type or writing a non-settable variable must never raise (an exception in a
-callback is fmi2Error under our native wrapper and fmi2Fatal under pythonfmu's): the call is
-rejected with a logged message naming it, the value is skipped (get returns a neutral value).
+Vendored into every FMU as ``_dcs_slave_support_0_1_0`` (see ``fmu_src/build.py``); the FMUs
+run on our C wrapper (``fmu_src/wrapper``), whose status protocol this class speaks:
 
-An adapter defines ``_accessible(vr, kind, call) -> bool`` (usually :func:`access_problem` plus
-its own rules, ending in :func:`reject`) and decorates its class with :func:`guarded_access`,
-which adds every ``get_*``/``set_*`` method the class does not define itself.
+* **Status.** Every FMI callback returns None; a problem is reported by :meth:`DcsSlave._error`,
+  which logs the message (status and category ``logStatus<Status>``) and raises
+  ``self._fmi2_status`` to that status; the wrapper returns the highest status of the call
+  and resets the attribute. No anticipated problem raises; an unexpected exception becomes
+  fmi2Error with its traceback and the instance stays usable.
+* **Guarded get/set.** A bad value reference, a wrong type or writing a variable that is not
+  settable is fmi2Error from that get/set call, naming the variable (a get returns NaN / 0 /
+  false / "" for it, a set ignores it). Adapters add their own rules by overriding
+  :meth:`DcsSlave._access_problem`.
+* **Real buffers.** The Real inputs and outputs named in ``REAL_INPUTS`` / ``REAL_OUTPUTS`` live
+  in two float64 arrays, ``self.inputs`` and ``self.outputs`` (shapes ``(len(REAL_INPUTS),)``
+  and ``(len(REAL_OUTPUTS),)``), fixed for the instance's lifetime: the adapter reads inputs
+  and writes outputs in place (``out=``, ``[:] =``), never rebinds them. The wrapper takes them
+  once through :meth:`DcsSlave._fmi2_real_buffers` and then moves those values in step mode
+  without calling Python (one Python call per doStep).
+* **FMU state.** ``_fmu_state_from_bytes`` never raises: bytes that are not a state of ours give
+  a marker that the adapter's ``_set_fmu_state`` rejects with fmi2Error.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, ClassVar
 
-from _dcs_pythonfmu_0_7_0 import Boolean, Integer, Real, String
-from _dcs_pythonfmu_0_7_0.enums import Fmi2Causality
+import numpy as np
+from _dcs_pythonfmu_0_7_0 import Boolean, Fmi2Slave, Integer, Real, String
+from _dcs_pythonfmu_0_7_0.enums import Fmi2Causality, Fmi2Status
 
-__all__ = ["access_problem", "reject", "guarded_access"]
+__all__ = ["DcsSlave"]
 
-_KINDS: tuple[tuple[type, Callable[[Any], Any], Any], ...] = (
-    (Real, float, math.nan),
-    (Integer, int, 0),
-    (Boolean, bool, False),
-    (String, str, ""),
-)
-
-
-def access_problem(slave: Any, vr: int, kind: type, call: str) -> str | None:
-    """Why ``call`` (e.g. ``"setReal"``) may not access ``vr``, or None if it may."""
-    var = slave.vars.get(vr)
-    if var is None:
-        return f"unknown value reference {vr} (valid: 0..{len(slave.vars) - 1})"
-    if not isinstance(var, kind):
-        return f"value reference {vr} ({var.name}) is not of type {kind.__name__}"
-    if call.startswith("set") and var.causality not in (Fmi2Causality.input,
-                                                        Fmi2Causality.parameter):
-        return f"{var.name} (value reference {vr}) is an {var.causality.name}: not settable"
-    return None
+#: (variable class, conversion of a value, neutral value of a rejected get)
+_KINDS: dict[str, tuple[type, Callable[[Any], Any], Any]] = {
+    "Real": (Real, float, math.nan),
+    "Integer": (Integer, int, 0),
+    "Boolean": (Boolean, bool, False),
+    "String": (String, str, ""),
+}
 
 
-def reject(slave: Any, call: str, problem: str) -> bool:
-    """Log a rejected access; under pythonfmu's wrapper also fail the next doStep. Returns False.
+class DcsSlave(Fmi2Slave):
+    """pythonfmu slave with our status protocol, guarded access and shared Real buffers.
 
-    The native wrapper fails the call itself (the error status of the logged message); pythonfmu's
-    ignores get/set problems, so the adapter reports them at the next doStep instead.
+    Subclasses set ``REAL_INPUTS`` / ``REAL_OUTPUTS`` (names, in value-reference order of
+    registration) and register those variables with :meth:`register_real_io`.
     """
-    if slave._fmi2_wrapper != "native":
-        slave._call_error = f"{call}: {problem}"
-    slave._error(f"{call}: {problem}")
-    return False
 
+    #: Names of the Real inputs held in ``self.inputs`` (index = position).
+    REAL_INPUTS: ClassVar[tuple[str, ...]] = ()
+    #: Names of the Real outputs held in ``self.outputs`` (index = position).
+    REAL_OUTPUTS: ClassVar[tuple[str, ...]] = ()
 
-def _getter(kind: type, convert: Callable[[Any], Any], default: Any, call: str):
-    def get(self, vrs: list[int]) -> list[Any]:
-        return [convert(self.vars[vr].getter()) if self._accessible(vr, kind, call) else default
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        #: Highest status reported during the current call; read and reset by the wrapper.
+        self._fmi2_status: int | None = None
+        #: Real inputs [input units], shape (len(REAL_INPUTS),); shared with the wrapper.
+        self.inputs = np.zeros(len(self.REAL_INPUTS))
+        #: Real outputs [output units], shape (len(REAL_OUTPUTS),); shared with the wrapper.
+        self.outputs = np.zeros(len(self.REAL_OUTPUTS))
+
+    # ---------------------------------------------------------------- the protocol
+    def _error(self, msg: str, status: Fmi2Status = Fmi2Status.error) -> None:
+        """Log ``msg`` (prefixed by the instance name) and raise the call's status to ``status``."""
+        self.log(f"{self.instance_name}: {msg}", status=status)
+        self._fmi2_status = max(self._fmi2_status or 0, int(status))
+
+    # ------------------------------------------------------------------- buffers
+    def register_real_io(self, var: Real) -> None:
+        """Register a Real input or output whose value lives in ``inputs`` / ``outputs``."""
+        if var.causality == Fmi2Causality.input:
+            array, i = self.inputs, self.REAL_INPUTS.index(var.name)
+        elif var.causality == Fmi2Causality.output:
+            array, i = self.outputs, self.REAL_OUTPUTS.index(var.name)
+        else:
+            raise ValueError(f"{var.name}: only inputs and outputs live in the buffers")
+
+        def getter() -> float:
+            return float(array[i])
+
+        def setter(value: float) -> None:
+            array[i] = value
+
+        var.getter, var.setter = getter, setter
+        self.register_variable(var, nested=False)
+
+    def _fmi2_real_buffers(self) -> tuple[list[int], np.ndarray, list[int], np.ndarray]:
+        """(input vrs, inputs, output vrs, outputs): what the wrapper moves without Python."""
+        vr_of = {var.name: vr for vr, var in self.vars.items()}
+        return ([vr_of[n] for n in self.REAL_INPUTS], self.inputs,
+                [vr_of[n] for n in self.REAL_OUTPUTS], self.outputs)
+
+    # ----------------------------------------------------------- guarded access
+    def _access_problem(self, vr: int, kind: type, call: str) -> str | None:
+        """Why ``call`` (e.g. ``"setReal"``) may not access ``vr``, or None if it may."""
+        var = self.vars.get(vr)
+        if var is None:
+            return f"unknown value reference {vr} (valid: 0..{len(self.vars) - 1})"
+        if not isinstance(var, kind):
+            return f"value reference {vr} ({var.name}) is not of type {kind.__name__}"
+        if call.startswith("set") and var.causality not in (Fmi2Causality.input,
+                                                            Fmi2Causality.parameter):
+            return f"{var.name} (value reference {vr}) is an {var.causality.name}: not settable"
+        return None
+
+    def _accessible(self, vr: int, kind: type, call: str) -> bool:
+        """Whether ``call`` may access ``vr``; if not, the call is fmi2Error naming why."""
+        problem = self._access_problem(vr, kind, call)
+        if problem is not None:
+            self._error(f"{call}: {problem}")
+        return problem is None
+
+    def _get(self, vrs: list[int], kind_name: str) -> list[Any]:
+        kind, convert, neutral = _KINDS[kind_name]
+        call = f"get{kind_name}"
+        return [convert(self.vars[vr].getter()) if self._accessible(vr, kind, call) else neutral
                 for vr in vrs]
 
-    get.__name__ = f"get_{kind.__name__.lower()}"
-    return get
-
-
-def _setter(kind: type, convert: Callable[[Any], Any], call: str):
-    def set_(self, vrs: list[int], values: list[Any]) -> None:
+    def _set(self, vrs: list[int], values: list[Any], kind_name: str) -> None:
+        kind, convert, _neutral = _KINDS[kind_name]
+        call = f"set{kind_name}"
         for vr, value in zip(vrs, values):
             if self._accessible(vr, kind, call):
                 self.vars[vr].setter(convert(value))
 
-    set_.__name__ = f"set_{kind.__name__.lower()}"
-    return set_
+    def get_real(self, vrs: list[int]) -> list[float]:
+        return self._get(vrs, "Real")
 
+    def get_integer(self, vrs: list[int]) -> list[int]:
+        return self._get(vrs, "Integer")
 
-def guarded_access(cls: type) -> type:
-    """Class decorator: add the guarded ``get_*``/``set_*`` methods ``cls`` lacks."""
-    for kind, convert, default in _KINDS:
-        name = kind.__name__
-        if f"get_{name.lower()}" not in cls.__dict__:
-            setattr(cls, f"get_{name.lower()}", _getter(kind, convert, default, f"get{name}"))
-        if f"set_{name.lower()}" not in cls.__dict__:
-            setattr(cls, f"set_{name.lower()}", _setter(kind, convert, f"set{name}"))
-    return cls
+    def get_boolean(self, vrs: list[int]) -> list[bool]:
+        return self._get(vrs, "Boolean")
+
+    def get_string(self, vrs: list[int]) -> list[str]:
+        return self._get(vrs, "String")
+
+    def set_real(self, vrs: list[int], values: list[float]) -> None:
+        self._set(vrs, values, "Real")
+
+    def set_integer(self, vrs: list[int], values: list[int]) -> None:
+        self._set(vrs, values, "Integer")
+
+    def set_boolean(self, vrs: list[int], values: list[bool]) -> None:
+        self._set(vrs, values, "Boolean")
+
+    def set_string(self, vrs: list[int], values: list[str]) -> None:
+        self._set(vrs, values, "String")
+
+    # ------------------------------------------------------------- FMU state
+    @staticmethod
+    def _fmu_state_from_bytes(state: bytes) -> dict[str, Any]:
+        """Decode a serialized state; bytes that are none give a marker _set_fmu_state rejects."""
+        try:
+            out = json.loads(state.decode("utf-8"))
+            return out if isinstance(out, dict) else {"__invalid_state__": repr(out)[:80]}
+        except Exception as exc:  # noqa: BLE001 - bad bytes are the importer's error: fmi2Error
+            return {"__invalid_state__": repr(exc)}

@@ -1,17 +1,30 @@
 """Native FMI 2.0 co-simulation wrapper (C) for pythonfmu ``Fmi2Slave`` classes.
 
-pythonfmu 0.7.0's prebuilt C++ wrapper can return only fmi2OK, fmi2Discard
-(``do_step`` returned False) and fmi2Fatal (any Python exception, after which it
-releases the instance's Python objects twice). ``dcs_fmi2_native.c`` beside this
-file replaces ``binaries/linux64/<modelIdentifier>.so`` of a pythonfmu-built FMU
-(``python -m drillcosim.fmu_src.build``: the default, ``--wrapper native``); the rest of the
-FMU (script, ``resources/``, modelDescription.xml) is unchanged. It is compiled on the build
-machine against the running Python's headers and records the path of its libpython
-and executable; the FMU therefore runs with this machine's Python (the same
-requirement as the pythonfmu build, which ships no interpreter either).
+The C sources beside this file (one job per file, see ``dcs_wrapper.h``) replace pythonfmu
+0.7.0's prebuilt C++ binary, which can return only fmi2OK, fmi2Discard and fmi2Fatal, needs
+libpython preloaded in a C host, and releases an instance's Python objects twice after an
+exception. The build (``python -m drillcosim.fmu_src.build``) compiles them against the running
+Python's headers into ``binaries/linux64/<modelIdentifier>.so``; the rest of the FMU (slave
+module, ``resources/``, modelDescription.xml) is pythonfmu's. The FMI 2.0 declarations come
+from the official headers in ``fmi2/`` (BSD 2-Clause, see ``fmi2/LICENSE.txt``).
 
-Status convention (what a slave method's outcome becomes)
----------------------------------------------------------
+Which Python runs the slave
+---------------------------
+* In a Python host (fmpy, libcosimpy) the running interpreter; it must be the major.minor the
+  wrapper is compiled for (else fmi2Instantiate fails with one message saying so).
+* In a host without Python (a C/C++ tool), at fmi2Instantiate, the first that fits of:
+  ``$DRILLCOSIM_PYTHON``; a config file ``drillcosim.conf`` with a line
+  ``python = /path/to/python3``, in the FMU's unzip folder, then in
+  ``$XDG_CONFIG_HOME/drillcosim/`` (``~/.config/drillcosim/``); every ``python3`` and
+  ``python3.M`` on ``PATH``; last, the interpreter that built the FMU. Each is checked in a
+  child process (``python -E``: version, shared libpython, ``import`` of the modules listed in
+  ``resources/python_requires.txt``). None fits: fmi2Instantiate returns NULL with ONE message
+  listing each candidate and what it lacked, and how to fix it. The chosen libpython is loaded
+  and started with ``PyConfig.use_environment = 0``, so a host's ``PYTHONHOME``/``PYTHONPATH``
+  change nothing (``dcs_python.c``, ``dcs_discover.c``; ``docs/interop.md``).
+
+The status protocol (what a slave method's outcome becomes)
+-----------------------------------------------------------
 =====================================  =============================================
 Python outcome                         FMI status
 =====================================  =============================================
@@ -21,58 +34,43 @@ exception                              fmi2Error; the formatted traceback is log
 returns None or True                   fmi2OK
 returns False                          ``do_step``: fmi2Discard; other methods:
                                        fmi2Error
-returns an int 0..4 (not a bool),      that status (``Fmi2Status.error`` -> fmi2Error)
-e.g. ``Fmi2Status.error``
+returns an int 0..4 (not a bool)       that status
 ``do_step`` returns anything else      truthy -> fmi2OK, falsy -> fmi2Discard
-                                       (pythonfmu's rule)
 =====================================  =============================================
 
-After every call (get/set included) the wrapper reads ``slave._fmi2_status``: if it
-is an int above the status found so far, it becomes the status; the wrapper then
-resets it to None (opt-in: the attribute must exist right after the slave is
-constructed, e.g. ``self._fmi2_status = None`` in ``__init__``; otherwise it is never
-read, which saves a failed attribute lookup per call). This lets a ``get_real`` that
-meets an unknown value reference, or a ``do_step`` that must keep returning a bool for
-pythonfmu, report fmi2Error. Right
-after constructing the slave the wrapper sets ``slave._fmi2_wrapper = "native"``,
-so an adapter can tell which wrapper runs it (pythonfmu never sets it).
+After every call (get/set included) the wrapper reads ``slave._fmi2_status``: if it is an int
+above the status found so far, it becomes the status; the wrapper then resets it to None.
+Opt-in: the attribute must exist right after the slave is constructed (our adapters get it from
+:class:`fmu_src.slave_support.DcsSlave`, which sets it through ``_error``). fmi2Fatal is returned
+only when Python itself is unusable (an exception that cannot even be formatted).
 
-Do not return an int from ``do_step`` for pythonfmu-wrapped FMUs: pythonfmu maps
-the return value through truthiness, so ``Fmi2Status.ok`` (0) would be a discard and
-``Fmi2Status.error`` (3) would be OK. Use ``_fmi2_status`` instead.
-
-fmi2Fatal is returned only when Python itself is unusable (it cannot be loaded or
-initialised, or an exception cannot even be formatted).
+Real buffers (the fast boundary)
+--------------------------------
+A slave that defines ``_fmi2_real_buffers()`` returns ``(input_vrs, inputs, output_vrs,
+outputs)``: two float64 numpy arrays (C-contiguous, writable, one value per value reference)
+that hold those Real variables for the slave's lifetime. The wrapper keeps a buffer view of
+each; in step mode ``fmi2GetReal`` of those value references reads them and ``fmi2SetReal`` of
+the inputs (also in initialization mode) writes them, without Python, and ``fmi2DoStep`` is
+one Python call. Any other access goes through ``get_real``/``set_real``.
 
 Other behaviour
 ---------------
 * ``fmi2Instantiate`` imports the module named in ``resources/slavemodule.txt`` with
-  ``resources/`` first on ``sys.path`` during the import only (the module is
-  imported once per process and cached in ``sys.modules``, unlike pythonfmu
-  0.7.0, which re-executes it at every instantiation), takes the class named in
-  ``resources/slaveclass.txt`` (default: the modelIdentifier) and calls it with
-  ``instance_name``, ``resources`` and ``visible`` keyword arguments. Failure:
-  NULL and the traceback logged.
-* Messages of ``slave.log()`` are drained after every call; status != OK messages
-  are always passed to the logger, OK messages only with debug logging on (and the
-  category enabled by ``fmi2SetDebugLogging``, no categories = all).
-* The FMI state machine is checked: ``fmi2DoStep`` before
-  ``fmi2ExitInitializationMode`` or after ``fmi2Terminate``, initialization calls out
-  of order: fmi2Error and a message; calls on NULL/freed components: fmi2Error.
-* ``fmi2Reset``: ``slave.reset()`` if it exists, else a new slave object replaces the
-  old one (as pythonfmu does).
-* FMU state: the object of ``slave._get_fmu_state()`` is held by the C state (freed
-  by ``fmi2FreeFMUstate``); serialisation through ``_fmu_state_to_bytes`` /
-  ``_fmu_state_from_bytes``.
-* Strings of ``fmi2GetString`` stay valid until the next ``fmi2GetString`` call on
-  the instance (or its release).
-* Unsupported FMI 2.0 features: directional derivatives, input/output derivatives and
-  ``fmi2CancelStep`` return fmi2Error; ``fmi2Get*Status`` returns fmi2Discard except
+  ``resources/`` first on ``sys.path`` during the import only (once per process; cached in
+  ``sys.modules``), takes the class named in ``resources/slaveclass.txt`` and calls it with
+  ``instance_name``, ``resources`` and ``visible``. Failure: NULL and the traceback logged.
+* Messages of ``slave.log()`` are drained after every call; status != OK messages are always
+  passed to the logger, OK messages only with debug logging on (and the category enabled by
+  ``fmi2SetDebugLogging``, no categories = all).
+* The FMI calling sequence is a state-mask table (``fmi2_functions.c``): a call in a state
+  that does not allow it is fmi2Error naming the state; NULL/freed components: fmi2Error.
+* ``fmi2Reset``: ``slave.reset()`` if it exists, else a new slave object replaces the old one.
+* FMU state: the object of ``slave._get_fmu_state()`` is held by the C state (freed by
+  ``fmi2FreeFMUstate``); serialization through ``_fmu_state_to_bytes``/``_fmu_state_from_bytes``.
+* Strings of ``fmi2GetString`` stay valid until the next ``fmi2GetString`` on the instance.
+* Unsupported FMI 2.0 features (directional derivatives, input/output derivatives,
+  ``fmi2CancelStep``) return fmi2Error; ``fmi2Get*Status`` returns fmi2Discard except
   ``fmi2GetRealStatus(fmi2LastSuccessfulTime)`` (the end of the last successful step).
-* Host without Python (a C/C++ tool): libpython (recorded at build time, override
-  with ``$DRILLCOSIM_LIBPYTHON``) is loaded with ``RTLD_GLOBAL`` and initialised
-  with the recorded executable as program name (override ``$DRILLCOSIM_PYTHON``; a
-  venv is honoured), then the GIL is released. The interpreter is never finalised.
 """
 
 from __future__ import annotations
@@ -83,37 +81,35 @@ import subprocess
 import sys
 import sysconfig
 import zipfile
+from collections.abc import Sequence
 from pathlib import Path
 
-__all__ = ["SOURCE", "compile_wrapper", "install_native_wrapper", "libpython_path"]
+__all__ = ["HEADERS", "SOURCES", "compile_shared", "compile_wrapper", "install_native_wrapper", "sources"]
 
-#: The C source of the wrapper.
-SOURCE = Path(__file__).resolve().parent / "dcs_fmi2_native.c"
-CFLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-shared", "-fPIC",
+HERE = Path(__file__).resolve().parent
+#: The C sources of the wrapper, compiled together.
+SOURCES: tuple[Path, ...] = tuple(sorted(HERE.glob("*.c")))
+#: The official FMI 2.0.5 headers and our internal ones.
+HEADERS: tuple[Path, ...] = tuple(sorted([*HERE.glob("*.h"), *HERE.glob("fmi2/*.h")]))
+CFLAGS = ("-std=c99", "-O2", "-DNDEBUG", "-Wall", "-Wextra", "-Werror", "-shared", "-fPIC",
           "-fvisibility=hidden")
 
 
-def libpython_path() -> str:
-    """Path of the running Python's shared libpython (LIBDIR/INSTSONAME or LDLIBRARY).
+def sources() -> list[Path]:
+    """Every file the compiled wrapper depends on (C sources and headers)."""
+    return [*SOURCES, *HEADERS]
 
-    Raises
-    ------
-    RuntimeError
-        If this Python has no shared libpython (built without --enable-shared).
-    """
-    libdir = sysconfig.get_config_var("LIBDIR") or ""
-    for key in ("INSTSONAME", "LDLIBRARY"):
-        name = sysconfig.get_config_var(key) or ""
-        path = Path(libdir) / name
-        if name.endswith((".so", ".dylib")) or ".so." in name:
-            if path.is_file():
-                return str(path)
-    raise RuntimeError(f"Python {sys.version.split()[0]} at {sys.executable} has no shared "
-                       f"libpython in {libdir!r}: the native wrapper needs one")
+
+def _c_string(text: str) -> str:
+    """``text`` as the body of a C string literal for a -D define (quotes and backslashes)."""
+    return text.replace("\\", "\\\\").replace('"', '\\"')
 
 
 def compile_wrapper(out: Path | str, cc: str | None = None) -> Path:
     """Compile the wrapper for the running Python into the shared library ``out``.
+
+    The running interpreter is recorded as the last Python candidate (see the module
+    docstring); nothing else of this machine is compiled in.
 
     Parameters
     ----------
@@ -130,29 +126,61 @@ def compile_wrapper(out: Path | str, cc: str | None = None) -> Path:
     Raises
     ------
     RuntimeError
-        If the compiler fails or prints a warning (its output is included).
+        If there is no compiler, or it fails or prints a warning (its output is included).
+    """
+    include = sysconfig.get_paths()["include"]
+    return compile_shared(
+        "the native wrapper", SOURCES, out,
+        flags=(f"-I{include}", f"-I{HERE}",
+               f"-DDCS_BUILD_PYTHON=\"{_c_string(sys.executable)}\""),
+        libs=("-ldl", "-lpthread"), cc=cc)
+
+
+def compile_shared(what: str, sources: Sequence[Path], out: Path | str, *,
+                   flags: Sequence[str] = (), libs: Sequence[str] = (),
+                   cc: str | None = None) -> Path:
+    """Compile C ``sources`` into the shared library ``out`` with :data:`CFLAGS` (the one place
+    the project runs a C compiler: the wrapper and the C-coded FMUs share flags and checks).
+
+    Parameters
+    ----------
+    what : str
+        What is compiled, for messages (e.g. "the native wrapper").
+    sources : sequence of Path
+        C files.
+    out : path-like
+        Target ``.so``.
+    flags, libs : sequence of str
+        Extra compiler flags (before the sources) and libraries (after them).
+    cc : str, optional
+        C compiler (default ``$CC`` or ``gcc``).
+
+    Raises
+    ------
+    RuntimeError
+        No compiler, or it failed or printed a warning (its command and output included).
     """
     out = Path(out)
     cc = cc or os.environ.get("CC") or "gcc"
     if shutil.which(cc) is None:
-        raise RuntimeError(f"C compiler {cc!r} not found: the native wrapper needs one")
-    include = sysconfig.get_paths()["include"]
-    defines = [f"-DDCS_LIBPYTHON=\"{libpython_path()}\"",
-               f"-DDCS_PYTHON_EXE=\"{sys.executable}\""]
-    cmd = [cc, *CFLAGS, f"-I{include}", *defines, str(SOURCE), "-o", str(out),
-           "-ldl", "-lpthread"]
+        raise RuntimeError(f"C compiler {cc!r} not found: building {what} needs one "
+                           f"(Debian: apt install gcc; or set $CC)")
+    cmd = [cc, *CFLAGS, *flags, *map(str, sources), "-o", str(out), *libs]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0 or proc.stderr.strip():
-        raise RuntimeError(f"compiling the native wrapper failed:\n{' '.join(cmd)}\n"
+        raise RuntimeError(f"compiling {what} failed:\n{' '.join(cmd)}\n"
                            f"{proc.stdout}{proc.stderr}")
     return out
 
 
-def install_native_wrapper(fmu: Path | str, class_name: str, library: Path | str) -> None:
-    """Replace the linux64 binary of a pythonfmu-built FMU by the native wrapper.
+def install_native_wrapper(fmu: Path | str, class_name: str, library: Path | str,
+                           requires: tuple[str, ...] = ()) -> None:
+    """Make a pythonfmu-built FMU run on our wrapper, linux64 only.
 
-    Also writes ``resources/slaveclass.txt`` (the class the wrapper instantiates).
-    The ``win64`` binary, if any, stays pythonfmu's.
+    Replaces ``binaries/linux64/<modelIdentifier>.so`` by ``library``, removes every other
+    ``binaries/`` member (pythonfmu's prebuilt win64 binary cannot report errors), and writes
+    ``resources/slaveclass.txt`` (the class the wrapper instantiates) and
+    ``resources/python_requires.txt`` (the modules a Python must import to run the FMU).
 
     Parameters
     ----------
@@ -162,18 +190,21 @@ def install_native_wrapper(fmu: Path | str, class_name: str, library: Path | str
         The ``Fmi2Slave`` subclass in the slave module.
     library : path-like
         Output of :func:`compile_wrapper`.
+    requires : tuple of str
+        Import names checked in each Python candidate of a host without Python.
     """
     fmu = Path(fmu)
     tmp = fmu.with_suffix(".native.tmp")
+    ours = {"resources/slaveclass.txt", "resources/python_requires.txt"}
     with zipfile.ZipFile(fmu) as src:
         md = src.read("modelDescription.xml").decode()
         ident = md.split('modelIdentifier="', 1)[1].split('"', 1)[0]
-        member = f"binaries/linux64/{ident}.so"
         with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as dst:
             for info in src.infolist():
-                if info.filename in (member, "resources/slaveclass.txt"):
+                if info.filename.startswith("binaries/") or info.filename in ours:
                     continue
                 dst.writestr(info, src.read(info.filename), compress_type=zipfile.ZIP_DEFLATED)
-            dst.write(library, member)
+            dst.write(library, f"binaries/linux64/{ident}.so")
             dst.writestr("resources/slaveclass.txt", class_name + "\n")
+            dst.writestr("resources/python_requires.txt", " ".join(requires) + "\n")
     os.replace(tmp, fmu)

@@ -1,4 +1,4 @@
-"""FMI 2.0 API misuse fuzzer for our pythonfmu FMUs, run in a child process.
+"""FMI 2.0 API misuse fuzzer for our FMUs (pythonfmu slaves on our C wrapper), in a child process.
 
 Usage (normally started by ``tests/test_reliability_fuzz.py``)::
 
@@ -13,9 +13,9 @@ terminate, get/set/free/serialize FMU states) and runs them through fmpy's
 
 * it returns a status (fmpy returns, or raises ``FMICallException`` for a status
   worse than fmi2Warning, which is caught and counted);
-* the status is never fmi2Fatal: our adapters let no exception reach pythonfmu
-  (an instance that went fatal is leaked, never freed: pythonfmu 0.7.0 would
-  release its Python objects twice);
+* the status is never fmi2Fatal: the wrapper reports a Python exception as fmi2Error and
+  the adapters report every anticipated problem through the status protocol (an instance
+  that went fatal anyway is leaked, never freed, so the report shows it);
 * no other exception escapes (fmpy raises nothing else for valid arguments).
 
 A crash (segfault, abort) kills this process: the parent sees a negative exit
@@ -268,7 +268,7 @@ def run_case(h: Harness, stats: Stats, prefix: str, ops: Sequence[tuple]) -> Non
         raise
     finally:
         if fatal:
-            h.leaked.append(s)  # never free a fatal pythonfmu instance (double release)
+            h.leaked.append(s)  # a fatal instance is kept for the report, never freed
         else:
             for state in states:
                 try:

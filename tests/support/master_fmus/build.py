@@ -1,10 +1,10 @@
 """The tiny master-test FMUs: built in a subprocess, cached under a full key, validated on use.
 
 Each script ``tests/support/master_fmus/<name>.py`` is built by the project's own build
-(:func:`drillcosim.fmu_src.build.build_one`: a fresh Python subprocess, the native wrapper,
+(:func:`drillcosim.fmu_src.build.build_one`: a fresh Python subprocess, our C wrapper,
 pythonfmu vendored under a unique name), never inside the calling (test) process, whose
 ``sys.modules`` may hold anything. The cache file name carries a hash of everything that makes
-the FMU: the script's bytes, the pythonfmu version, the wrapper and the build's own sources.
+the FMU: the pythonfmu version and every file of its recipe (script, wrapper sources, build).
 A cached FMU is validated before it is handed out (:func:`problems`: the binary of this
 platform, the slave module and the vendored pythonfmu are present; fmpy's validation is clean)
 and rebuilt when it is not; an FMU that is still broken after a rebuild raises.
@@ -38,15 +38,17 @@ def cache_dir() -> Path:
     return path
 
 
-def cache_key(script: Path, wrapper: str) -> str:
-    """Hash of what makes the FMU: script, pythonfmu version, wrapper, build sources."""
+def cache_key(script: Path) -> str:
+    """Hash of what makes the FMU: the pythonfmu version and every file of its recipe."""
     digest = hashlib.sha256()
-    digest.update(script.read_bytes())
-    digest.update(f"\0pythonfmu {pythonfmu.__version__}\0wrapper {wrapper}\0".encode())
-    build_dir = Path(project_build.__file__).resolve().parent
-    for src in [build_dir / "build.py", *sorted((build_dir / "wrapper").glob("*.[ch]"))]:
+    digest.update(f"pythonfmu {pythonfmu.__version__}\0".encode())
+    for src in _recipe(script).sources():
         digest.update(src.name.encode() + b"\0" + src.read_bytes())
     return digest.hexdigest()[:16]
+
+
+def _recipe(script: Path) -> project_build.FmuRecipe:
+    return project_build.FmuRecipe(name=SCRIPTS[script.stem], script=str(script))
 
 
 def problems(fmu: Path) -> list[str]:
@@ -67,19 +69,17 @@ def problems(fmu: Path) -> list[str]:
     return found
 
 
-def build_fmu(name: str, dest: Path | None = None, wrapper: str | None = None) -> Path:
+def build_fmu(name: str, dest: Path | None = None) -> Path:
     """Path of a valid FMU of ``<name>.py``, built (in a subprocess) unless cached and valid."""
-    wrapper = wrapper or project_build.default_wrapper()
     script = HERE / f"{name}.py"
     dest = dest or cache_dir()
     dest.mkdir(parents=True, exist_ok=True)
-    target = dest / f"{name}-{cache_key(script, wrapper)}.fmu"
+    target = dest / f"{name}-{cache_key(script)}.fmu"
     if target.exists() and not problems(target):
         return target
-    spec = project_build.FmuSpec(name=SCRIPTS[name], script=str(script))
     tmp = Path(tempfile.mkdtemp(dir=dest, prefix=f".{name}-"))
     try:
-        built = project_build.build_one(spec, tmp, wrapper=wrapper)
+        built = project_build.build_one(_recipe(script), tmp)
         found = problems(built)
         if found:
             raise RuntimeError(f"test FMU {name} is broken right after its build: "
