@@ -35,7 +35,7 @@ import numpy as np  # noqa: E402
 from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
-from drillcosim.cosim.master.cosimulation import CoSimulation  # noqa: E402
+from drillcosim.cosim.master.master import Master  # noqa: E402
 from drillcosim.cosim.scenario.scene_system import scene_system  # noqa: E402
 from drillcosim.fmu_src.build import REGISTRY, build_one  # noqa: E402
 from drillcosim.fmu_src.build_c import build_c_controller  # noqa: E402
@@ -92,7 +92,7 @@ class ControllerLoop:
 def closed_loop(plant: Path, controller: Path, stop: float) -> tuple[float, np.ndarray, int]:
     """(wall [s], structured result, base steps) of paper_closed_loop through our master."""
     ss = scene_system(load_scene("paper_closed_loop"), plant_fmu=plant, controller_fmu=controller)
-    res = CoSimulation(ss.system).run(stop, ss.outputs)
+    res = Master(ss.system).simulate(stop, ss.outputs)
     return res.wall_time, res.data, round(stop / ss.system.base_step)
 
 

@@ -7,7 +7,7 @@ by side in one process, best of ``--repeat`` runs of ``--steps`` steps each:
 * raw fmpy loop: ``FMU2Slave.getReal/setReal/doStep``, the usual hand-written loop;
 * raw ctypes loop: the FMI functions on preallocated buffers (lower bound);
 * cosim Jacobi / Gauss-Seidel: :class:`cosim.master.execution.Execution` without observers,
-  and the Jacobi run through :class:`cosim.master.CoSimulation` recording 2 outputs;
+  and the Jacobi run through :class:`cosim.master.Master` recording 2 outputs;
 * libcosimpy (libcosim, C++) on the same FMUs, if it loads them.
 
 Run: ``.venv/bin/python benchmarks/bench_master_overhead.py [--steps N] [--repeat R]``.
@@ -29,8 +29,8 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
-from drillcosim.cosim.master.cosimulation import CoSimulation  # noqa: E402
 from drillcosim.cosim.master.execution import Execution  # noqa: E402
+from drillcosim.cosim.master.master import Master  # noqa: E402
 from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec  # noqa: E402
 from support.master_fmus.build import build_fmu  # noqa: E402
 
@@ -125,7 +125,7 @@ def cosim_execution(paths, steps: int, algorithm: str) -> float:
 
 
 def cosim_facade(paths, steps: int) -> float:
-    res = CoSimulation(system(paths, "jacobi")).run(steps * H, outputs=["plant.x", "ctrl.y"])
+    res = Master(system(paths, "jacobi")).simulate(steps * H, outputs=["plant.x", "ctrl.y"])
     return res.wall_time / steps
 
 
@@ -168,7 +168,7 @@ def main(argv=None) -> None:
         "cosim Execution, Jacobi": lambda: cosim_execution(paths, args.steps, "jacobi"),
         "cosim Execution, Gauss-Seidel": lambda: cosim_execution(paths, args.steps,
                                                                  "gauss_seidel"),
-        "cosim CoSimulation.run, Jacobi, 2 outputs recorded": lambda: cosim_facade(
+        "cosim Master.simulate, Jacobi, 2 outputs recorded": lambda: cosim_facade(
             paths, args.steps),
         "libcosimpy (libcosim, fixed step)": lambda: libcosim(paths, args.steps),
     }

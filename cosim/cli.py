@@ -112,8 +112,8 @@ def _is_ssp(target: str) -> bool:
                                                        (path / "SystemStructure.ssd").is_file())
 
 
-def _run_ssp(args: argparse.Namespace):
-    from drillcosim.cosim.scenario.ssp_run import run_ssp
+def _simulate_ssp(args: argparse.Namespace):
+    from drillcosim.cosim.scenario.ssp_run import simulate_ssp
 
     scene_only = [flag for flag, value in (("--delay", args.delay), ("--gain", args.gain),
                                            ("--set", args.set), ("--fmu-dir", args.fmu_dir),
@@ -123,24 +123,24 @@ def _run_ssp(args: argparse.Namespace):
     if scene_only:
         raise UsageError(f"{args.scene} is an SSP file: it takes --step, --stop-time and "
                          f"--out, not {', '.join(scene_only)} (options of scenes)")
-    return run_ssp(args.scene, stop_time=args.stop_time, step=args.step, out_dir=args.out,
+    return simulate_ssp(args.scene, stop_time=args.stop_time, step=args.step, out_dir=args.out,
                    progress=False if args.no_progress else None)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from drillcosim.cosim.master.errors import FMI2_ERROR, CosimError
-    from drillcosim.cosim.scenario.run import run_scene
+    from drillcosim.cosim.scenario.run import simulate_scene
 
     try:
         if _is_ssp(args.scene):
-            outcome = _run_ssp(args)
+            outcome = _simulate_ssp(args)
         else:
-            outcome = run_scene(args.scene, stop_time=args.stop_time, step=args.step,
-                                delay=args.delay, gain=args.gain, sets=args.set,
-                                out_dir=args.out, fmu_dir=args.fmu_dir,
-                                progress=False if args.no_progress else None,
-                                plots=not args.no_plots, plant_fmu=args.plant_fmu,
-                                controller_fmu=args.controller_fmu)
+            outcome = simulate_scene(args.scene, stop_time=args.stop_time, step=args.step,
+                                     delay=args.delay, gain=args.gain, sets=args.set,
+                                     out_dir=args.out, fmu_dir=args.fmu_dir,
+                                     progress=False if args.no_progress else None,
+                                     plots=not args.no_plots, plant_fmu=args.plant_fmu,
+                                     controller_fmu=args.controller_fmu)
     except CosimError as exc:  # failed before the first step: earlier files are kept
         if exc.call == "fmi2ExitInitializationMode" and exc.status == FMI2_ERROR:
             # the FMU rejected its parameters (its message names them): bad input
@@ -170,17 +170,20 @@ def _cmd_ssp(args: argparse.Namespace) -> int:
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from drillcosim.cosim.scenario.run import parse_set
-    from drillcosim.cosim.study.sweep import run_sweep, sweep_from_args
+    from drillcosim.cosim.study.sweep import execute_sweep, judging_note, sweep_from_args
 
     spec = sweep_from_args(args.scene, args.gain, args.delay, args.step, args.stop_time,
                            args.engine, parse_set(args.set))
+    note = judging_note(spec)
+    if note:
+        print(f"drillcosim sweep: note: {note}", file=sys.stderr)
     out = args.out or f"out/sweep_{spec.scene.rsplit('/', 1)[-1].removesuffix('.toml')}"
-    res = run_sweep(spec, out, workers=args.workers, scheduler=args.scheduler,
-                    progress=False if args.no_progress else None,
-                    retry_errors=args.retry_errors)
-    print(f"sweep: {res.n_points} points ({res.n_skipped} already done, {res.n_run} run, "
-          f"{res.n_unstable} unstable, {res.n_errors} errors) in {res.wall_time:.1f} s; "
-          f"table {res.folder / 'results.csv'} and results.parquet")
+    res = execute_sweep(spec, out, workers=args.workers, scheduler=args.scheduler,
+                        progress=False if args.no_progress else None,
+                        retry_errors=args.retry_errors)
+    print(f"ran {res.n_run} of {res.n_points} points ({res.n_skipped} already done) in "
+          f"{res.wall_time:.1f} s")
+    print(res.summary())
     if args.maps:
         from drillcosim.cosim.study.maps import plot_maps
 
@@ -279,7 +282,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="stop time [s] (default: the scene's)")
     p.add_argument("--engine", choices=("fmu", "python"), default="fmu",
                    help="fmu: plant + controller FMUs in the master (default); python: the same "
-                        "loop in-process without FMI (faster)")
+                        "models as in-process slaves of the same master (no FMI boundary, same "
+                        "numbers)")
     p.add_argument("--workers", type=int, metavar="N",
                    help="local worker processes (default: all cores; 0: in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS",

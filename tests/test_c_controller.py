@@ -30,7 +30,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 from drillcosim.controller import MODES, ControllerParams, StrainController
-from drillcosim.cosim.master.cosimulation import CoSimulation
+from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.scenario.scene_system import scene_system
 from drillcosim.fmu_src.build_c import SOURCE_DIR
 from drillcosim.plant.scene import load_scene
@@ -226,7 +226,7 @@ def test_closed_loop_equals_the_python_controller_exactly(project_fmus, c_contro
         for ctrl in (project_fmus["StrainController"], c_controller_fmu):
             ss = scene_system(sc, plant_fmu=project_fmus["DrillstringPlant"],
                               controller_fmu=ctrl)
-            data[ctrl.stem] = CoSimulation(ss.system).run(stop, ss.outputs).data
+            data[ctrl.stem] = Master(ss.system).simulate(stop, ss.outputs).data
         py, c = data["StrainController"], data["StrainControllerC"]
         assert py.dtype.names == c.dtype.names and len(py) == len(c) > 100
         for field in py.dtype.names:

@@ -19,13 +19,13 @@ import numpy as np
 import pytest
 
 from drillcosim.cosim.cli import main
-from drillcosim.cosim.master.cosimulation import CoSimulation
 from drillcosim.cosim.master.interface import (
     InterfaceError,
     check_system,
     pair_by_name,
     read_interface,
 )
+from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.master.system import FmuSpec
 from drillcosim.cosim.scenario.interface import InterfaceWarning
 from drillcosim.cosim.scenario.scene_system import scene_system
@@ -167,7 +167,7 @@ def test_a_controller_serving_fewer_sites_warns_and_runs(project_fmus, c_control
         ss = scene_system(sc, plant_fmu=project_fmus["DrillstringPlant"],
                           controller_fmu=one_site)
     assert len(ss.system.connections) == 4
-    data = CoSimulation(ss.system).run(0.2, ss.outputs).data
+    data = Master(ss.system).simulate(0.2, ss.outputs).data
     assert np.max(np.abs(data["controller.actuator1_force_C"])) > 0  # site 1 is controlled
     assert np.all(data["plant.actuator2_power"] == 0.0)  # site 2 keeps 0 N: no actuation
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drillcosim.cosim.master.cosimulation import CoSimulation
+from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.master.ssp import export_ssp
 from drillcosim.cosim.scenario.scene_system import scene_system
 from drillcosim.plant.scene import load_scene
@@ -58,7 +58,7 @@ def test_libcosim_multirate_restricted_actuator(project_fmus, tmp_path: Path) ->
     sc = dataclasses.replace(sc, cosim={"step": 1e-3, "controller_sample_period": 2e-3})
     ss = scene_system(sc, project_fmus["DrillstringPlant"].parent)
     n = 200
-    ours = CoSimulation(ss.system).run(n * 1e-3, ss.outputs).data
+    ours = Master(ss.system).simulate(n * 1e-3, ss.outputs).data
     exp = export_ssp(ss.system, tmp_path / "sys.ssp")
     rows = run_libcosim(exp.path, 1e-3, n, ss.outputs, tmp_path)
     result = compare(ours[1:], {o: rows[:, j] for j, o in enumerate(ss.outputs)}, rtol=1e-9)

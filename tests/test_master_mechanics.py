@@ -4,13 +4,14 @@ result files and system validation."""
 from __future__ import annotations
 
 import csv
+from collections import deque
 
 import numpy as np
 import pytest
 
-from drillcosim.cosim.master.cosimulation import CoSimulation
 from drillcosim.cosim.master.errors import CosimError, DivergenceError
 from drillcosim.cosim.master.execution import Execution
+from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.master.recorder import Recorder
 from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec, system_from_dict
 
@@ -114,7 +115,7 @@ def plant_loop(fmus, plant_params, h=0.01):
 def test_discard_names_fmu_call_time_and_keeps_data(fmus, tmp_path):
     out = tmp_path / "run.csv"
     with pytest.raises(CosimError) as info:
-        CoSimulation(plant_loop(fmus, {"fail_at_time": 0.5})).run(
+        Master(plant_loop(fmus, {"fail_at_time": 0.5})).simulate(
             1.0, outputs=["plant.x"], csv_path=out, flush_every=7)
     err = info.value
     assert (err.fmu_name, err.call, err.status) == ("plant", "fmi2DoStep", 2)
@@ -131,13 +132,46 @@ def test_discard_names_fmu_call_time_and_keeps_data(fmus, tmp_path):
     assert float(rows[-1][0]) == 0.5 and float(rows[-1][1]) == data["plant.x"][-1]
 
 
-def test_exception_in_fmu_is_reported_as_error(fmus):
+def test_exception_in_fmu_is_reported_as_error(fmus, capfd):
+    """The FMU's own message (a Python exception in its doStep, logged through the FMI logger
+    callback) ends the error, on one line; nothing is printed."""
     with pytest.raises(CosimError) as info:
-        CoSimulation(plant_loop(fmus, {"fail_at_time": 0.2, "fail_mode": 1})).run(
+        Master(plant_loop(fmus, {"fail_at_time": 0.2, "fail_mode": 1})).simulate(
             1.0, outputs=["plant.x"])
     assert info.value.call == "fmi2DoStep" and info.value.status in (3, 4)
     assert info.value.time == pytest.approx(0.2)
     assert info.value.result.data["time"][-1] == pytest.approx(0.2)
+    assert info.value.fmu_message == ("plant: Python exception in fmi2DoStep: RuntimeError: "
+                                      "injected failure")
+    assert str(info.value).endswith(info.value.fmu_message) and "\n" not in str(info.value)
+    assert capfd.readouterr().out == ""
+
+
+def test_fmu_messages_reach_their_own_execution_through_the_logger_callback(fmus, caplog):
+    """fmpy's logger proxy is one global of the process: another logger installed after the
+    FMUs were instantiated (as a test or another tool may do) does not steal their messages,
+    and two executions with equally named instances keep their messages apart."""
+    import ctypes
+
+    from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+    from fmpy.logging import addLoggerProxy
+
+    stolen = []
+    other = fmi2CallbackFunctions()
+    other.logger = fmi2CallbackLoggerTYPE(lambda *args: stolen.append(args))
+    failing = Execution(plant_loop(fmus, {"fail_at_time": 0.05, "fail_mode": 1}))
+    healthy = Execution(plant_loop(fmus, {}))
+    with failing, healthy, caplog.at_level("DEBUG", "drillcosim.cosim.master.fmi_log"):
+        failing.initialize()
+        healthy.initialize()
+        addLoggerProxy(ctypes.byref(other))          # someone re-points the global proxy
+        with pytest.raises(CosimError, match="RuntimeError: injected failure"):
+            failing.simulate_until(0.1)
+        healthy.simulate_until(0.1)
+        assert healthy.slaves["plant"].log.messages == deque()
+        assert [m[0] for m in failing.slaves["plant"].log.messages] == [3]
+    assert stolen == []
+    assert any("injected failure" in r.getMessage() for r in caplog.records)
 
 
 def test_non_finite_output_stops_with_divergence(fmus):
@@ -146,7 +180,7 @@ def test_non_finite_output_stops_with_divergence(fmus):
         ex.simulate_until(1.0)
     assert info.value.quantity == "plant.x" and np.isnan(info.value.value)
     assert info.value.time == pytest.approx(0.31)
-    res = CoSimulation(system).run(1.0, outputs=["plant.x", "ctrl.y"])
+    res = Master(system).simulate(1.0, outputs=["plant.x", "ctrl.y"])
     assert res.diverged is not None and res.diverged.quantity == "plant.x"
     assert res.diverged.time == pytest.approx(0.31)
     assert res.data["time"][-1] == pytest.approx(0.30) and np.isfinite(res.data["plant.x"]).all()
@@ -157,7 +191,7 @@ def test_unwritable_output_directory_fails_before_running(fmus, tmp_path):
     blocker.write_text("x")
     target = blocker / "out.csv"
     with pytest.raises(OSError, match="cannot write results to .*out.csv"):
-        CoSimulation(plant_loop(fmus, {})).run(0.1, outputs=["plant.x"], csv_path=target)
+        Master(plant_loop(fmus, {})).simulate(0.1, outputs=["plant.x"], csv_path=target)
 
 
 def test_earlier_result_file_survives_until_new_one_is_complete(fmus, tmp_path):
@@ -185,13 +219,13 @@ def test_earlier_result_file_survives_until_new_one_is_complete(fmus, tmp_path):
     out.write_text("earlier result\n")
     bad = SystemSpec([FmuSpec("plant", fmus["mt_integrator"], {"x_0": 1.0})], base_step=0.1)
     with pytest.raises(ValueError, match="no variable 'x_0' \\(did you mean 'x0'"):
-        CoSimulation(bad).run(1.0, outputs=["plant.x"], csv_path=out)
+        Master(bad).simulate(1.0, outputs=["plant.x"], csv_path=out)
     assert out.read_text() == "earlier result\n"
 
 
 def test_result_array_has_fmpy_result_layout(fmus):
     """Structured array, 'time' first: the layout fmpy.util.plot_result takes."""
-    res = CoSimulation(plant_loop(fmus, {})).run(0.2, outputs=["plant.x", "ctrl.y"],
+    res = Master(plant_loop(fmus, {})).simulate(0.2, outputs=["plant.x", "ctrl.y"],
                                                   output_interval=0.05)
     assert res.data.dtype.names == ("time", "plant.x", "ctrl.y")
     np.testing.assert_allclose(res.data["time"], [0, 0.05, 0.1, 0.15, 0.2])
@@ -207,7 +241,7 @@ def test_multirate_fmu_steps_every_third_tick_with_3h(fmus, algorithm):
          FmuSpec("slow", fmus["mt_integrator"], {"u": 1.0}, sample_period_ticks=3)],
         [], H, algorithm)
     refs = ["slow.n_steps", "slow.last_h", "fast.n_steps", "slow.x"]
-    res = CoSimulation(system).run(0.3, outputs=refs)
+    res = Master(system).simulate(0.3, outputs=refs)
     k = np.arange(31)
     # Jacobi publishes a slow FMU's outputs when time reaches its communication
     # point; Gauss-Seidel as soon as it has stepped (ahead of the others).
@@ -224,7 +258,7 @@ def test_multirate_consumer_holds_slow_output(fmus):
         [FmuSpec("src", fmus["mt_source"], {"omega": 2.0}, sample_period_ticks=4),
          FmuSpec("probe", fmus["mt_gain"], {"k": -1.0})],
         [Connection("src.y", "probe.u")], 0.01, "jacobi")
-    res = CoSimulation(system).run(0.4, outputs=["probe.y"])
+    res = Master(system).simulate(0.4, outputs=["probe.y"])
     k = np.arange(41)
     # probe(t_k) echoes the input set at t_{k-1}: src at the last multiple of 4 <= k-1
     held = np.sin(2.0 * 0.01 * 4 * (np.maximum(k - 1, 0) // 4))
@@ -302,8 +336,8 @@ def test_streaming_csv_keeps_memory_flat(fmus, tmp_path):
 
 def test_progress_bar_shows_real_time_factor(fmus, capsys):
     system = SystemSpec([FmuSpec("i", fmus["mt_integrator"])], base_step=0.01)
-    CoSimulation(system).run(1.0, progress=True)
+    Master(system).simulate(1.0, progress=True)
     err = capsys.readouterr().err
     assert "RTF" in err and "1.000/1.000 s" in err
-    CoSimulation(system).run(1.0, progress=None)  # not a TTY under pytest: silent
+    Master(system).simulate(1.0, progress=None)  # not a TTY under pytest: silent
     assert capsys.readouterr().err == ""

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from drillcosim.cosim.master.cosimulation import CoSimulation
+from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec
 
 H_LOOP = 0.01
@@ -41,7 +41,7 @@ CASES = [("gauss_seidel", m, m) for m in range(5)] + [("jacobi", m, m - 1) for m
 @pytest.mark.parametrize("algorithm,m,delay_steps", CASES)
 def test_levin_may_stability_bound(fmus, algorithm, m, delay_steps, side):
     kh = side * levin_may_bound(m)
-    res = CoSimulation(loop_system(fmus, kh, algorithm, delay_steps)).run(
+    res = Master(loop_system(fmus, kh, algorithm, delay_steps)).simulate(
         20.0, outputs=["plant.x"])
     x = np.abs(res.data["plant.x"])
     assert len(x) == 2001 and res.diverged is None
@@ -55,7 +55,7 @@ def test_levin_may_stability_bound(fmus, algorithm, m, delay_steps, side):
 def test_gauss_seidel_loop_is_exact_geometric_sequence(fmus):
     """m = 0: x_k = (1 - K H)^k, to rounding."""
     kh = 0.3
-    res = CoSimulation(loop_system(fmus, kh, "gauss_seidel", 0)).run(1.0, outputs=["plant.x"])
+    res = Master(loop_system(fmus, kh, "gauss_seidel", 0)).simulate(1.0, outputs=["plant.x"])
     k = np.arange(len(res.data))
     np.testing.assert_allclose(res.data["plant.x"], (1 - kh) ** k, rtol=1e-12)
 
@@ -63,7 +63,7 @@ def test_gauss_seidel_loop_is_exact_geometric_sequence(fmus):
 def test_jacobi_loop_matches_delayed_recursion(fmus):
     """Jacobi, delay 2 steps: x_{k+1} = x_k - a x_{k-3}, x constant before the start."""
     a = 0.2
-    res = CoSimulation(loop_system(fmus, a, "jacobi", 2)).run(1.0, outputs=["plant.x"])
+    res = Master(loop_system(fmus, a, "jacobi", 2)).simulate(1.0, outputs=["plant.x"])
     x = [1.0]
     for k in range(100):
         x.append(x[k] - a * x[max(k - 3, 0)])
@@ -102,7 +102,7 @@ STEPS = [0.04, 0.02, 0.01, 0.005]
 def test_coupling_error_order(fmus, reference, algorithm, coupling, order):
     errors = []
     for h in STEPS:
-        res = CoSimulation(oscillator(fmus, h, coupling, algorithm)).run(
+        res = Master(oscillator(fmus, h, coupling, algorithm)).simulate(
             T_OSC, outputs=["a.x", "b.x"])
         ref = reference(res.data["time"])
         err = max(np.abs(res.data["a.x"] - ref[0]).max(), np.abs(res.data["b.x"] - ref[2]).max())
@@ -129,7 +129,7 @@ def delay_system(fmus, delay: float, algorithm: str) -> SystemSpec:
 @pytest.mark.parametrize("m", [0, 1, 3, 7])
 def test_integer_delay_is_exact_shift(fmus, algorithm, lag, m):
     """probe(t_k) = src(t_{k - m - lag}), bit for bit (lag: Jacobi's extra step)."""
-    res = CoSimulation(delay_system(fmus, m * H_D, algorithm)).run(1.0, outputs=["src.y",
+    res = Master(delay_system(fmus, m * H_D, algorithm)).simulate(1.0, outputs=["src.y",
                                                                                  "probe.y"])
     src, probe = res.data["src.y"], res.data["probe.y"]
     shift = m + lag
@@ -141,7 +141,7 @@ def test_integer_delay_is_exact_shift(fmus, algorithm, lag, m):
 @pytest.mark.parametrize("frac_delay", [0.25, 2.6])
 def test_fractional_delay_interpolates_linearly(fmus, frac_delay):
     """d = (n + f) H: probe(t) = (1 - f) s(t - n H) + f s(t - (n + 1) H) (Gauss-Seidel)."""
-    res = CoSimulation(delay_system(fmus, frac_delay * H_D, "gauss_seidel")).run(
+    res = Master(delay_system(fmus, frac_delay * H_D, "gauss_seidel")).simulate(
         1.0, outputs=["probe.y"])
     t = res.data["time"]
     n, f = int(frac_delay), frac_delay - int(frac_delay)
@@ -190,9 +190,32 @@ def test_jacobi_loop_delay_agrees_with_libcosim(fmus):
     x_lc = np.array(x_lc)
     del obs, ex  # free libcosim now, not at interpreter shutdown (it aborts there)
     gc.collect()
-    x_us = CoSimulation(loop_system(fmus, a, "jacobi", 0)).run(n * H_LOOP,
+    x_us = Master(loop_system(fmus, a, "jacobi", 0)).simulate(n * H_LOOP,
                                                                outputs=["plant.x"]).data
     x_us = x_us["plant.x"]
     for x in (x_lc[1:], x_us):
         np.testing.assert_allclose(x[2:], x[1:-1] - a * x[:-2], atol=1e-14)
     assert x_lc[1] == 1.0 and x_us[1] == pytest.approx(1.0 - a)
+
+
+# --- exchange timing, multirate ---------------------------------------------------------
+@pytest.mark.parametrize("algorithm,order", [("jacobi", ("src", "probe")),
+                                             ("gauss_seidel", ("src", "probe")),
+                                             ("gauss_seidel", ("probe", "src"))])
+@pytest.mark.parametrize("p_src,p_dst", [(1, 1), (3, 1), (1, 2), (3, 2), (2, 3)])
+def test_linear_coupling_extrapolates_a_ramp_to_the_middle_of_the_target_step(
+        fmus, algorithm, order, p_src, p_dst):
+    """A ramp x = t through a linear-coupling connection: whichever source samples the target
+    sees (cosim.master.algorithms.newest_sample_tick, any periods, either order), their linear
+    extrapolant is the ramp itself, so the probe must hold exactly t_mid = the middle of its
+    own step over the step; a horizon off by a sample would miss it by a source period."""
+    H = 0.01
+    system = SystemSpec(
+        [FmuSpec("src", fmus["mt_integrator"], {"u": 1.0}, sample_period_ticks=p_src),
+         FmuSpec("probe", fmus["mt_gain"], {"k": -1.0}, sample_period_ticks=p_dst)],
+        [Connection("src.x", "probe.u", coupling="linear")], H, algorithm, order)
+    res = Master(system).simulate(60 * H, outputs=["probe.y"], output_interval=p_dst * H)
+    t, y = res.data["time"], res.data["probe.y"]
+    late = t >= 3 * max(p_src, p_dst) * H + p_dst * H     # two samples exist by then
+    assert late.sum() >= 10
+    np.testing.assert_allclose(y[late], t[late] - p_dst * H / 2, rtol=0, atol=1e-12)

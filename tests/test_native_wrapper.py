@@ -536,7 +536,7 @@ def test_fmu_state_get_set_serialize_bit_identical(name: str, native_dir: Path) 
 @pytest.mark.interop
 def test_libcosim_runs_native_fmus_like_our_master(native_dir: Path, tmp_path: Path) -> None:
     pytest.importorskip("libcosimpy")
-    from drillcosim.cosim.master.cosimulation import CoSimulation
+    from drillcosim.cosim.master.master import Master
     from drillcosim.cosim.master.ssp import export_ssp
     from drillcosim.cosim.scenario.scene_system import scene_system
     from drillcosim.plant.scene import load_scene
@@ -546,7 +546,7 @@ def test_libcosim_runs_native_fmus_like_our_master(native_dir: Path, tmp_path: P
     sc = dataclasses.replace(sc, cosim={"step": 1e-3, "controller_sample_period": 2e-3})
     ss = scene_system(sc, native_dir)
     n = 200
-    ours = CoSimulation(ss.system).run(n * 1e-3, ss.outputs).data
+    ours = Master(ss.system).simulate(n * 1e-3, ss.outputs).data
     exp = export_ssp(ss.system, tmp_path / "sys.ssp")
     with zipfile.ZipFile(exp.path) as zf:  # the archive holds the native-wrapped FMUs
         inner = zipfile.ZipFile(zf.open("resources/StrainController.fmu"))

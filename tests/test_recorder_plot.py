@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from test_master_mechanics import plant_loop
 
-from drillcosim.cosim.master.cosimulation import CoSimulation
+from drillcosim.cosim.master.master import Master
 
 
 def test_fmpy_plot_result_accepts_the_recorded_array(fmus):
@@ -15,7 +15,7 @@ def test_fmpy_plot_result_accepts_the_recorded_array(fmus):
     pytest.importorskip("plotly")
     from fmpy.util import create_plotly_figure
 
-    res = CoSimulation(plant_loop(fmus, {})).run(0.2, outputs=["plant.x", "ctrl.y"],
+    res = Master(plant_loop(fmus, {})).simulate(0.2, outputs=["plant.x", "ctrl.y"],
                                                   output_interval=0.05)
     fig = create_plotly_figure(res.data)
     traces = {tr.name: tr for tr in fig.data}

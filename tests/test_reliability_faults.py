@@ -13,7 +13,7 @@ are complete and readable (``numpy.loadtxt`` gives exactly ``result.data``), no
 temporary file is left behind, and no earlier result file is overwritten by a
 truncated one. Bugs in files owned by others are ``xfail(strict=True)``.
 
-The facade :class:`cosim.master.CoSimulation` takes no manipulators; the tests
+The master :class:`cosim.master.Master` takes no manipulators; the tests
 add theirs through a subclass of :class:`cosim.master.execution.Execution` patched into
 ``cosim.master``, so the facade's own error handling is what is tested.
 """
@@ -34,13 +34,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import drillcosim.cosim.master.cosimulation as cosimulation_module
-import drillcosim.cosim.master.recorder as recorder_module
+import drillcosim.cosim.master.files as files_module
+import drillcosim.cosim.master.master as master_module
 import drillcosim.cosim.scenario.summary as summary_module
-from drillcosim.cosim.master.cosimulation import CoSimulation
 from drillcosim.cosim.master.errors import CosimError
 from drillcosim.cosim.master.execution import Execution
 from drillcosim.cosim.master.manipulators import InjectFault, ScheduledChange
+from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.master.recorder import ResultWriteError
 from drillcosim.cosim.master.system import FmuSpec, SystemSpec
 
@@ -64,7 +64,7 @@ def manipulated(monkeypatch: pytest.MonkeyPatch, *manipulators) -> Iterator[None
                 self.add_manipulator(m)
 
     with monkeypatch.context() as mp:
-        mp.setattr(cosimulation_module, "Execution", WithManipulators)
+        mp.setattr(master_module, "Execution", WithManipulators)
         yield
 
 
@@ -112,7 +112,7 @@ def test_fmu_discarding_mid_run_stops_with_report_and_complete_partial_file(
     out = tmp_path / "run.csv"
     fault = ScheduledChange(0.5, "i.fail_at_time", 0.5)
     with manipulated(monkeypatch, fault), pytest.raises(CosimError) as info:
-        CoSimulation(integrator(fmus)).run(2.0, outputs=OUTPUTS, csv_path=out,
+        Master(integrator(fmus)).simulate(2.0, outputs=OUTPUTS, csv_path=out,
                                            flush_every=flush_every)
     err = info.value
     assert str(err) == ("FMU 'i': fmi2DoStep failed at t = 0.5 s: the FMU discarded the "
@@ -133,7 +133,7 @@ def test_nan_injected_on_an_input_stops_with_divergence_and_finite_rows(
     out = tmp_path / "run.csv"
     fault = InjectFault(0.3, "i.u", math.nan)
     with manipulated(monkeypatch, fault):
-        res = CoSimulation(integrator(fmus)).run(1.0, outputs=OUTPUTS, csv_path=out)
+        res = Master(integrator(fmus)).simulate(1.0, outputs=OUTPUTS, csv_path=out)
     assert res.diverged is not None
     assert res.diverged.quantity == "i.x" and math.isnan(res.diverged.value)
     assert res.diverged.time == pytest.approx(0.301)
@@ -146,7 +146,7 @@ def test_nan_injected_on_an_input_stops_with_divergence_and_finite_rows(
 def test_inject_fault_holds_then_restores(fmus, monkeypatch):
     fault = InjectFault(0.2, "i.u", 5.0, stop=0.4, restore=1.0)
     with manipulated(monkeypatch, fault):
-        res = CoSimulation(integrator(fmus)).run(1.0, outputs=["i.x"], output_interval=0.1)
+        res = Master(integrator(fmus)).simulate(1.0, outputs=["i.x"], output_interval=0.1)
     assert fault.applied == 200
     assert res.data["i.x"][-1] == pytest.approx(0.2 + 0.2 * 5.0 + 0.6, rel=1e-12)
     with pytest.raises(ValueError, match="stop"):
@@ -168,10 +168,14 @@ def test_plant_driven_to_divergence_by_a_huge_actuator_force(
     out = tmp_path / "plant.csv"
     fault = InjectFault(0.02, "plant.actuator1_force_C", 1e12)
     with manipulated(monkeypatch, fault), pytest.raises(CosimError) as info:
-        CoSimulation(system).run(1.0, outputs=PLANT_OUT, csv_path=out, flush_every=5)
+        Master(system).simulate(1.0, outputs=PLANT_OUT, csv_path=out, flush_every=5)
     err = info.value
     assert (err.fmu_name, err.call, err.status) == ("plant", "fmi2DoStep", 2)
     assert 0.02 <= err.time < 1.0
+    # the plant's own report, through the FMI logger callback; nothing on stdout
+    assert "discarded: diverged at t = " in err.fmu_message and str(err).endswith(
+        err.fmu_message)
+    assert capfd.readouterr().out == ""
     res = err.result
     assert res.data["time"][-1] == pytest.approx(err.time) and len(res.data) >= 21
     assert np.all(np.isfinite(res.data.view(np.float64)))
@@ -219,11 +223,11 @@ def test_full_disk_tmpfs_stops_cleanly_and_keeps_earlier_file(fmus, tmp_path):
         old_text = "time,i.x\n0,0\n"
         out.write_text(old_text)
         with pytest.raises(CosimError) as info:
-            CoSimulation(integrator(fmus)).run(30.0, outputs=OUTPUTS, csv_path=out,
+            Master(integrator(fmus)).simulate(30.0, outputs=OUTPUTS, csv_path=out,
                                                flush_every=100)
         _check_disk_full(info.value, out, old_text, disk, 100)
         # the space is free again: a small run to the same file now succeeds
-        res = CoSimulation(integrator(fmus)).run(0.1, outputs=OUTPUTS, csv_path=out)
+        res = Master(integrator(fmus)).simulate(0.1, outputs=OUTPUTS, csv_path=out)
         assert_complete(out, res.data)
 
 
@@ -254,9 +258,9 @@ def test_full_disk_patched_enospc_stops_cleanly_and_keeps_earlier_file(
     patched_os = types.SimpleNamespace(**{k: getattr(os, k) for k in dir(os)
                                           if not k.startswith("__")})
     patched_os.fdopen = fdopen
-    monkeypatch.setattr(recorder_module, "os", patched_os)
+    monkeypatch.setattr(files_module, "os", patched_os)   # the recorder's atomic file
     with pytest.raises(CosimError) as info:
-        CoSimulation(integrator(fmus)).run(5.0, outputs=OUTPUTS, csv_path=out,
+        Master(integrator(fmus)).simulate(5.0, outputs=OUTPUTS, csv_path=out,
                                            flush_every=flush_every)
     _check_disk_full(info.value, out, old_text, tmp_path, flush_every)
 
@@ -286,7 +290,7 @@ def read_only_dir(path: Path) -> Iterator[Path]:
 def test_unwritable_output_folder_fails_before_running(fmus, tmp_path):
     with read_only_dir(tmp_path / "ro") as ro:
         with pytest.raises(OSError) as info:
-            CoSimulation(integrator(fmus)).run(0.1, outputs=OUTPUTS, csv_path=ro / "run.csv")
+            Master(integrator(fmus)).simulate(0.1, outputs=OUTPUTS, csv_path=ro / "run.csv")
         msg = str(info.value)
         assert f"cannot write results to '{ro / 'run.csv'}'" in msg and "\n" not in msg
         assert sorted(p.name for p in ro.iterdir()) == ["earlier.csv"]

@@ -314,11 +314,11 @@ def test_cli_bad_input_exits_2_with_one_line_and_no_traceback(
     assert not (tmp_path / "out").exists()  # nothing written
 
 
-def test_library_callers_get_value_error_from_run_scene(tmp_path: Path) -> None:
-    from drillcosim.cosim.scenario.run import run_scene
+def test_library_callers_get_value_error_from_simulate_scene(tmp_path: Path) -> None:
+    from drillcosim.cosim.scenario.run import simulate_scene
 
     with pytest.raises(ValueError, match="not found"):
-        run_scene("NO_SUCH_SCENE", out_dir=tmp_path / "out")
+        simulate_scene("NO_SUCH_SCENE", out_dir=tmp_path / "out")
     with pytest.raises(ValueError, match="pipe.length"):
-        run_scene(sets=["pipe.length=-1"], out_dir=tmp_path / "out")
+        simulate_scene(sets=["pipe.length=-1"], out_dir=tmp_path / "out")
     assert not (tmp_path / "out").exists()

@@ -15,7 +15,7 @@ import pytest
 
 from drillcosim.cosim.cli import main
 from drillcosim.cosim.master.errors import CosimError
-from drillcosim.cosim.scenario.run import run_system
+from drillcosim.cosim.scenario.run import simulate_system
 from drillcosim.cosim.scenario.scene_system import ensure_fmus, scene_system
 from drillcosim.cosim.scenario.summary import SUMMARY_KEYS
 from drillcosim.plant.scene import load_scene
@@ -106,7 +106,8 @@ def test_bad_input_exits_2_in_one_line_and_keeps_files(good_run, capsys) -> None
     assert _snapshot(out) == before
 
 
-def test_failure_before_the_first_step_keeps_earlier_files(good_run, fmu_dir, capsys) -> None:
+def test_failure_before_the_first_step_keeps_earlier_files(good_run, fmu_dir, capsys,
+                                                           caplog) -> None:
     out, _ = good_run
     before = _snapshot(out)
     sc = dataclasses.replace(load_scene("paper_closed_loop"), cosim={"step": 1e-3})
@@ -115,14 +116,21 @@ def test_failure_before_the_first_step_keeps_earlier_files(good_run, fmu_dir, ca
     bad = dataclasses.replace(plant, parameters={**plant.parameters, "pipe.length": -1.0})
     ss = dataclasses.replace(ss, system=dataclasses.replace(
         ss.system, fmus=[bad, ss.system.fmu("controller")]))
-    with pytest.raises(CosimError) as info:
-        run_system(ss, out, stop_time=0.1, progress=False)
+    with pytest.raises(CosimError) as info, \
+            caplog.at_level("DEBUG", "drillcosim.cosim.master.fmi_log"):
+        simulate_system(ss, out, stop_time=0.1, progress=False)
     err = info.value
     # the plant FMU (native wrapper) refuses the parameter at initialization with fmi2Error;
-    # the error names FMU and call and ends with the FMU's own message naming the parameter
+    # the error names FMU and call and ends with the FMU's own message naming the parameter,
+    # received through the FMI logger callback (nothing is printed)
     assert (err.fmu_name, err.call, err.status) == ("plant", "fmi2ExitInitializationMode", 3)
-    assert "pipe.length = -1.0 is out of range" in str(err) and "\n" not in str(err), str(err)
-    assert "fmi2Terminate" not in capsys.readouterr().out  # FMI 2.0: no terminate after Error
+    assert "pipe.length = -1.0 is out of range" in err.fmu_message
+    assert str(err).endswith(err.fmu_message) and "\n" not in str(err), str(err)
+    assert capsys.readouterr().out == ""
+    logged = [r.getMessage() for r in caplog.records]
+    assert any("pipe.length = -1.0 is out of range" in m for m in logged), logged
+    # FMI 2.0: no fmi2Terminate after fmi2Error (the wrapper would refuse it, logging the call)
+    assert not any("fmi2Terminate" in m for m in logged), logged
     assert _snapshot(out) == before
 
 

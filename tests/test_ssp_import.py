@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from drillcosim.cosim.cli import main
-from drillcosim.cosim.master.cosimulation import CoSimulation
+from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.master.ssp import export_ssp
 from drillcosim.cosim.master.ssp_import import SspError, read_ssp
 from drillcosim.cosim.scenario.scene_system import scene_system
@@ -154,8 +154,8 @@ def test_round_trip_export_import_is_bit_for_bit(multirate, tmp_path) -> None:
                 {k: type(v) for k, v in fb.parameters.items()}
             assert Path(fb.path).read_bytes() == Path(fa.path).read_bytes()
         assert set(b.connections) == set(a.connections) and len(b.connections) == 8
-        ours = CoSimulation(a).run(0.2, imp.outputs).data
-        back = CoSimulation(b).run(0.2, imp.outputs).data
+        ours = Master(a).simulate(0.2, imp.outputs).data
+        back = Master(b).simulate(0.2, imp.outputs).data
         directory = imp.directory
     assert not directory.exists()  # the extracted files are gone
     assert len(imp.outputs) == 27 and len(ours) == 201
@@ -181,7 +181,7 @@ def test_cli_writes_a_scene_ssp_and_runs_it_bit_for_bit(project_fmus, tmp_path, 
     assert summary["end_time_s"] == pytest.approx(0.05) and summary["step_s"] == 1e-4
     assert summary["components"]["controller"]["start_values"]["gain"] == 1e9
     with read_ssp(ssp) as imp:
-        ref = CoSimulation(imp.system).run(0.05, imp.outputs).data
+        ref = Master(imp.system).simulate(0.05, imp.outputs).data
     assert header == ["time", *imp.outputs] and rows.shape == (501, len(header))
     for j, name in enumerate(header):
         assert np.array_equal(rows[:, j], ref[name]), name  # %.17g: exact
@@ -199,7 +199,7 @@ def test_hand_written_ssp_runs_as_its_closed_form(fmus, tmp_path) -> None:
         assert spec.fmu("source").parameters == {"amplitude": A, "omega": W}
         assert spec.fmu("gain").parameters == {"k": K}
         assert spec.fmu("integrator").parameters == {"x0": X0}
-        data = CoSimulation(spec).run(STOP, imp.outputs).data
+        data = Master(spec).simulate(STOP, imp.outputs).data
     x = data["integrator.x"]
     assert len(x) == 101
     np.testing.assert_allclose(x, closed_form(len(x)), rtol=0, atol=1e-13)
@@ -349,7 +349,7 @@ def test_libcosim_runs_the_hand_written_ssp_like_our_import(fmus, tmp_path) -> N
 
     ssp = make_ssp(tmp_path / "hand.ssp", fmus)
     with read_ssp(ssp) as imp:
-        ours = CoSimulation(imp.system).run(STOP, imp.outputs).data
+        ours = Master(imp.system).simulate(STOP, imp.outputs).data
         outputs = imp.outputs
     rows = run_libcosim(ssp, H, round(STOP / H), outputs, tmp_path)
     result = compare(ours[1:], {o: rows[:, j] for j, o in enumerate(outputs)}, rtol=1e-12)

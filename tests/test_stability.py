@@ -112,17 +112,17 @@ def test_prediction_boundaries_of_the_paper_scene(drill):
 
 def _monolithic_force_growth(gain: float, delay: float, step: float, t_end: float) -> float:
     """Fit ln|F| peaks of the 'python' engine loop over its second half [1/s]."""
-    from drillcosim.cosim.study.point import PointOptions, _run_python, _scene
+    from drillcosim.cosim.study.point import PointOptions, point_scene, simulate_point
 
     kick = {"kind": "force", "body": 11, "direction": "x", "magnitude": 1.0, "start": 0.05,
             "duration": 0.01}
-    sc, _ = _scene("paper_closed_loop", gain, delay, step, t_end, False,
-                   {"bit": {"displacement_amplitude": 0.0}, "unbalance": {"moment": 0.0},
-                    "loads": [kick]})
-    series, reason = _run_python(sc, PointOptions(force_cap=1e9))
+    sc, over = point_scene("paper_closed_loop", gain, delay, step, t_end, False,
+                           {"bit": {"displacement_amplitude": 0.0},
+                            "unbalance": {"moment": 0.0}, "loads": [kick]})
+    data, reason = simulate_point(sc, over, PointOptions(force_cap=1e9), engine="python")
     assert reason == ""
-    t = series["time"]
-    f = np.max(np.abs(np.vstack([series[f"actuator{s}_force_{a}"] for s in (1, 2)
+    t = data["time"]
+    f = np.max(np.abs(np.vstack([data[f"controller.actuator{s}_force_{a}"] for s in (1, 2)
                                  for a in "CE"])), axis=0)
     edges = np.arange(t_end / 2, t_end + 1e-9, 0.1)
     env = [f[(t >= a) & (t < b)].max() for a, b in zip(edges[:-1], edges[1:])]

@@ -2,28 +2,35 @@
 
 Both share one interface (as in libcosim): :meth:`setup` builds the exchange
 plan once, :meth:`initialize` reads the initial outputs and sets the initial
-inputs, :meth:`do_step` advances the system from tick ``k`` to ``k + 1``.
+inputs, :meth:`do_step` advances the system from tick ``k`` to ``k + 1``. They
+drive :class:`~cosim.master.slave.Slave` s (FMUs or in-process components alike).
 
-Multirate: FMU ``i`` has a period of ``p_i`` base steps; it steps only at ticks
+Multirate: component ``i`` has a period of ``p_i`` base steps; it steps only at ticks
 ``k`` with ``k % p_i == 0``, with step size ``p_i * H``. Its outputs are held
 between its communication points.
 
-* **Jacobi** (parallel): at tick k every due FMU steps with the inputs set at
-  tick k; then, at tick k + 1, the FMUs that reached their communication point
+* **Jacobi** (parallel): at tick k every due component steps with the inputs set at
+  tick k; then, at tick k + 1, the components that reached their communication point
   publish their outputs and those due next get their new inputs. The inputs
   used over ``[t_k, t_k+1]`` are outputs sampled at ``t_k``.
-* **Gauss-Seidel** (sequential): due FMUs step one after another in
+* **Gauss-Seidel** (sequential): due components step one after another in
   ``order``; each first takes its inputs from the newest outputs (already at
-  ``t_k+1`` for the FMUs before it), steps, and publishes at once. Relative to
-  Jacobi, a connection from an earlier to a later FMU has one step less delay.
+  ``t_k+1`` for the components before it), steps, and publishes at once. Relative to
+  Jacobi, a connection from an earlier to a later component has one step less delay.
+
+:func:`newest_sample_tick` states this exchange timing (which source sample a
+target sees when) once: the algorithms take their coupling horizons from it, and
+so does the linear stability prediction (:mod:`cosim.study.stability`).
 
 Initialisation: all outputs are read at the start time, then as many sweeps as
-there are FMUs, in stepping order, set each FMU's inputs and re-read its
-outputs (propagating direct feedthrough along any chain of FMUs).
+there are components, in stepping order, set each one's inputs and re-read its
+outputs (propagating direct feedthrough along any chain of components).
 
 The hot loop works on ctypes buffers with precomputed index pairs: per step and
-FMU one ``fmi2SetReal``, one ``fmi2DoStep`` and one ``fmi2GetReal`` on the raw
-library functions, no dict lookups and no per-step allocation besides floats.
+component one :meth:`~cosim.master.slave.Slave.write_inputs`, one
+:meth:`~cosim.master.slave.Slave.do_step` and one
+:meth:`~cosim.master.slave.Slave.read_outputs`, no dict lookups and no per-step
+allocation besides floats.
 """
 
 from __future__ import annotations
@@ -34,14 +41,51 @@ from collections.abc import Callable, Mapping, Sequence
 
 from .delays import DelayLine
 from .errors import DivergenceError
-from .slave import Slave, c_double_ptr, vr_pointer
+from .slave import Slave
 from .system import SystemSpec, split_variable
 
-_FMI_FALSE = 0
+__all__ = ["GaussSeidelAlgorithm", "JacobiAlgorithm", "make_algorithm", "newest_sample_tick"]
 
 
-class _FmuPlan:
-    """Precomputed exchange data of one FMU (built once in ``setup``)."""
+def newest_sample_tick(algorithm: str, source_first: bool, source_period: int,
+                       tick: int) -> int:
+    """Tick of the newest source sample a target sees for its step from ``tick``.
+
+    The exchange timing of the algorithms, stated once (the delay lines count their
+    delays back from this sample, :mod:`cosim.master.delays`):
+
+    * Jacobi: the source's last communication point at or before ``tick``;
+    * Gauss-Seidel, source earlier in the stepping order (``source_first``): the end of the
+      source's step that contains ``tick`` (it has stepped already);
+    * Gauss-Seidel, source later in the order: ``tick`` if the source is due at ``tick`` (not
+      stepped yet), else the end of its step that contains ``tick``.
+
+    Parameters
+    ----------
+    algorithm : {"jacobi", "gauss_seidel"}
+    source_first : bool
+        The source steps before the target (Gauss-Seidel only).
+    source_period : int
+        Source period [base steps], >= 1.
+    tick : int
+        Start of the target's step [base steps], a multiple of the target's period.
+
+    Returns
+    -------
+    int
+    """
+    last = tick - tick % source_period
+    if algorithm == "jacobi":
+        return last
+    if algorithm != "gauss_seidel":
+        raise ValueError(f"algorithm: 'jacobi' or 'gauss_seidel', got {algorithm!r}")
+    if not source_first and last == tick:
+        return tick
+    return last + source_period
+
+
+class _Plan:
+    """Precomputed exchange data of one component (built once in ``setup``)."""
 
     def __init__(self, index: int, slave: Slave, period: int, base_step: float):
         self.index = index
@@ -53,21 +97,17 @@ class _FmuPlan:
         self.out_offset = 0
         self.in_names: list[str] = []
         self.plain: list[tuple[int, int]] = []            # (input pos, y index)
-        self.lines: list[tuple[int, DelayLine, int, float, float]] = []
+        # (input pos, line, coupling horizons by tick % source period)
+        self.lines: list[tuple[int, DelayLine, tuple[float, ...], int]] = []
         self.pushes: list[tuple[int, DelayLine]] = []     # (y index, line)
 
     def tuple(self, y) -> tuple:
-        """The flat tuple unpacked by the hot loop."""
+        """The flat tuple unpacked by the hot loop (after binding the slave's buffers)."""
         s = self.slave
-        out_vrs, out_vr_p = vr_pointer(s.real_vrs(self.out_names))
-        in_vrs, in_vr_p = vr_pointer(s.real_vrs(self.in_names))
-        self._keep = (out_vrs, in_vrs)
         self.u = (ctypes.c_double * max(1, len(self.in_names)))()
-        y_p = c_double_ptr(y, self.out_offset)
-        return (self.index, self.period, self.h, s.component, s.c_do_step, s.c_get_real,
-                out_vr_p, len(self.out_names), y_p, s.c_set_real, in_vr_p,
-                len(self.in_names), self.u, tuple(self.plain), tuple(self.lines),
-                tuple(self.pushes))
+        s.bind(self.out_names, y, self.out_offset, self.in_names, self.u)
+        return (self.index, self.period, self.h, s.do_step, s.read_outputs, s.write_inputs,
+                self.u, tuple(self.plain), tuple(self.lines), tuple(self.pushes))
 
 
 class _Algorithm:
@@ -76,7 +116,7 @@ class _Algorithm:
     name = "base"
 
     def __init__(self):
-        self.plans: list[_FmuPlan] = []
+        self.plans: list[_Plan] = []
         self.y = None
         self.newest: list[int] = []
         self.lines: list[DelayLine] = []
@@ -91,7 +131,7 @@ class _Algorithm:
         ----------
         system : SystemSpec
         slaves : mapping of name to Slave
-            Instantiated FMUs.
+            Instantiated components.
         time_of : callable
             Tick -> time [s] (exact conversion owned by the execution).
         read_outputs : sequence of str
@@ -101,14 +141,14 @@ class _Algorithm:
         self.time_of = time_of
         order = system.stepping_order
         H = system.base_step
-        self.plans = [_FmuPlan(i, slaves[n], system.fmu(n).sample_period_ticks, H)
+        self.plans = [_Plan(i, slaves[n], system.fmu(n).sample_period_ticks, H)
                       for i, n in enumerate(order)]
         by_name = {p.name: p for p in self.plans}
         for ref in [c.source for c in system.connections] + list(read_outputs):
             fmu, var = split_variable(ref, "output")
             plan = by_name[fmu]
-            plan.slave.variable(var, ("output", "local", "parameter", "calculatedParameter",
-                                      "input"))
+            plan.slave.check_variable(var, ("output", "local", "parameter",
+                                            "calculatedParameter", "input"))
             if var not in plan.out_names:
                 plan.out_names.append(var)
         offset = 0
@@ -119,14 +159,13 @@ class _Algorithm:
             self.y_names += [f"{plan.name}.{v}" for v in plan.out_names]
         self.y_index = {n: i for i, n in enumerate(self.y_names)}
         self.y = (ctypes.c_double * max(1, offset))()
-        self.n_y = offset
         self.lines = []
         for c in system.connections:
             src_fmu, _ = split_variable(c.source, "source")
             dst_fmu, dst_var = split_variable(c.target, "target")
             dst = by_name[dst_fmu]
             src = by_name[src_fmu]
-            dst.slave.variable(dst_var, ("input", "parameter"))
+            dst.slave.check_variable(dst_var, ("input", "parameter"))
             pos = len(dst.in_names)
             dst.in_names.append(dst_var)
             y_idx = self.y_index[c.source]
@@ -136,42 +175,40 @@ class _Algorithm:
             line = DelayLine(c.delay, src.h, c.coupling == "linear")
             self.lines.append(line)
             src.pushes.append((y_idx, line))
-            # horizon [source periods] = (k + p_dst / 2 - newest_src) / p_src
-            dst.lines.append((pos, line, src.index, dst.period / 2.0, 1.0 / src.period))
+            # horizon [source periods]: newest source sample -> midpoint of the target's step
+            p = src.period
+            first = src.index < dst.index
+            horizons = tuple((k + dst.period / 2.0 - newest_sample_tick(self.name, first, p, k))
+                             * (1.0 / p) for k in range(p))
+            dst.lines.append((pos, line, horizons, p))
         self.flat = [p.tuple(self.y) for p in self.plans]
         self.newest = [0] * len(self.plans)
 
     # -- shared pieces ---------------------------------------------------------
-    def _read(self, plan: _FmuPlan, tick: int) -> None:
-        n_out = len(plan.out_names)
-        if n_out:
-            f = self.flat[plan.index]
-            st = f[5](f[3], f[6], n_out, f[8])
-            if st > 1:
-                plan.slave.fail(st, "fmi2GetReal", self.time_of(tick))
+    def _read(self, plan: _Plan, tick: int) -> None:
+        st = self.flat[plan.index][4]()
+        if st > 1:
+            plan.slave.fail(st, "fmi2GetReal", self.time_of(tick))
         self.newest[plan.index] = tick
-
-    def _gather_set(self, plan: _FmuPlan, tick: int) -> None:
-        self._apply_inputs(self.flat[plan.index], tick, self.time_of(tick))
 
     def initialize(self) -> None:
         """Read initial outputs, then feedthrough sweeps in stepping order.
 
-        One sweep per FMU (each: set inputs, re-read outputs, restart its
+        One sweep per component (each: set inputs, re-read outputs, restart its
         delay lines from the new outputs) propagates direct feedthrough along
-        any chain of FMUs; the signals are taken constant before the start.
+        any chain of components; the signals are taken constant before the start.
         """
         for plan in self.plans:
             self._read(plan, 0)
             self._reset_lines(plan)
         for _ in self.plans:
             for plan in self.plans:
-                self._gather_set(plan, 0)
+                self._apply_inputs(self.flat[plan.index], 0, self.time_of(0))
                 self._read(plan, 0)
                 self._reset_lines(plan)
         self.check_finite()
 
-    def _reset_lines(self, plan: _FmuPlan) -> None:
+    def _reset_lines(self, plan: _Plan) -> None:
         for y_idx, line in plan.pushes:
             line.reset(self.y[y_idx])
 
@@ -186,10 +223,6 @@ class _Algorithm:
                 if not math.isfinite(y[j]):
                     raise DivergenceError(self.y_names[j], self.time_of(self.newest[plan.index]),
                                           y[j])
-
-    def value(self, ref: str) -> float:
-        """Last read value of output ``'fmu.var'`` (must be in the read set)."""
-        return self.y[self.y_index[ref]]
 
     def get_state(self) -> dict:
         """Snapshot of the master-side exchange state (buffers, delay lines)."""
@@ -208,24 +241,21 @@ class _Algorithm:
     def do_step(self, tick: int) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
 
-
-    def _apply_inputs(self, f: list, tick: int, t: float) -> None:
-        """Write FMU plan ``f``'s inputs for ``tick`` (held / extrapolated / delayed values).
+    def _apply_inputs(self, f: tuple, tick: int, t: float) -> None:
+        """Write plan ``f``'s inputs for its step from ``tick`` (held / extrapolated / delayed).
 
         Direct connections copy the newest exchanged output; delayed or extrapolated ones ask
-        their line at the age of the newest sample (in source periods).
+        their line at the coupling horizon of this tick (:func:`newest_sample_tick`).
         """
-        u = f[12]
+        u = f[6]
         y = self.y
-        newest = self.newest
-        for d, s in f[13]:
+        for d, s in f[7]:
             u[d] = y[s]
-        for d, line, src, half, inv_p in f[14]:
-            u[d] = line.value((tick + half - newest[src]) * inv_p)
-        if f[11]:
-            st = f[9](f[3], f[10], f[11], u)
-            if st > 1:
-                self.plans[f[0]].slave.fail(st, "fmi2SetReal", t)
+        for d, line, horizons, p in f[8]:
+            u[d] = line.value(horizons[tick % p])
+        st = f[5]()
+        if st > 1:
+            self.plans[f[0]].slave.fail(st, "fmi2SetReal", t)
 
 
 class JacobiAlgorithm(_Algorithm):
@@ -240,7 +270,7 @@ class JacobiAlgorithm(_Algorithm):
         for f in self.flat:
             if tick % f[1]:
                 continue
-            st = f[4](f[3], t, f[2], _FMI_FALSE)
+            st = f[3](t, f[2])
             if st > 1:
                 self.plans[f[0]].slave.fail(st, "fmi2DoStep", t)
         k1 = tick + 1
@@ -249,12 +279,11 @@ class JacobiAlgorithm(_Algorithm):
         for f in self.flat:
             if k1 % f[1]:
                 continue
-            if f[7]:
-                st = f[5](f[3], f[6], f[7], f[8])
-                if st > 1:
-                    self.plans[f[0]].slave.fail(st, "fmi2GetReal", time_of(k1))
+            st = f[4]()
+            if st > 1:
+                self.plans[f[0]].slave.fail(st, "fmi2GetReal", time_of(k1))
             newest[f[0]] = k1
-            for s, line in f[15]:
+            for s, line in f[9]:
                 line.push(y[s])
         s = sum(y)
         if s - s != 0.0:
@@ -280,15 +309,14 @@ class GaussSeidelAlgorithm(_Algorithm):
             if tick % p:
                 continue
             self._apply_inputs(f, tick, t)
-            st = f[4](f[3], t, f[2], _FMI_FALSE)
+            st = f[3](t, f[2])
             if st > 1:
                 self.plans[f[0]].slave.fail(st, "fmi2DoStep", t)
-            if f[7]:
-                st = f[5](f[3], f[6], f[7], f[8])
-                if st > 1:
-                    self.plans[f[0]].slave.fail(st, "fmi2GetReal", time_of(tick + p))
+            st = f[4]()
+            if st > 1:
+                self.plans[f[0]].slave.fail(st, "fmi2GetReal", time_of(tick + p))
             newest[f[0]] = tick + p
-            for s, line in f[15]:
+            for s, line in f[9]:
                 line.push(y[s])
         s = sum(y)
         if s - s != 0.0:

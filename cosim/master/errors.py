@@ -1,7 +1,7 @@
 """Exceptions of the co-simulation master.
 
 This is the one place where FMI status codes returned by fmpy's low-level calls
-become exceptions: :func:`check_status` / :func:`raise_for_status` turn a status
+become exceptions: :func:`raise_for_status` turns a status
 of ``fmi2Discard``, ``fmi2Error``, ``fmi2Fatal`` or ``fmi2Pending`` into a
 :class:`CosimError` naming the FMU instance, the FMI function and the simulated
 time of the call.
@@ -44,24 +44,29 @@ class CosimError(RuntimeError):
     ----------
     status : int or None
         FMI status code when the error comes from an FMI call.
+    fmu_message : str or None
+        The component's own message about the failure (its newest Discard/Error/Fatal log
+        message, one line), also the end of ``message``.
     result : object or None
-        Set by :class:`cosim.master.CoSimulation` to the partial result recorded
+        Set by :class:`cosim.master.Master` to the partial result recorded
         until the failure.
     """
 
     def __init__(self, fmu_name: str, call: str, time: float, message: str,
-                 status: int | None = None):
+                 status: int | None = None, fmu_message: str | None = None):
         self.fmu_name = fmu_name
         self.call = call
         self.time = time
         self.message = message
         self.status = status
+        self.fmu_message = fmu_message
         self.result = None
         when = "" if math.isnan(time) else f" at t = {time:.9g} s"
         super().__init__(f"FMU '{fmu_name}': {call} failed{when}: {message}")
 
     def __reduce__(self):
-        return (type(self), (self.fmu_name, self.call, self.time, self.message, self.status))
+        return (type(self), (self.fmu_name, self.call, self.time, self.message, self.status,
+                             self.fmu_message))
 
 
 class DivergenceError(CosimError):
@@ -88,10 +93,12 @@ class DivergenceError(CosimError):
         return (type(self), (self.quantity, self.time, self.value))
 
 
-def raise_for_status(status: int, fmu_name: str, call: str, time: float) -> None:
+def raise_for_status(status: int, fmu_name: str, call: str, time: float,
+                     detail: str | None = None) -> None:
     """Raise :class:`CosimError` for an FMI status worse than ``fmi2Warning``.
 
-    Called from hot loops only after the cheap test ``status > 1`` failed.
+    Called from hot loops only after the cheap test ``status > 1`` failed. ``detail`` is the
+    component's own message (from its FMI logger callback), appended to the message.
     """
     if status <= FMI2_WARNING:
         return
@@ -101,7 +108,5 @@ def raise_for_status(status: int, fmu_name: str, call: str, time: float) -> None
         4: "the FMU reported a fatal error (fmi2Fatal); the instance is unusable",
         5: "asynchronous stepping (fmi2Pending) is not supported",
     }.get(status, f"{status_name(status)} returned")
-    raise CosimError(fmu_name, call, time, hint, status=status)
-
-
-check_status = raise_for_status
+    raise CosimError(fmu_name, call, time, f"{hint}: {detail}" if detail else hint,
+                     status=status, fmu_message=detail)

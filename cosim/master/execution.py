@@ -1,4 +1,5 @@
-"""The execution: owns simulated time, the FMU instances and the observers.
+"""The execution: owns simulated time, the slaves (FMU instances or in-process components)
+and the observers.
 
 Time is an integer number of ticks of the base step H. A float time exists
 only at the FMI boundary and is computed from the integer,
@@ -15,6 +16,7 @@ Observers only read (``on_step(execution)``, called after every step, and
 from __future__ import annotations
 
 import shutil
+from collections.abc import Mapping
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -22,9 +24,10 @@ from typing import Protocol
 
 from fmpy import extract
 
+from . import fmi_log
 from .algorithms import GaussSeidelAlgorithm, JacobiAlgorithm, _Algorithm, make_algorithm
 from .errors import CosimError
-from .slave import Slave
+from .slave import FmuSlave, Slave
 from .system import SystemSpec, split_variable
 
 
@@ -60,13 +63,18 @@ class Execution:
         recorded ones); all values read are checked for finiteness.
     algorithm : JacobiAlgorithm or GaussSeidelAlgorithm, optional
         Defaults to ``system.algorithm``.
+    slaves : mapping of str to Slave, optional
+        Ready-made components by instance name (not instantiated yet; e.g. in-process models,
+        :mod:`cosim.scenario.inprocess`); every other instance of the system is loaded from
+        its FMU file as an :class:`~cosim.master.slave.FmuSlave`. The execution closes them.
 
     Notes
     -----
-    Use as a context manager, or call :meth:`close` to free the FMUs.
+    Use as a context manager, or call :meth:`close` to free the slaves.
     """
 
-    def __init__(self, system: SystemSpec, read_outputs=(), algorithm: _Algorithm | None = None):
+    def __init__(self, system: SystemSpec, read_outputs=(), algorithm: _Algorithm | None = None,
+                 slaves: Mapping[str, Slave] | None = None):
         self.system = system
         self.base_step = system.base_step
         self.start_time = system.start_time
@@ -83,17 +91,27 @@ class Execution:
         self._read_outputs = tuple(read_outputs)
         self.initialized = False
         self.closed = False
+        given = dict(slaves or {})
+        unknown = sorted(set(given) - {f.name for f in system.fmus})
+        if unknown:
+            raise ValueError(f"slaves: no instance {unknown} in the system")
         dirs: dict[Path, str] = {}
+        self._dirs: list[str] = []
         try:
             for spec in system.fmus:
+                if spec.name in given:
+                    self.slaves[spec.name] = given.pop(spec.name)
+                    continue
                 path = Path(spec.path).resolve()
                 if path not in dirs and path.is_file():
                     dirs[path] = extract(str(path))
-                self.slaves[spec.name] = Slave(spec, dirs.get(path))
+                    self._dirs.append(dirs[path])
+                self.slaves[spec.name] = FmuSlave(spec, dirs.get(path))
         except BaseException:
+            for slave in given.values():  # ready-made ones not taken over yet
+                slave.close()
             self.close()
             raise
-        self._dirs = list(dirs.values())
 
     # -- time -----------------------------------------------------------------
     def time_of(self, tick: int) -> float:
@@ -132,11 +150,12 @@ class Execution:
 
     # -- running ----------------------------------------------------------------
     def initialize(self) -> None:
-        """Instantiate and initialise the FMUs, read initial outputs, set inputs."""
+        """Instantiate and initialise the slaves, read initial outputs, set inputs."""
         if self.initialized:
             return
         system = self.system
         stop = system.stop_time
+        fmi_log.claim()
         for slave in self.slaves.values():
             slave.instantiate(system.start_time, stop)
         read = list(self._read_outputs)
@@ -170,6 +189,7 @@ class Execution:
         k_stop = self.ticks_until(stop_time)
         if k_stop < self.tick:
             raise ValueError(f"stop_time: >= current time {self.time} s, got {stop_time} s")
+        fmi_log.claim()
         do_step = self.algorithm.do_step
         observers = tuple(o.on_step for o in self.observers)
         manipulators = tuple(m.before_step for m in self.manipulators)
@@ -196,8 +216,7 @@ class Execution:
         y_index = getattr(self.algorithm, "y_index", {})
         if ref in y_index:
             return self.algorithm.y[y_index[ref]]
-        slave = self.slaves[fmu]
-        return slave.get_reals(slave.real_vrs([var]), self.time)[0]
+        return self.slaves[fmu].get_real(var, self.time)
 
     def set_value(self, ref: str, value) -> None:
         """Set variable ``'fmu.var'`` now (for manipulators; typed by the FMU).
@@ -205,7 +224,7 @@ class Execution:
         A connected input is overwritten at the FMU's next exchange.
         """
         fmu, var = split_variable(ref, "ref")
-        self.slaves[fmu].set_values({var: value}, self.time)
+        self.slaves[fmu].set_value(var, value, self.time)
 
     def get_state(self) -> ExecutionState:
         """Save the full state: FMU states, exchange buffers, delay lines, tick."""
@@ -224,7 +243,7 @@ class Execution:
         self.tick = state.tick
 
     def close(self) -> None:
-        """Free saved states, terminate and free all FMUs, delete extracted files."""
+        """Free saved states, close all slaves (FMUs: terminate, free), delete extracted files."""
         if self.closed:
             return
         self.closed = True
@@ -237,7 +256,7 @@ class Execution:
         self._states.clear()
         for slave in self.slaves.values():
             slave.close()
-        for d in getattr(self, "_dirs", []):
+        for d in self._dirs:
             shutil.rmtree(d, ignore_errors=True)
 
     def __enter__(self) -> Execution:

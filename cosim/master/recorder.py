@@ -3,10 +3,10 @@
 Rows are kept as a structured numpy array with ``'time'`` first (so
 ``fmpy.util.plot_result`` accepts it) and can be streamed to a CSV file.
 
-The CSV is written atomically: rows go to a temporary file in the target's
-directory, flushed every ``flush_every`` rows (memory stays flat when
-``keep_in_memory=False``), and :meth:`Recorder.close` renames it onto the
-target with ``os.replace``. An earlier file under the target name is thus
+The CSV is written atomically (:class:`cosim.master.files.AtomicFile`): rows go to a
+temporary file in the target's directory, flushed every ``flush_every`` rows (memory
+stays flat when ``keep_in_memory=False``), and :meth:`Recorder.close` renames it onto
+the target. An earlier file under the target name is thus
 never truncated before the new one is complete; if the run fails, closing
 (which the facade does in a ``finally``) still finalises the partial,
 readable file under the target name.
@@ -22,14 +22,13 @@ replaces the target: an earlier file under the target name stays unchanged.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from .errors import CosimError
+from .files import AtomicFile
 from .system import split_variable
 
 
@@ -100,8 +99,7 @@ class Recorder:
         self._chunks: list[np.ndarray] = []           # flushed rows kept in memory
         self.n_rows = 0
         self.csv_path = Path(csv_path) if csv_path is not None else None
-        self._tmp_path: Path | None = None
-        self._file = None
+        self._csv: AtomicFile | None = None
         self._last_time = float("nan")
         self.write_error: ResultWriteError | None = None
         self.closed = False
@@ -110,16 +108,13 @@ class Recorder:
 
     def _open_csv(self) -> None:
         target = self.csv_path
-        directory = target.parent if str(target.parent) else Path(".")
         try:
-            fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{target.name}.",
-                                       suffix=".part")
+            self._csv = AtomicFile(target, "w", newline="")
         except OSError as exc:
+            directory = target.parent if str(target.parent) else Path(".")
             raise OSError(exc.errno, f"cannot write results to '{target}': directory "
                           f"'{directory}' is not writable ({exc.strerror})") from exc
-        self._tmp_path = Path(tmp)
-        self._file = os.fdopen(fd, "w", newline="")
-        self._file.write(",".join(self.names) + "\n")
+        self._csv.file.write(",".join(self.names) + "\n")
 
     # -- observer hooks --------------------------------------------------------
     def on_start(self, execution) -> None:
@@ -161,23 +156,18 @@ class Recorder:
         self._rows = []
         if self.keep_in_memory:
             self._chunks.append(chunk)
-        if self._file is not None:
+        if self._csv is not None:
             flat = chunk.view(np.float64).reshape(len(chunk), len(self.names))
             try:
-                np.savetxt(self._file, flat, delimiter=",", fmt="%.17g")
-                self._file.flush()
+                np.savetxt(self._csv.file, flat, delimiter=",", fmt="%.17g")
+                self._csv.file.flush()
             except OSError as exc:
                 self._write_failed(exc)
 
     def _write_failed(self, exc: OSError) -> None:
         """Drop the temporary file (never the target) and raise :class:`ResultWriteError`."""
-        file, self._file = self._file, None
-        try:
-            file.close()
-        except OSError:
-            pass  # the buffered rows cannot be written either
-        if self._tmp_path is not None:
-            self._tmp_path.unlink(missing_ok=True)
+        csv, self._csv = self._csv, None
+        csv.discard()
         kept = "kept in memory" if self.keep_in_memory else "lost (keep_in_memory=False)"
         reason = (f"{exc.strerror or exc} (errno {exc.errno}); {self.n_rows} rows recorded "
                   f"({kept}); the target file was not replaced")
@@ -199,13 +189,9 @@ class Recorder:
         if self.closed:
             return
         self.closed = True
-        if self._file is not None:
-            try:
-                self._file.close()
-            except OSError:
-                pass  # unflushed rows of a file that is deleted anyway
-            self._tmp_path.unlink(missing_ok=True)
-            self._file = None
+        if self._csv is not None:
+            self._csv.discard()
+            self._csv = None
 
     def close(self) -> None:
         """Flush and atomically move the CSV onto its target name (idempotent).
@@ -219,12 +205,9 @@ class Recorder:
             return
         self.closed = True
         self.flush()
-        if self._file is not None:
+        if self._csv is not None:
             try:
-                self._file.flush()
-                os.fsync(self._file.fileno())
-                self._file.close()
+                self._csv.commit()
             except OSError as exc:
                 self._write_failed(exc)
-            os.replace(self._tmp_path, self.csv_path)
-            self._file = None
+            self._csv = None

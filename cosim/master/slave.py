@@ -1,30 +1,144 @@
-"""One FMU instance driven through fmpy's low-level FMI 2 API.
+"""The slave protocol of the master, and its FMU implementation.
 
-:class:`Slave` loads the model description once, caches value references,
-and exposes the raw ctypes FMI functions (``fmi2DoStep``, ``fmi2GetReal``,
-``fmi2SetReal``) together with preallocated C buffers, so the algorithms' hot
-loops call the shared library directly: no list conversion, no dict lookup,
-no Python object creation per call. Status codes are returned to the caller,
-which hands any status worse than ``fmi2Warning`` to
-:func:`cosim.master.errors.raise_for_status`.
+The master (:mod:`.execution`, :mod:`.algorithms`) drives every component of a system
+through :class:`Slave`; :class:`FmuSlave` is an FMI 2.0 co-simulation FMU behind fmpy's
+low-level API. Other implementations (in-process models, see
+:mod:`cosim.scenario.inprocess`) are handed to :class:`~.execution.Execution` ready-made and
+stepped by the same algorithms with the same exchange timing.
 """
 
 from __future__ import annotations
 
+import abc
 import ctypes
+import functools
 import math
 import shutil
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any, NoReturn
 
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
+from . import fmi_log
 from .errors import FMI2_ERROR, FMI2_FATAL, CosimError, raise_for_status
 from .system import FmuSpec, ParameterValue, _did_you_mean
 
+__all__ = ["FmuSlave", "Slave", "c_double_ptr"]
+
 _C_DOUBLE_P = ctypes.POINTER(ctypes.c_double)
 _C_UINT_P = ctypes.POINTER(ctypes.c_uint)
+
+
+class Slave(abc.ABC):
+    """One component of a co-simulation, as the master sees it.
+
+    A slave must implement (the master relies on nothing else):
+
+    1. ``name``: its instance name in the system (a :class:`~.system.FmuSpec` of that name
+       gives its sample period).
+    2. :meth:`check_variable` ``(name, causalities)``: raise ``ValueError`` (one line, with a
+       "did you mean") unless it has a Real variable ``name`` of one of ``causalities``
+       (FMI 2 causality names).
+    3. :meth:`instantiate` ``(start_time, stop_time)``: be ready to step from ``start_time``
+       [s], parameters applied, outputs valid; raise :class:`~.errors.CosimError` on failure.
+    4. :meth:`bind` ``(outputs, y, offset, inputs, u)``, once after :meth:`instantiate`:
+       from then on :meth:`read_outputs` writes output ``outputs[i]`` to ``y[offset + i]``
+       and :meth:`write_inputs` takes input ``inputs[i]`` from ``u[i]`` (``y``, ``u``: the
+       master's ``ctypes.c_double`` arrays, owned by the master). :meth:`bind` may replace
+       the three hot methods by equivalent callables on the instance (the master looks them
+       up after binding).
+    5. The hot calls :meth:`write_inputs` ``()``, :meth:`do_step` ``(t, h)`` (advance from
+       ``t`` by ``h`` [s] with the inputs held) and :meth:`read_outputs` ``()`` return an FMI 2
+       status (0 OK, 1 Warning, 2 Discard, 3 Error, 4 Fatal) and do not raise for a failure of
+       the component; the master then calls :meth:`fail`.
+    6. :meth:`fail` ``(status, call, time)`` raises a :class:`~.errors.CosimError` naming the
+       slave, the call, the time and the component's own message; after status Error the
+       master calls nothing but :meth:`set_state` and :meth:`close`, after Fatal only
+       :meth:`close`.
+    7. :meth:`get_real` ``(name, time)`` and :meth:`set_value` ``(name, value, time)``: slow
+       access by name (recording of unexchanged variables, manipulators).
+    8. :meth:`get_state` / :meth:`set_state` / :meth:`free_state` if ``can_get_set_state``:
+       save and restore the component's full state (:meth:`get_state` may be called many
+       times; a state can be restored many times).
+    9. :meth:`close` ``()``: release everything; idempotent; called once by the execution,
+       after failures too.
+
+    This base class implements :meth:`fail` from :meth:`take_problem` and refuses state
+    handling.
+    """
+
+    name: str
+    can_get_set_state: bool = False
+    #: The last call returned fmi2Error (FMI 2.0: then only reset/set state/free are allowed).
+    errored: bool = False
+    #: The last call returned fmi2Fatal (nothing may be called any more but close).
+    dead: bool = False
+
+    @abc.abstractmethod
+    def check_variable(self, name: str, causalities: Sequence[str]) -> None:
+        """Raise ``ValueError`` unless ``name`` is a Real variable of ``causalities``."""
+
+    @abc.abstractmethod
+    def instantiate(self, start_time: float, stop_time: float | None) -> None:
+        """Make the component ready to step from ``start_time`` [s]."""
+
+    @abc.abstractmethod
+    def bind(self, outputs: Sequence[str], y, offset: int, inputs: Sequence[str], u) -> None:
+        """Bind the exchange buffers (contract item 4)."""
+
+    @abc.abstractmethod
+    def write_inputs(self) -> int:
+        """Pass the bound inputs to the component; FMI status."""
+
+    @abc.abstractmethod
+    def do_step(self, t: float, h: float) -> int:
+        """Advance from ``t`` by ``h`` [s]; FMI status."""
+
+    @abc.abstractmethod
+    def read_outputs(self) -> int:
+        """Write the bound outputs into the master's buffer; FMI status."""
+
+    @abc.abstractmethod
+    def get_real(self, name: str, time: float) -> float:
+        """Current value of Real variable ``name`` (slow path)."""
+
+    @abc.abstractmethod
+    def set_value(self, name: str, value: ParameterValue, time: float) -> None:
+        """Set variable ``name`` now (slow path; raises :class:`CosimError` on failure)."""
+
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Release the component (idempotent)."""
+
+    def take_problem(self) -> str | None:
+        """The component's newest problem message not reported yet (one line), or None."""
+        return None
+
+    def fail(self, status: int, call: str, time: float) -> NoReturn:
+        """Record a failed status (errored on Error, dead on Fatal) and raise
+        :class:`CosimError` with the component's own message."""
+        if status >= FMI2_ERROR:
+            self.errored = True
+        if status >= FMI2_FATAL:
+            self.dead = True
+        raise_for_status(status, self.name, call, time, self.take_problem())
+        raise CosimError(self.name, call, time, f"status {status}", status=status)
+
+    def get_state(self, time: float) -> Any:
+        """Saved component state (contract item 8)."""
+        raise CosimError(self.name, "fmi2GetFMUstate", time,
+                         "the component cannot save its state")
+
+    def set_state(self, state: Any, time: float) -> None:
+        """Restore a state from :meth:`get_state`."""
+        raise CosimError(self.name, "fmi2SetFMUstate", time,
+                         "the component cannot restore a state")
+
+    def free_state(self, state: Any) -> None:
+        """Release a state from :meth:`get_state` (errors ignored)."""
+        del state   # nothing to release unless a subclass holds native resources
 
 
 def _vr_array(vrs: Sequence[int]):
@@ -32,16 +146,26 @@ def _vr_array(vrs: Sequence[int]):
     return arr, ctypes.cast(arr, _C_UINT_P)
 
 
-class Slave:
-    """An instantiated FMI 2 co-simulation FMU.
+def c_double_ptr(buf, offset: int = 0):
+    """Pointer to element ``offset`` of a ctypes double array (no copy)."""
+    return ctypes.cast(ctypes.addressof(buf) + 8 * offset, _C_DOUBLE_P)
+
+
+class FmuSlave(Slave):
+    """An FMI 2.0 co-simulation FMU instance (fmpy's low-level API).
+
+    The model description is read once and value references cached; the hot calls go to the
+    shared library's ``fmi2SetReal`` / ``fmi2DoStep`` / ``fmi2GetReal`` with preallocated
+    buffers (one call per direction for all bound variables). The FMU logs through
+    :mod:`.fmi_log` (logging on); an error carries its newest problem message.
 
     Parameters
     ----------
     spec : FmuSpec
-        Instance name, path, parameters and sample period.
+        Instance name, path, parameters.
     unzip_dir : str, optional
-        Where the FMU was already extracted (shared between instances of one
-        file); extracted to a temporary folder owned by this object otherwise.
+        Where the FMU was already extracted (shared between instances of one file);
+        extracted to a temporary folder owned by this object otherwise.
     """
 
     def __init__(self, spec: FmuSpec, unzip_dir: str | None = None):
@@ -64,14 +188,12 @@ class Slave:
         self.c_do_step = dll.fmi2DoStep
         self.c_get_real = dll.fmi2GetReal
         self.c_set_real = dll.fmi2SetReal
+        self.log = fmi_log.LogBook(spec.name)
         self.component = None
-        self.dead = False
         self.instantiated = False
         #: fmi2ExitInitializationMode succeeded (fmi2Terminate is allowed only then)
         self.initialized = False
-        #: a call returned fmi2Error: FMI 2.0 then allows only fmi2FreeInstance,
-        #: fmi2Reset or fmi2SetFMUstate (a successful one clears the flag)
-        self.errored = False
+        self._bound: tuple = ()
 
     # -- variables -------------------------------------------------------------
     def variable(self, name: str, causality: Sequence[str] | None = None):
@@ -84,6 +206,11 @@ class Slave:
             raise ValueError(f"'{self.name}.{name}' has causality '{var.causality}', "
                              f"expected one of {tuple(causality)}")
         return var
+
+    def check_variable(self, name: str, causalities: Sequence[str]) -> None:
+        """``ValueError`` unless ``name`` is a Real variable of one of ``causalities``."""
+        self.variable(name, causalities)
+        self.real_vrs([name])
 
     def real_vrs(self, names: Sequence[str]) -> list[int]:
         """Value references of Real variables ``names``."""
@@ -98,50 +225,83 @@ class Slave:
 
     # -- life cycle ------------------------------------------------------------
     def instantiate(self, start_time: float, stop_time: float | None) -> None:
-        """Instantiate, set parameters and enter/exit initialisation mode."""
+        """Instantiate (logging on), set parameters and enter/exit initialisation mode."""
         fmu = self.fmu
-        fmu.instantiate()
+        fmi_log.claim()
+        fmu.instantiate(callbacks=self.log.callbacks, loggingOn=True)
         self.instantiated = True
         self.initialized = self.errored = False
+        self.log.take_problem()
         self.component = fmu.component
         self._call("fmi2SetupExperiment", start_time,
                    lambda: fmu.fmi2SetupExperiment(self.component, 0, 0.0, start_time,
                                                    stop_time is not None, stop_time or 0.0))
-        self.set_values(self.spec.parameters, start_time)
+        for name, value in self.spec.parameters.items():
+            self.set_value(name, value, start_time)
         self._call("fmi2EnterInitializationMode", start_time,
                    lambda: fmu.fmi2EnterInitializationMode(self.component))
         self._call("fmi2ExitInitializationMode", start_time,
                    lambda: fmu.fmi2ExitInitializationMode(self.component))
         self.initialized = True
 
-    def set_values(self, values: dict[str, ParameterValue], time: float) -> None:
-        """Set variables by name with the setter matching their FMI type."""
-        fmu = self.fmu
-        for name, value in values.items():
-            var = self.variable(name)
-            vr, _ = _vr_array([var.valueReference])
-            if var.type == "Real":
-                call, buf = "fmi2SetReal", (ctypes.c_double * 1)(float(value))
-                fn = fmu.fmi2SetReal
-            elif var.type in ("Integer", "Enumeration"):
-                call, buf = "fmi2SetInteger", (ctypes.c_int * 1)(int(value))
-                fn = fmu.fmi2SetInteger
-            elif var.type == "Boolean":
-                call, buf = "fmi2SetBoolean", (ctypes.c_int * 1)(int(bool(value)))
-                fn = fmu.fmi2SetBoolean
-            else:
-                call, buf = "fmi2SetString", (ctypes.c_char_p * 1)(str(value).encode())
-                fn = fmu.fmi2SetString
-            self._call(f"{call}({name})", time,
-                       lambda fn=fn, vr=vr, buf=buf: fn(self.component, vr, 1, buf))
+    def bind(self, outputs: Sequence[str], y, offset: int, inputs: Sequence[str], u) -> None:
+        """Precompute the value-reference arrays and buffer pointers of the hot calls."""
+        out_vrs, out_p = _vr_array(self.real_vrs(outputs))
+        in_vrs, in_p = _vr_array(self.real_vrs(inputs))
+        self._bound = (out_vrs, in_vrs, y, u)           # keep the buffers alive
+        comp = self.component
+        n_out, n_in = len(outputs), len(inputs)
+        y_p = c_double_ptr(y, offset)
+        self._step = (self.c_do_step, comp)
+        # the hot calls become the library functions with their arguments bound (no Python
+        # frame per call)
+        if n_out:
+            self.read_outputs = functools.partial(self.c_get_real, comp, out_p, n_out, y_p)
+        if n_in:
+            self.write_inputs = functools.partial(self.c_set_real, comp, in_p, n_in, u)
 
-    def get_reals(self, vrs: Sequence[int], time: float) -> list[float]:
-        """Read Real variables by value reference (slow path, not for hot loops)."""
-        arr, _ = _vr_array(vrs)
-        out = (ctypes.c_double * max(1, len(vrs)))()
-        self._call("fmi2GetReal", time, lambda: self.c_get_real(self.component, arr,
-                                                                len(vrs), out))
-        return list(out[: len(vrs)])
+    def write_inputs(self) -> int:
+        """``fmi2SetReal`` of all bound inputs (nothing bound: nothing to do)."""
+        return 0
+
+    def do_step(self, t: float, h: float) -> int:
+        """``fmi2DoStep(t, h, noSetFMUStatePriorToCurrentPoint = false)``."""
+        s = self._step
+        return s[0](s[1], t, h, 0)
+
+    def read_outputs(self) -> int:
+        """``fmi2GetReal`` of all bound outputs (nothing bound: nothing to do)."""
+        return 0
+
+    def take_problem(self) -> str | None:
+        """The newest Discard/Error/Fatal message the FMU logged and nobody reported yet."""
+        return self.log.take_problem()
+
+    def set_value(self, name: str, value: ParameterValue, time: float) -> None:
+        """Set a variable by name with the setter matching its FMI type."""
+        fmu = self.fmu
+        var = self.variable(name)
+        vr, _ = _vr_array([var.valueReference])
+        if var.type == "Real":
+            call, buf = "fmi2SetReal", (ctypes.c_double * 1)(float(value))
+            fn = fmu.fmi2SetReal
+        elif var.type in ("Integer", "Enumeration"):
+            call, buf = "fmi2SetInteger", (ctypes.c_int * 1)(int(value))
+            fn = fmu.fmi2SetInteger
+        elif var.type == "Boolean":
+            call, buf = "fmi2SetBoolean", (ctypes.c_int * 1)(int(bool(value)))
+            fn = fmu.fmi2SetBoolean
+        else:
+            call, buf = "fmi2SetString", (ctypes.c_char_p * 1)(str(value).encode())
+            fn = fmu.fmi2SetString
+        self._call(f"{call}({name})", time, lambda: fn(self.component, vr, 1, buf))
+
+    def get_real(self, name: str, time: float) -> float:
+        """``fmi2GetReal`` of one variable (slow path)."""
+        arr, _ = _vr_array(self.real_vrs([name]))
+        out = (ctypes.c_double * 1)()
+        self._call("fmi2GetReal", time, lambda: self.c_get_real(self.component, arr, 1, out))
+        return out[0]
 
     def get_state(self, time: float):
         """FMU state handle (``fmi2GetFMUstate``); free with :meth:`free_state`."""
@@ -185,18 +345,13 @@ class Slave:
             except Exception:  # noqa: BLE001
                 pass
         self.instantiated = self.initialized = False
+        self._bound = ()
+        self.__dict__.pop("read_outputs", None)
+        self.__dict__.pop("write_inputs", None)
         if self._own_dir:
             shutil.rmtree(self.unzip_dir, ignore_errors=True)
 
     # -- helpers ---------------------------------------------------------------
-    def fail(self, status: int, call: str, time: float) -> None:
-        """Record a failed status (errored on fmi2Error, dead on fmi2Fatal) and raise."""
-        if status >= FMI2_ERROR:
-            self.errored = True
-        if status >= FMI2_FATAL:
-            self.dead = True
-        raise_for_status(status, self.name, call, time)
-
     def _call(self, call: str, time: float, fn) -> None:
         try:
             status = fn()
@@ -208,13 +363,3 @@ class Slave:
                 raise CosimError(self.name, call, time, str(exc)) from exc
         if status is not None and status > 1:
             self.fail(status, call, time)
-
-
-def c_double_ptr(buf, offset: int = 0):
-    """Pointer to element ``offset`` of a ctypes double array (no copy)."""
-    return ctypes.cast(ctypes.addressof(buf) + 8 * offset, _C_DOUBLE_P)
-
-
-def vr_pointer(vrs: Sequence[int]):
-    """``(array, pointer)`` of a C ``unsigned int`` array holding ``vrs``."""
-    return _vr_array(vrs)

@@ -31,8 +31,6 @@ the system without them and the omissions are returned (and listed in the
 
 from __future__ import annotations
 
-import os
-import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,6 +38,7 @@ from xml.sax.saxutils import quoteattr
 
 from fmpy import read_model_description
 
+from .files import AtomicFile
 from .system import SystemSpec, split_variable
 
 __all__ = ["SspExport", "export_ssp", "ssd_xml", "unsupported_features"]
@@ -192,7 +191,7 @@ def ssd_xml(system: SystemSpec, name: str = "drillcosim", description: str = "")
 
 def export_ssp(system: SystemSpec, path: str | Path, *, name: str = "drillcosim",
                strict: bool = True) -> SspExport:
-    """Write ``system`` as an SSP archive (atomically: temporary file + ``os.replace``).
+    """Write ``system`` as an SSP archive (atomically, :class:`cosim.master.files.AtomicFile`).
 
     Parameters
     ----------
@@ -226,17 +225,8 @@ def export_ssp(system: SystemSpec, path: str | Path, *, name: str = "drillcosim"
     desc = ("exported by drillcosim without: " + "; ".join(omitted)) if omitted else ""
     xml = ssd_xml(system, name, desc)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
-    os.close(fd)
-    try:
-        with zipfile.ZipFile(tmp, "w") as zf:
-            zf.writestr("SystemStructure.ssd", xml, compress_type=zipfile.ZIP_DEFLATED)
-            for src, res in _resource_names(system).items():
-                zf.write(src, f"resources/{res}", compress_type=zipfile.ZIP_STORED)
-        from drillcosim.cosim.scenario.summary import publish
-
-        publish(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with AtomicFile(path, "wb") as fh, zipfile.ZipFile(fh, "w") as zf:
+        zf.writestr("SystemStructure.ssd", xml, compress_type=zipfile.ZIP_DEFLATED)
+        for src, res in _resource_names(system).items():
+            zf.write(src, f"resources/{res}", compress_type=zipfile.ZIP_STORED)
     return SspExport(path, tuple(omitted))

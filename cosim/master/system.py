@@ -43,7 +43,9 @@ class FmuSpec:
     name : str
         Instance name, unique in the system, without '.'.
     path : str or Path
-        Path of the ``.fmu`` file.
+        Path of the ``.fmu`` file (it also describes a component the caller hands to the
+        execution ready-made, e.g. an in-process slave, see
+        :class:`~cosim.master.execution.Execution`).
     parameters : dict[str, float | int | bool | str]
         Start values set before initialisation, by variable name.
     sample_period_ticks : int

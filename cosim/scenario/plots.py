@@ -5,20 +5,16 @@
 * :func:`plot_deflection_contact` - radial deflection and contact force vs time
   at every contact body (Figs. 10, 12, 14, 16);
 * :func:`plot_actuators` - actuator forces and powers vs time (Figs. 11, 13, 14);
-* :func:`plot_run` - all of the above for one run;
-* :func:`plot_comparison` - several runs (e.g. open loop, closed loop,
-  restricted actuator) on common axes.
+* :func:`plot_run` - all of the above for one run.
 
 Inputs are the structured arrays of :class:`cosim.master.Result` or
 :func:`cosim.scenario.summary.load_results` (columns ``plant.<output>`` /
-``controller.<output>``). Files are written atomically (temporary file +
-``os.replace``). Uses matplotlib's non-interactive Agg backend.
+``controller.<output>``). Files are written atomically
+(:class:`cosim.master.files.AtomicFile`). Uses matplotlib's non-interactive Agg backend.
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -28,42 +24,25 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .summary import load_results, publish  # noqa: E402
+from drillcosim.cosim.master.files import AtomicFile  # noqa: E402
 
-__all__ = ["plot_actuators", "plot_comparison", "plot_deflection_contact", "plot_orbit",
-           "plot_run", "save_figure"]
+from .scene_system import CONTROLLER, PLANT  # noqa: E402
+from .summary import column, contact_bodies  # noqa: E402
+
+__all__ = ["plot_actuators", "plot_deflection_contact", "plot_orbit", "plot_run", "save_figure"]
 
 MM = 1e3  # m -> mm
 KN = 1e-3  # N -> kN
 
 
 def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:
-    """Save ``fig`` as PNG atomically and close it."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".png")
-    os.close(fd)
+    """Save ``fig`` as PNG atomically (:class:`cosim.master.files.AtomicFile`) and close it."""
     try:
-        fig.savefig(tmp, dpi=dpi, format="png")
-        publish(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        with AtomicFile(path, "wb") as fh:
+            fig.savefig(fh, dpi=dpi, format="png")
     finally:
         plt.close(fig)
-    return path
-
-
-def _col(data: np.ndarray, name: str) -> np.ndarray | None:
-    for cand in (name, f"plant.{name}", f"controller.{name}"):
-        if cand in (data.dtype.names or ()):
-            return np.asarray(data[cand], dtype=float)
-    return None
-
-
-def _bodies(data: np.ndarray) -> list[int]:
-    names = data.dtype.names or ()
-    return sorted({int(n.split("body")[1].split("_")[0]) for n in names
-                   if "body" in n and n.endswith("_radial_deflection")})
+    return Path(path)
 
 
 def _span_label(body: int, spans: Mapping[int, Mapping] | None) -> str:
@@ -77,7 +56,7 @@ def _long_body(data: np.ndarray, spans: Mapping[int, Mapping] | None) -> int | N
         for b, info in spans.items():
             if info.get("span") == "long":
                 return b
-    bodies = _bodies(data)
+    bodies = contact_bodies(data)
     return bodies[0] if bodies else None
 
 
@@ -94,7 +73,7 @@ def plot_orbit(data: np.ndarray, path: str | Path, clearance: float,
     body = _long_body(data, spans)
     if body is None:
         return None
-    x, y = _col(data, f"body{body}_X"), _col(data, f"body{body}_Y")
+    x, y = column(data, PLANT, f"body{body}_X"), column(data, PLANT, f"body{body}_Y")
     if x is None or y is None:
         return None
     sel = np.ones(len(x), bool) if t_from is None else data["time"] >= t_from
@@ -132,15 +111,15 @@ def plot_deflection_contact(data: np.ndarray, path: str | Path, clearance: float
 
     ``switch_on_time`` [s], if given, is marked by a dotted line.
     """
-    bodies = _bodies(data)
+    bodies = contact_bodies(data)
     if not bodies:
         return None
     t = data["time"]
     fig, axes = plt.subplots(2, len(bodies), figsize=(5 * len(bodies), 6), sharex=True,
                              squeeze=False, layout="constrained")
     for j, b in enumerate(bodies):
-        r = _col(data, f"body{b}_radial_deflection")
-        f = _col(data, f"body{b}_contact_force")
+        r = column(data, PLANT, f"body{b}_radial_deflection")
+        f = column(data, PLANT, f"body{b}_contact_force")
         ax = axes[0, j]
         ax.plot(t, r * MM, lw=0.7)
         ax.axhline(clearance * MM, color="k", ls="--", lw=1.0, label="clearance")
@@ -165,14 +144,14 @@ def plot_actuators(data: np.ndarray, path: str | Path, n_sites: int = 2,
                    switch_on_time: float | None = None) -> Path | None:
     """Actuator forces [kN] (C and E) and delivered power [W] vs time per site."""
     t = data["time"]
-    if all(_col(data, f"actuator{s}_power") is None for s in range(1, n_sites + 1)):
+    if all(column(data, PLANT, f"actuator{s}_power") is None for s in range(1, n_sites + 1)):
         return None
     fig, axes = plt.subplots(2, n_sites, figsize=(5 * n_sites, 6), sharex=True, squeeze=False,
                              layout="constrained")
     for j, s in enumerate(range(1, n_sites + 1)):
         ax = axes[0, j]
         for a, color in (("C", "tab:blue"), ("E", "tab:orange")):
-            f = _col(data, f"actuator{s}_force_{a}")
+            f = column(data, CONTROLLER, f"actuator{s}_force_{a}")
             if f is not None:
                 ax.plot(t, f * KN, lw=0.7, color=color, label=f"force {a}")
         ax.set_ylabel("actuator force [kN]")
@@ -184,7 +163,7 @@ def plot_actuators(data: np.ndarray, path: str | Path, n_sites: int = 2,
             ax.text(0.5, 0.5, "controller disabled", ha="center", transform=ax.transAxes)
         ax.grid(alpha=0.3)
         ax = axes[1, j]
-        p = _col(data, f"actuator{s}_power")
+        p = column(data, PLANT, f"actuator{s}_power")
         if p is not None:
             ax.plot(t, p, lw=0.7, color="tab:green")
         ax.set_ylabel("actuator power [W]")
@@ -213,47 +192,3 @@ def plot_run(data: np.ndarray, out_dir: str | Path, clearance: float,
              plot_actuators(data, out / "actuators.png", n_sites, site_spans, title,
                             switch_on_time)]
     return [p for p in paths if p is not None]
-
-
-def plot_comparison(runs: Sequence[tuple[str, str | Path | np.ndarray]], path: str | Path,
-                    body: int = 11, site: int = 1, clearance: float | None = 0.02,
-                    title: str = "comparison") -> Path:
-    """Several runs on common axes: radial deflection at ``body``, force and power at ``site``.
-
-    Parameters
-    ----------
-    runs : sequence of (label, results)
-        ``results`` is a ``results.csv`` path or a structured array.
-    path : path-like
-        Output PNG.
-    body : int
-        Contact body whose radial deflection [mm] is shown (11: long span).
-    site : int
-        Actuator site whose force magnitude sqrt(F_C^2 + F_E^2) [kN] and power [W]
-        are shown (1: long span).
-    clearance : float, optional
-        Drawn as a dashed line [m].
-    """
-    fig, axes = plt.subplots(3, 1, figsize=(9, 9), sharex=True, layout="constrained")
-    for label, res in runs:
-        data = res if isinstance(res, np.ndarray) else load_results(res)
-        t = data["time"]
-        r = _col(data, f"body{body}_radial_deflection")
-        if r is not None:
-            axes[0].plot(t, r * MM, lw=0.7, label=label)
-        fc, fe = _col(data, f"actuator{site}_force_C"), _col(data, f"actuator{site}_force_E")
-        f = np.hypot(fc, fe) if fc is not None and fe is not None else np.zeros_like(t)
-        axes[1].plot(t, f * KN, lw=0.7, label=label)
-        p = _col(data, f"actuator{site}_power")
-        axes[2].plot(t, p if p is not None else np.zeros_like(t), lw=0.7, label=label)
-    if clearance is not None:
-        axes[0].axhline(clearance * MM, color="k", ls="--", lw=1.0, label="clearance")
-    axes[0].set_ylabel(f"radial deflection\nbody {body} [mm]")
-    axes[1].set_ylabel(f"actuator force site {site}\n|F| [kN]")
-    axes[2].set_ylabel(f"actuator power site {site} [W]")
-    axes[2].set_xlabel("time [s]")
-    for ax in axes:
-        ax.grid(alpha=0.3)
-        ax.legend(loc="upper right", fontsize=8)
-    fig.suptitle(title)
-    return save_figure(fig, path)

@@ -14,16 +14,16 @@ A run that fails while stepping (divergence: a non-finite output, or the plant
 discarding a step) keeps the rows recorded so far, writes the summary (with
 ``diverged`` set) and the plots, and reports one line; exit code 1. A run that
 fails before the first step leaves earlier files of the folder untouched and
-raises :class:`CosimError` whose message ends with the FMU's own log line (e.g.
-the plant naming an out-of-range parameter at ``fmi2ExitInitializationMode``).
+raises :class:`CosimError` whose message ends with the FMU's own message, received
+through the FMI logger callback (e.g. the plant naming an out-of-range parameter at
+``fmi2ExitInitializationMode``).
 Bad input raises ``ValueError`` (exit code 2 in the CLI; so does an FMU
 rejecting its parameters with fmi2Error at initialization).
 """
 
 from __future__ import annotations
 
-import contextlib
-import io
+import dataclasses
 import math
 import os
 import sys
@@ -37,19 +37,19 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-from drillcosim.cosim.master.cosimulation import CoSimulation, Result
 from drillcosim.cosim.master.errors import CosimError
+from drillcosim.cosim.master.master import Master, Result
 
-__all__ = ["EXIT_DIVERGED", "EXIT_OK", "RunOutcome", "parse_set", "run_scene", "run_system",
-           "scene_system_from_options", "simulate_into"]
+__all__ = ["EXIT_DIVERGED", "EXIT_OK", "SceneOutcome", "parse_set", "scene_system_from_options",
+           "simulate_into", "simulate_scene", "simulate_system"]
 
 EXIT_OK = 0
 EXIT_DIVERGED = 1
 
 
 @dataclass(frozen=True)
-class RunOutcome:
-    """What :func:`run_scene` produced.
+class SceneOutcome:
+    """What :func:`simulate_scene` produced.
 
     Attributes
     ----------
@@ -116,89 +116,22 @@ def _merge(base: dict[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-class _FmuLog(io.TextIOBase):
-    """stdout pass-through remembering FMU log lines (fmpy prints them as ``[STATUS] msg``).
-
-    A message holding a Python traceback (the native FMI wrapper logs exceptions as
-    ``name: Python exception in fmi2X: Traceback ...``) is remembered with the
-    traceback's last line (the exception) in place of ``Traceback ...``.
-    """
-
-    _TRACEBACK = "Traceback (most recent call last):"
-
-    def __init__(self, target):
-        self.target = target
-        self.problems: list[str] = []
-        self._buf = ""
-        self._in_traceback = False
-        self._head = ""
-
-    def write(self, s: str) -> int:
-        self.target.write(s)
-        self._buf += s
-        *lines, self._buf = self._buf.split("\n")
-        for ln in lines:
-            if ln.startswith(("[DISCARD]", "[ERROR]", "[FATAL]")):
-                self.problems.append(ln)
-                self._in_traceback = ln.endswith(self._TRACEBACK)
-                self._head = ln[: -len(self._TRACEBACK)]
-            elif ln.startswith("["):
-                self._in_traceback = False
-            elif self._in_traceback and ln.strip() and not ln.startswith(" "):
-                self.problems[-1] = self._head + ln.strip()
-        return len(s)
-
-    def detail(self, fmu_name: str) -> str | None:
-        """The last problem line of FMU instance ``fmu_name`` (else any), without the label."""
-        texts = [p.split("] ", 1)[-1] for p in self.problems]
-        own = [t for t in texts if t.startswith(f"{fmu_name}:")]
-        return (own or texts or [None])[-1]
-
-    def flush(self) -> None:
-        self.target.flush()
-
-
-def _failure(err: CosimError | None, result: Result, log: _FmuLog) -> dict[str, Any] | None:
+def _failure(err: CosimError | None, result: Result) -> dict[str, Any] | None:
     if result.diverged is not None:
         d = result.diverged
         return {"time_s": d.time, "quantity": d.quantity, "value": d.value,
                 "message": f"non-finite {d.quantity} = {d.value!r} at t = {d.time:.6g} s"}
     if err is None:
         return None
-    detail = log.detail(err.fmu_name) or err.message
     return {"time_s": err.time, "quantity": f"{err.fmu_name}.{err.call}", "value": None,
             "message": f"FMU '{err.fmu_name}' {err.call} failed at t = {err.time:.6g} s: "
-                       f"{detail}"}
+                       f"{err.fmu_message or err.message}"}
 
 
-class _FmuLogging:
-    """Observer switching on the FMUs' logging (``fmi2SetDebugLogging``) at the start.
-
-    fmpy instantiates with logging off; pythonfmu then drops the messages that
-    explain a discarded step (e.g. the plant's divergence report).
-    """
-
-    def on_start(self, execution) -> None:
-        for slave in execution.slaves.values():
-            with contextlib.suppress(Exception):
-                slave.fmu.fmi2SetDebugLogging(slave.component, 1, 0, None)
-
-    def on_step(self, execution) -> None:
-        """Nothing to do per step."""
-
-
-def _simulate(system, outputs: Sequence[str], output_interval: float, stop: float,
-              progress: bool | None, csv_path: Path) -> Result:
-    """:meth:`CoSimulation.run` with the FMU-logging observer added."""
-    H = system.base_step
-    return CoSimulation(system).run(
-        stop_time=stop, outputs=outputs, output_interval=max(1, round(output_interval / H))
-        * H, progress=progress, csv_path=csv_path, observers=[_FmuLogging()])
-
-
-def simulate_into(system, outputs: Sequence[str], output_interval: float, stop: float,
-                  out: Path, progress: bool | None) -> tuple[Result, dict[str, Any] | None, Path]:
-    """Run ``system`` to ``stop`` [s], streaming ``out/results.csv`` (moved into place at the end).
+def simulate_into(system, outputs: Sequence[str], output_ticks: int, stop: float, out: Path,
+                  progress: bool | None) -> tuple[Result, dict[str, Any] | None, Path]:
+    """Run ``system`` to ``stop`` [s], recording ``outputs`` every ``output_ticks`` base steps
+    into ``out/results.csv`` (written atomically, :class:`cosim.master.recorder.Recorder`).
 
     Returns
     -------
@@ -209,43 +142,26 @@ def simulate_into(system, outputs: Sequence[str], output_interval: float, stop: 
     Raises
     ------
     CosimError
-        If the run failed before its first step (earlier files are kept); its message ends
-        with the FMU's own log line when there is one.
+        If the run failed before its first step (an earlier ``results.csv`` is kept); its
+        message ends with the FMU's own message when it logged one.
     """
-    from .summary import publish
-
-    staging = out / ".results.running.csv"
-    log = _FmuLog(sys.stdout)
+    csv = out / "results.csv"
     err: CosimError | None = None
     try:
-        with contextlib.redirect_stdout(log):
-            result = _simulate(system, outputs, output_interval, stop, progress, staging)
+        result = Master(system).simulate(stop_time=stop, outputs=outputs,
+                                          output_ticks=output_ticks, progress=progress,
+                                          csv_path=csv)
     except CosimError as exc:
         err = exc
         result = exc.result
         if result is None or not math.isfinite(result.end_time) or \
                 result.end_time <= system.start_time:
-            with contextlib.suppress(OSError):  # keep the real error visible
-                staging.unlink(missing_ok=True)
-            detail = log.detail(exc.fmu_name)
-            if detail is None:
-                raise
-            full = CosimError(exc.fmu_name, exc.call, exc.time, f"{exc.message}: {detail}",
-                              status=exc.status)
-            full.result = exc.result
-            raise full from exc
-    except BaseException:
-        with contextlib.suppress(OSError):
-            staging.unlink(missing_ok=True)
-        raise
-    csv = out / "results.csv"
-    if staging.exists():
-        publish(staging, csv)
-    return result, _failure(err, result, log), csv
+            raise
+    return result, _failure(err, result), csv
 
 
-def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
-               progress: bool | None = None, plots: bool = True) -> RunOutcome:
+def simulate_system(ss, out_dir: str | Path, stop_time: float | None = None,
+                    progress: bool | None = None, plots: bool = True) -> SceneOutcome:
     """Run a :class:`cosim.scenario.scene_system.SceneSystem` and write results, summary and plots.
 
     Parameters
@@ -262,7 +178,7 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
 
     Returns
     -------
-    RunOutcome
+    SceneOutcome
         ``exit_code`` 1 if the run stopped before ``stop_time``.
 
     Raises
@@ -272,8 +188,7 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
     CosimError
         If the run failed before its first step (earlier files are kept).
     """
-    from .plots import plot_run
-    from .scene_system import controller_parameters, span_info
+    from .scene_system import scene_controller, span_info
     from .summary import summarize, write_json
 
     out = Path(out_dir)
@@ -281,33 +196,35 @@ def run_system(ss, out_dir: str | Path, stop_time: float | None = None,
     stop = ss.stop_time if stop_time is None else float(stop_time)
     if not (math.isfinite(stop) and stop > 0):
         raise ValueError(f"stop time: a finite number > 0 [s], got {stop!r}")
-    result, failure, csv = simulate_into(ss.system, ss.outputs, ss.output_interval, stop, out,
-                                         progress)
+    result, failure, csv = simulate_into(ss.system, ss.outputs, ss.settings.output_ticks, stop,
+                                         out, progress)
     scene = ss.scene
     spans = span_info(scene)
     n_sites = len(scene.plant.actuator_joints)
-    ctrl = controller_parameters(scene)
-    switch = ctrl["switch_on_time"] if ctrl["enabled"] else None
+    ctrl = scene_controller(scene)
+    switch = ctrl.switch_on_time if ctrl.enabled else None
     summary = summarize(result.data, scene=scene.name, scene_file=scene.source, spans=spans,
                         n_sites=n_sites, stop_time=stop, step=ss.system.base_step,
                         output_interval=ss.output_interval, wall_time=result.wall_time,
                         real_time_factor=result.real_time_factor, end_time=result.end_time,
                         switch_on_time=switch, diverged=failure)
-    summary["controller"] = ctrl
-    summary["cosim"] = {k: v for k, v in vars(ss.settings).items()}
+    summary["controller"] = dataclasses.asdict(ctrl)
+    summary["cosim"] = {**vars(ss.settings), "output_interval": ss.settings.output_interval}
     files = [csv, write_json(summary, out / "summary.json")]
     if plots and len(result.data) > 1:
+        from .plots import plot_run  # matplotlib: imported only when plotting
+
         files += plot_run(result.data, out, scene.plant.contact.clearance, spans, n_sites,
                           title=scene.name, switch_on_time=switch or None)
     if failure is not None:
         msg = (f"run stopped at t = {result.end_time:.6g} s of {stop:g} s: "
                f"{failure['message']}; partial results in {out}")
-        return RunOutcome(EXIT_DIVERGED, msg, out, summary, tuple(files))
+        return SceneOutcome(EXIT_DIVERGED, msg, out, summary, tuple(files))
     pngs = [Path(f).name for f in files if str(f).endswith(".png")]
     where = f"results.csv, summary.json{' and plots ' + ', '.join(pngs) if pngs else ''} in {out}"
     msg = (f"{scene.name}: {result.end_time:g} s simulated in {result.wall_time:.1f} s "
            f"(real-time factor {result.real_time_factor:.3g}); {where}")
-    return RunOutcome(EXIT_OK, msg, out, summary, tuple(files))
+    return SceneOutcome(EXIT_OK, msg, out, summary, tuple(files))
 
 
 def scene_system_from_options(scene: str | os.PathLike, *, stop_time: float | None = None,
@@ -318,7 +235,7 @@ def scene_system_from_options(scene: str | os.PathLike, *, stop_time: float | No
                               controller_fmu: str | Path | None = None):
     """Load a scene with the command-line overrides and build its checked system.
 
-    Parameters: as :func:`run_scene`.
+    Parameters: as :func:`simulate_scene`.
 
     Returns
     -------
@@ -346,12 +263,13 @@ def scene_system_from_options(scene: str | os.PathLike, *, stop_time: float | No
                         plant_overrides=plant_over)
 
 
-def run_scene(scene: str | os.PathLike = "paper_closed_loop", *, stop_time: float | None = None,
-              step: float | None = None, delay: float | None = None, gain: float | None = None,
-              sets: Sequence[str] = (), out_dir: str | Path | None = None,
-              fmu_dir: str | Path | None = None, progress: bool | None = None,
-              plots: bool = True, plant_fmu: str | Path | None = None,
-              controller_fmu: str | Path | None = None) -> RunOutcome:
+def simulate_scene(scene: str | os.PathLike = "paper_closed_loop", *,
+                   stop_time: float | None = None, step: float | None = None,
+                   delay: float | None = None, gain: float | None = None,
+                   sets: Sequence[str] = (), out_dir: str | Path | None = None,
+                   fmu_dir: str | Path | None = None, progress: bool | None = None,
+                   plots: bool = True, plant_fmu: str | Path | None = None,
+                   controller_fmu: str | Path | None = None) -> SceneOutcome:
     """Load a scene with overrides, run it and write the output folder.
 
     Parameters
@@ -384,7 +302,7 @@ def run_scene(scene: str | os.PathLike = "paper_closed_loop", *, stop_time: floa
 
     Returns
     -------
-    RunOutcome
+    SceneOutcome
 
     Raises
     ------
@@ -395,4 +313,4 @@ def run_scene(scene: str | os.PathLike = "paper_closed_loop", *, stop_time: floa
                                    sets=sets, fmu_dir=fmu_dir, plant_fmu=plant_fmu,
                                    controller_fmu=controller_fmu)
     out = Path(out_dir) if out_dir is not None else Path("out") / ss.scene.name
-    return run_system(ss, out, progress=progress, plots=plots)
+    return simulate_system(ss, out, progress=progress, plots=plots)

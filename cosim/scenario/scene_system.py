@@ -111,6 +111,7 @@ __all__ = [
     "cosim_settings",
     "default_fmu_dir",
     "ensure_fmus",
+    "scene_controller",
     "scene_system",
     "span_info",
 ]
@@ -147,7 +148,8 @@ def _suggest(word: str, choices: Sequence[str]) -> str:
 
 @dataclass(frozen=True)
 class CosimSettings:
-    """Validated ``[cosim]`` table of a scene (all times in seconds)."""
+    """Validated ``[cosim]`` table of a scene (times in seconds; periods of the controller and of
+    the recording in base steps, ``*_ticks``)."""
 
     step: float
     stop_time: float
@@ -157,7 +159,12 @@ class CosimSettings:
     actuator_delay: float
     sensor_delay: float
     controller_sample_ticks: int
-    output_interval: float
+    output_ticks: int
+
+    @property
+    def output_interval(self) -> float:
+        """Recording interval [s] (``output_ticks`` base steps)."""
+        return self.output_ticks * self.step
 
 
 @dataclass(frozen=True)
@@ -239,23 +246,16 @@ def cosim_settings(scene: Scene) -> CosimSettings:
     ticks = _multiple(scene, "controller_sample_period", ctrl_period, step)
     if "output_interval" in table:
         interval = _number(scene, "output_interval", table["output_interval"], positive=True)
-        _multiple(scene, "output_interval", interval, step)
+        out_ticks = _multiple(scene, "output_interval", interval, step)
     else:
-        interval = step * max(1, math.ceil(1e-3 / step - 1e-9))
+        out_ticks = max(1, math.ceil(1e-3 / step - 1e-9))
     return CosimSettings(step, stop, get("algorithm", "jacobi"), tuple(order),
                          get("coupling", "zoh"), delays["actuator_delay"],
-                         delays["sensor_delay"], ticks, interval)
+                         delays["sensor_delay"], ticks, out_ticks)
 
 
-def controller_parameters(scene: Scene) -> dict[str, float | int | bool]:
-    """FMU parameters of the controller from the scene's ``[controller]`` table.
-
-    Returns
-    -------
-    dict
-        ``gain`` [N], ``mode`` (Integer: index in :data:`controller.MODES`),
-        ``force_limit`` [N], ``symmetric_force_limit`` [N] (inf -> 1e30),
-        ``switch_on_time`` [s], ``lag_time_constant`` [s], ``enabled``.
+def scene_controller(scene: Scene) -> ControllerParams:
+    """The scene's ``[controller]`` table as validated, typed parameters.
 
     Raises
     ------
@@ -269,9 +269,28 @@ def controller_parameters(scene: Scene) -> dict[str, float | int | bool]:
                              f"{_suggest(key, [*names, 'fmu'])}")
     raw = {"enabled": False, **{k: v for k, v in scene.controller.items() if k != "fmu"}}
     try:
-        p = ControllerParams(**raw)
+        return ControllerParams(**raw)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{scene.source}: [controller] {exc}") from None
+
+
+def controller_parameters(scene: Scene) -> dict[str, float | int | bool]:
+    """The controller FMU's parameters for the scene: :func:`scene_controller` encoded for the
+    FMU (the one place that encoding happens).
+
+    Returns
+    -------
+    dict
+        ``gain`` [N], ``mode`` (Integer: index in :data:`controller.MODES`),
+        ``force_limit`` [N], ``symmetric_force_limit`` [N] (inf -> 1e30),
+        ``switch_on_time`` [s], ``lag_time_constant`` [s], ``enabled``.
+
+    Raises
+    ------
+    ValueError
+        Unknown key (with suggestion) or invalid value, naming the scene file.
+    """
+    p = scene_controller(scene)
     sym = p.symmetric_force_limit
     return {"gain": p.gain, "mode": MODES.index(p.mode), "force_limit": p.force_limit,
             "symmetric_force_limit": NO_LIMIT if math.isinf(sym) else sym,

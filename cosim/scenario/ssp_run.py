@@ -1,7 +1,7 @@
 """SSP files from the command line: run one (``drillcosim run X.ssp``), write a scene's
 (``drillcosim ssp SCENE --out X.ssp``).
 
-:func:`run_ssp` imports an SSP 1.0 system (:mod:`cosim.master.ssp_import`), runs it with our
+:func:`simulate_ssp` imports an SSP 1.0 system (:mod:`cosim.master.ssp_import`), runs it with our
 master (Jacobi, zero-order hold, the SSP's base step and component periods) and writes into
 the output folder (default ``out/<system name>``)
 
@@ -12,8 +12,8 @@ the output folder (default ``out/<system name>``)
   time [s], real-time factor, the components (file, period [s], start values) and the
   divergence (time, quantity, value) if the run stopped early.
 
-The scene-specific summary and plots of :func:`cosim.scenario.run.run_system` need a scene and
-are not written.
+The scene-specific summary and plots of :func:`cosim.scenario.run.simulate_system` need a
+scene and are not written.
 """
 
 from __future__ import annotations
@@ -26,19 +26,20 @@ from pathlib import Path
 
 from drillcosim.cosim.master.ssp import SspExport, export_ssp, unsupported_features
 from drillcosim.cosim.master.ssp_import import read_ssp
+from drillcosim.cosim.master.system import integer_multiple
 
-from .run import EXIT_DIVERGED, EXIT_OK, RunOutcome, scene_system_from_options, simulate_into
+from .run import EXIT_DIVERGED, EXIT_OK, SceneOutcome, scene_system_from_options, simulate_into
 
-__all__ = ["SspWarning", "WrittenSsp", "run_ssp", "write_scene_ssp"]
+__all__ = ["SspWarning", "WrittenSsp", "simulate_ssp", "write_scene_ssp"]
 
 
 class SspWarning(UserWarning):
     """Something in an SSP file applied differently than written (e.g. an ignored parameter)."""
 
 
-def run_ssp(path: str | Path, *, stop_time: float | None = None, step: float | None = None,
+def simulate_ssp(path: str | Path, *, stop_time: float | None = None, step: float | None = None,
             out_dir: str | Path | None = None, output_interval: float | None = None,
-            progress: bool | None = None) -> RunOutcome:
+            progress: bool | None = None) -> SceneOutcome:
     """Run an SSP 1.0 file and write ``results.csv`` and ``summary.json``.
 
     Parameters
@@ -59,7 +60,7 @@ def run_ssp(path: str | Path, *, stop_time: float | None = None, step: float | N
 
     Returns
     -------
-    RunOutcome
+    SceneOutcome
         ``exit_code`` 1 if the run stopped early (divergence or an FMU failure).
 
     Raises
@@ -89,8 +90,12 @@ def run_ssp(path: str | Path, *, stop_time: float | None = None, step: float | N
                              "stopTime): give one (--stop-time S)")
         out = Path(out_dir) if out_dir is not None else Path("out") / imp.name
         out.mkdir(parents=True, exist_ok=True)
-        interval = system.base_step if output_interval is None else output_interval
-        result, failure, csv = simulate_into(system, imp.outputs, interval, stop, out, progress)
+        ticks = 1 if output_interval is None else integer_multiple(output_interval,
+                                                                    system.base_step)
+        if ticks is None:
+            raise ValueError(f"output interval: a positive integer multiple of the step "
+                             f"{system.base_step:g} s, got {output_interval!r} s")
+        result, failure, csv = simulate_into(system, imp.outputs, ticks, stop, out, progress)
         summary = {
             "ssp_file": str(Path(path).resolve()), "system": imp.name,
             "step_s": system.base_step, "stop_time_s": stop, "end_time_s": result.end_time,
@@ -104,13 +109,13 @@ def run_ssp(path: str | Path, *, stop_time: float | None = None, step: float | N
         }
     files = (csv, write_json(summary, out / "summary.json"))
     if failure is not None:
-        return RunOutcome(EXIT_DIVERGED, f"run stopped at t = {result.end_time:.6g} s of "
-                          f"{stop:g} s: {failure['message']}; partial results in {out}",
-                          out, summary, files)
-    return RunOutcome(EXIT_OK, f"{imp.name}: {result.end_time:g} s simulated in "
-                      f"{result.wall_time:.1f} s (real-time factor "
-                      f"{result.real_time_factor:.3g}); results.csv, summary.json in {out}",
-                      out, summary, files)
+        return SceneOutcome(EXIT_DIVERGED, f"run stopped at t = {result.end_time:.6g} s of "
+                            f"{stop:g} s: {failure['message']}; partial results in {out}",
+                            out, summary, files)
+    return SceneOutcome(EXIT_OK, f"{imp.name}: {result.end_time:g} s simulated in "
+                        f"{result.wall_time:.1f} s (real-time factor "
+                        f"{result.real_time_factor:.3g}); results.csv, summary.json in {out}",
+                        out, summary, files)
 
 
 @dataclass(frozen=True)

@@ -42,15 +42,18 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["SUMMARY_KEYS", "load_results", "publish", "summarize", "write_json"]
+from drillcosim.cosim.master.files import atomic_write
+
+from .scene_system import CONTROLLER, PLANT
+
+__all__ = ["SUMMARY_KEYS", "column", "contact_bodies", "load_results", "summarize",
+           "write_json"]
 
 #: Top-level keys every summary has.
 SUMMARY_KEYS = ("scene", "scene_file", "stop_time_s", "end_time_s", "completed", "wall_time_s",
@@ -71,11 +74,16 @@ def load_results(csv_path: str | Path) -> np.ndarray:
     return out
 
 
-def _col(data: np.ndarray, name: str) -> np.ndarray | None:
-    for cand in (name, f"plant.{name}", f"controller.{name}"):
-        if cand in (data.dtype.names or ()):
-            return np.asarray(data[cand], dtype=float)
-    return None
+def column(data: np.ndarray, fmu: str, name: str) -> np.ndarray | None:
+    """Column ``'fmu.name'`` of a recorded result as floats, or None if not recorded."""
+    ref = f"{fmu}.{name}"
+    return np.asarray(data[ref], dtype=float) if ref in (data.dtype.names or ()) else None
+
+
+def contact_bodies(data: np.ndarray) -> list[int]:
+    """Bodies whose ``plant.body<b>_radial_deflection`` was recorded."""
+    return sorted({int(n[len(PLANT) + 5:].split("_")[0]) for n in (data.dtype.names or ())
+                   if n.startswith(f"{PLANT}.body") and n.endswith("_radial_deflection")})
 
 
 def _stats(t: np.ndarray, r: np.ndarray, t0: float, t1: float) -> dict[str, float]:
@@ -115,7 +123,7 @@ def summarize(data: np.ndarray, *, scene: str = "", scene_file: str = "",
     ----------
     data : numpy.ndarray
         Structured array, ``time`` [s] first, columns named ``plant.<output>``
-        and ``controller.<output>`` (bare output names are accepted too).
+        and ``controller.<output>``.
     scene, scene_file : str
         Scene name and file.
     spans : mapping, optional
@@ -153,16 +161,13 @@ def summarize(data: np.ndarray, *, scene: str = "", scene_file: str = "",
     t_last = float(t[-1]) if t.size else 0.0
     w0 = t_first + 2.0 / 3.0 * (t_last - t_first)
     if spans is None:
-        names = data.dtype.names or ()
-        bodies = sorted({int(n.split("body")[1].split("_")[0]) for n in names if "body" in n
-                         and n.endswith("_radial_deflection")})
-        spans = {b: {"span": "", "span_length": math.nan} for b in bodies}
+        spans = {b: {"span": "", "span_length": math.nan} for b in contact_bodies(data)}
     out_spans: dict[str, Any] = {}
     for body, info in spans.items():
-        r = _col(data, f"body{body}_radial_deflection")
+        r = column(data, PLANT, f"body{body}_radial_deflection")
         if r is None:
             continue
-        entries, t_contact, f_peak = _contact(t, _col(data, f"body{body}_contact_force"),
+        entries, t_contact, f_peak = _contact(t, column(data, PLANT, f"body{body}_contact_force"),
                                               output_interval)
         entry: dict[str, Any] = {"span": info.get("span", ""),
                                  "span_length_m": info.get("span_length", math.nan),
@@ -178,11 +183,12 @@ def summarize(data: np.ndarray, *, scene: str = "", scene_file: str = "",
         out_spans[f"body{body}"] = entry
     actuators: dict[str, Any] = {}
     for s in range(1, n_sites + 1):
-        fc = _peak(_col(data, f"actuator{s}_force_C"))
-        fe = _peak(_col(data, f"actuator{s}_force_E"))
-        p = _col(data, f"actuator{s}_power")
+        fc = _peak(column(data, CONTROLLER, f"actuator{s}_force_C"))
+        fe = _peak(column(data, CONTROLLER, f"actuator{s}_force_E"))
+        p = column(data, PLANT, f"actuator{s}_power")
         sel = t >= w0
-        strains = [x for x in (_col(data, f"strain{s}_C"), _col(data, f"strain{s}_E"))
+        strains = [x for x in (column(data, PLANT, f"strain{s}_C"),
+                                        column(data, PLANT, f"strain{s}_E"))
                     if x is not None]
         extra: dict[str, float] = {}
         if strains:
@@ -225,31 +231,7 @@ def _clean(obj: Any) -> Any:
     return obj
 
 
-def publish(tmp: str | Path, path: str | Path) -> Path:
-    """Give ``tmp`` the default permissions (0666 minus the umask) and rename it onto ``path``.
-
-    ``tempfile.mkstemp`` creates files readable by the owner only; the published
-    file gets the mode an ordinary ``open`` would have given it.
-    """
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
-    os.replace(tmp, path)
-    return Path(path)
-
-
 def write_json(obj: Any, path: str | Path) -> Path:
-    """Write ``obj`` as indented JSON atomically (temp file + ``os.replace``); nan -> null."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(_clean(obj), fh, indent=2, allow_nan=False)
-            fh.write("\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        publish(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    """Write ``obj`` as indented JSON atomically (:func:`cosim.master.files.atomic_write`);
+    non-finite floats become ``null``."""
+    return atomic_write(path, json.dumps(_clean(obj), indent=2, allow_nan=False) + "\n")

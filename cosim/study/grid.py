@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from drillcosim.cosim.master.system import integer_multiple
+
 __all__ = ["Point", "SweepSpec", "parse_list", "point_key"]
 
 KINDS = ("closed_loop", "open_loop")
@@ -101,7 +103,7 @@ def point_key(scene: str, engine: str, kind: str, gain: float, delay: float, ste
 
 @dataclass(frozen=True)
 class Point:
-    """One co-simulation of a sweep (all the arguments of a point runner).
+    """One co-simulation of a sweep (all the arguments of a point measurement).
 
     Attributes
     ----------
@@ -120,7 +122,7 @@ class Point:
     overrides : str
         JSON of extra scene overrides (nested dict), "" for none.
     options : tuple of (str, float)
-        Metric options for the runner (see :class:`cosim.study.point.PointOptions`).
+        Metric options for the measurement (see :class:`cosim.study.point.PointOptions`).
     """
 
     scene: str
@@ -140,7 +142,7 @@ class Point:
                          self.stop_time, self.overrides)
 
     def kwargs(self) -> dict[str, Any]:
-        """Keyword arguments of :func:`cosim.study.point.run_point`."""
+        """Keyword arguments of :func:`cosim.study.point.measure_point`."""
         return {"scene": self.scene, "gain": self.gain, "delay": self.delay, "step": self.step,
                 "stop_time": self.stop_time, "engine": self.engine,
                 "open_loop": self.kind == "open_loop",
@@ -188,6 +190,11 @@ class SweepSpec:
             raise ValueError(f"engine = {self.engine!r}: 'fmu' or 'python'")
         if not (self.stop_time > 0 and math.isfinite(self.stop_time)):
             raise ValueError(f"stop time: a finite number > 0 [s], got {self.stop_time!r}")
+        for h in self.steps:
+            if integer_multiple(self.stop_time, h) is None:
+                raise ValueError(f"stop time {self.stop_time:g} s: not a whole number of steps "
+                                 f"of {h:g} s ({self.stop_time / h:.6g}); choose a stop time "
+                                 "every step divides")
         over = json.dumps(dict(self.overrides), sort_keys=True) if self.overrides else ""
         opts = tuple(sorted((k, float(v)) for k, v in self.options.items()))
         common = {"stop_time": float(self.stop_time), "engine": self.engine,

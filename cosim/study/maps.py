@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from drillcosim.cosim.master.files import atomic_write
+
 __all__ = ["plot_maps", "predicted_boundary"]
 
 
@@ -61,10 +63,9 @@ def _cached_boundary(folder: Path, scene: str, steps: list[float], delays: list[
         except (ValueError, KeyError):
             pass
     b = predicted_boundary(scene, steps, delays, gain_range, overrides)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps({"ident": ident, "boundary": {repr(k): v for k, v in b.items()}},
-                              default=lambda x: None if not math.isfinite(x) else x))
-    os.replace(tmp, path)
+    atomic_write(path, json.dumps({"ident": ident, "boundary": {repr(k): v for k, v in
+                                                                b.items()}},
+                                  default=lambda x: None if not math.isfinite(x) else x))
     return b
 
 
@@ -82,7 +83,7 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
     Parameters
     ----------
     folder : path-like
-        A :func:`cosim.study.sweep.run_sweep` output folder.
+        A :func:`cosim.study.sweep.execute_sweep` output folder.
     predict : bool
         Overlay the linear prediction (computed once, cached in ``prediction.json``).
 
@@ -95,6 +96,8 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.colors import TwoSlopeNorm
+
+    from drillcosim.cosim.scenario.plots import save_figure
 
     from .table import read_table
 
@@ -191,10 +194,5 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
         title = {"stability": "Stability of the strain-feedback loop",
                  "benefit": "Control benefit (long span radial deflection)"}[what]
         fig.suptitle(f"{title}\n{scene}, engine '{engine}', {stop:g} s runs", fontsize=11)
-        path = folder / f"{what}_map.png"
-        tmp = path.with_name(f".{path.stem}.tmp.png")
-        fig.savefig(tmp, dpi=110)
-        plt.close(fig)
-        os.replace(tmp, path)
-        paths.append(path)
+        paths.append(save_figure(fig, folder / f"{what}_map.png", dpi=110))
     return paths

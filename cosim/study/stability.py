@@ -17,24 +17,25 @@ The controller (:class:`controller.StrainController`) samples the strains at
 the communication points and outputs, after each step, ``F = a F_prev + (1 - a)
 K c`` with ``a = exp(-H / T_lag)`` (``a = 0`` without actuator lag, ``F = K c``).
 
-Loop timing (the master's conventions, :mod:`cosim.master.algorithms`,
-:mod:`cosim.master.delays`): with samples ``s_k = C x_k`` and ``G_k`` the controller
-output computed from ``s_k`` (lag filter applied to the samples),
+Loop timing: taken from the master, not restated here. With samples ``s_k = C x_k``
+and ``G_k`` the controller output computed from ``s_k`` (lag filter applied),
 
     u_k = sum_l W_l G_{k-l}
 
-where ``W`` is the convolution of
+where ``W`` (:func:`loop_weights`) is the convolution of
 
-* the algorithm's inherent delay: **Gauss-Seidel** (either order) uses the
-  strains of ``t_k`` for the force over ``[t_k, t_k+1]`` (``m0 = 0``);
-  **Jacobi** exchanges outputs sampled at ``t_k``, and the controller output at
-  ``t_k`` was computed from the strains of ``t_{k-1}`` (``m0 = 1``: one step more);
-* each connection's transport delay ``tau = (n + f) H``: the sample ``n`` steps
-  back, linearly interpolated with the one ``n + 1`` back for ``0 < f < 1``
-  (``(1 - f) s[-n] + f s[-n-1]``, exactly the master's :class:`~cosim.master.delays.DelayLine`);
-* with ``coupling="linear"``, the extrapolation ``(1 + h) d[0] - h d[-1]`` of each
-  delayed signal to the midpoint of the target's step (``h = +-1/2`` source
-  steps, depending on algorithm and stepping order, see :func:`loop_weights`).
+* the exchange timing of the algorithm (:func:`cosim.master.algorithms.newest_sample_tick`):
+  a connection whose source has already stepped to ``t_k+1`` when the target steps over
+  ``[t_k, t_k+1]`` (Gauss-Seidel, source first) sees one sample more recent. The
+  controller's output at ``t_k+1`` comes from the strains it held over ``[t_k, t_k+1]``
+  (no direct feedthrough), so the loop's own delay is ``1 - j_sensor - j_actuator`` steps
+  (``j``: how far ahead of ``t_k`` the newest source sample is): Gauss-Seidel either
+  order 0, Jacobi 1;
+* each connection's delay line (:class:`cosim.master.delays.DelayLine`): its weights are
+  the line's response to a unit sample (:func:`line_weights`), the transport delay
+  ``tau = (n + f) H`` (the sample ``n`` steps back, interpolated with the one ``n + 1``
+  back for ``0 < f < 1``) and, with ``coupling="linear"``, the extrapolation to the
+  midpoint of the target's step (horizon ``1/2 - j`` source steps).
 
 The closed loop is the discrete system on ``z_k = [x_k, G_{k-1}, ..., G_{k-D}]``;
 it is stable iff the spectral radius of its matrix is < 1. ``ln(rho) / H`` is
@@ -53,19 +54,22 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
+from drillcosim.cosim.master.algorithms import newest_sample_tick
+from drillcosim.cosim.master.delays import DelayLine
+from drillcosim.cosim.master.system import ALGORITHMS
+
 __all__ = [
-    "ALGORITHM_DELAY_STEPS",
     "LoopModel",
     "closed_loop_matrix",
+    "coupled_plant",
     "discretize",
     "line_weights",
+    "loop_delay_steps",
     "loop_weights",
     "reduce_loop",
     "spectral_radius",
 ]
 
-#: Inherent loop delay of each algorithm [communication steps].
-ALGORITHM_DELAY_STEPS = {"gauss_seidel": 0, "jacobi": 1}
 _EPS = 1e-9
 
 
@@ -133,7 +137,7 @@ def _scalar_map(lam: np.ndarray, step: float, method: str, max_step: float | Non
 
 def line_weights(delay_steps: float, coupling: str = "zoh", horizon: float = 0.5
                  ) -> dict[int, float]:
-    """Weights of past samples delivered by one connection (master's DelayLine).
+    """Weights of past samples delivered by one connection: the master's DelayLine's response.
 
     Parameters
     ----------
@@ -148,29 +152,22 @@ def line_weights(delay_steps: float, coupling: str = "zoh", horizon: float = 0.5
     -------
     dict of int -> float
         ``{j: w_j}``: the delivered value is ``sum_j w_j s[-j]``, ``s[0]`` the
-        newest sample.
+        newest sample (zero weights left out).
     """
     if not (delay_steps >= 0 and math.isfinite(delay_steps)):
         raise ValueError(f"delay: a finite number >= 0, got {delay_steps!r} steps")
-    n = math.floor(delay_steps + _EPS)
-    f = delay_steps - n
-    if f < _EPS:
-        f = 0.0
-
-    def delayed(back: int) -> dict[int, float]:
-        if f == 0.0:
-            return {n + back: 1.0}
-        return {n + back: 1.0 - f, n + back + 1: f}
-
-    if coupling == "zoh":
-        return delayed(0)
-    if coupling != "linear":
+    if coupling not in ("zoh", "linear"):
         raise ValueError(f"coupling = {coupling!r}: 'zoh' or 'linear'")
+    line = DelayLine(delay_steps, 1.0, coupling == "linear")
     out: dict[int, float] = {}
-    for j, w in delayed(0).items():
-        out[j] = out.get(j, 0.0) + (1.0 + horizon) * w
-    for j, w in delayed(1).items():
-        out[j] = out.get(j, 0.0) - horizon * w
+    for j in range(line.depth):      # a unit sample j exchanges before the newest one
+        line.reset(0.0)
+        line.push(1.0)
+        for _ in range(j):
+            line.push(0.0)
+        w = line.value(horizon)
+        if w != 0.0:
+            out[j] = w
     return out
 
 
@@ -180,6 +177,18 @@ def _convolve(a: Mapping[int, float], b: Mapping[int, float]) -> dict[int, float
         for j, wb in b.items():
             out[i + j] = out.get(i + j, 0.0) + wa * wb
     return {k: w for k, w in out.items() if w != 0.0}
+
+
+def _lead(algorithm: str, order: Sequence[str], source: str, target: str) -> int:
+    """Steps the newest sample of ``source`` is ahead of the start of ``target``'s step."""
+    first = tuple(order).index(source) < tuple(order).index(target)
+    return newest_sample_tick(algorithm, first, 1, 0)
+
+
+def loop_delay_steps(algorithm: str, order: Sequence[str] = ("plant", "controller")) -> int:
+    """Inherent delay of the strain loop [communication steps] (Gauss-Seidel 0, Jacobi 1)."""
+    return 1 - _lead(algorithm, order, "plant", "controller") \
+        - _lead(algorithm, order, "controller", "plant")
 
 
 def loop_weights(actuator_delay_steps: float, sensor_delay_steps: float = 0.0,
@@ -195,31 +204,20 @@ def loop_weights(actuator_delay_steps: float, sensor_delay_steps: float = 0.0,
         interpolation between samples, as the master does).
     algorithm : {"gauss_seidel", "jacobi"}
     order : sequence of str
-        Gauss-Seidel stepping order (``("plant", "controller")`` or reversed).
+        Stepping order of ``"plant"`` and ``"controller"`` (Gauss-Seidel).
     coupling : {"zoh", "linear"}
 
     Returns
     -------
     dict of int -> float
-
-    Notes
-    -----
-    Linear-coupling horizons (newest source sample to the target's step midpoint,
-    in steps): Jacobi +1/2 on both connections; Gauss-Seidel plant first: the
-    controller reads strains already at ``t_k+1`` (sensor -1/2, actuator +1/2);
-    controller first: the reverse.
     """
-    if algorithm not in ALGORITHM_DELAY_STEPS:
-        raise ValueError(f"algorithm = {algorithm!r}: one of {', '.join(ALGORITHM_DELAY_STEPS)}")
-    if algorithm == "jacobi":
-        h_act, h_sen = 0.5, 0.5
-    elif tuple(order)[0] == "plant":
-        h_act, h_sen = 0.5, -0.5
-    else:
-        h_act, h_sen = -0.5, 0.5
-    w = _convolve(line_weights(actuator_delay_steps, coupling, h_act),
-                  line_weights(sensor_delay_steps, coupling, h_sen))
-    m0 = ALGORITHM_DELAY_STEPS[algorithm]
+    if algorithm not in ALGORITHMS:
+        raise ValueError(f"algorithm = {algorithm!r}: one of {', '.join(ALGORITHMS)}")
+    j_act = _lead(algorithm, order, "controller", "plant")
+    j_sen = _lead(algorithm, order, "plant", "controller")
+    w = _convolve(line_weights(actuator_delay_steps, coupling, 0.5 - j_act),
+                  line_weights(sensor_delay_steps, coupling, 0.5 - j_sen))
+    m0 = loop_delay_steps(algorithm, order)
     return {k + m0: v for k, v in sorted(w.items())}
 
 
@@ -324,6 +322,28 @@ def reduce_loop(A: np.ndarray, B: np.ndarray, C: np.ndarray, tol: float = 1e-10
     return At[:r, :r], (Ti @ B)[:r], (C @ T)[:, :r], lam[~keep]
 
 
+def coupled_plant(scene: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """The scene's plant linearized (full 3D, top-drive frame) and reduced to the loop's modes.
+
+    Parameters
+    ----------
+    scene : Scene
+        A loaded :class:`plant.scene.Scene`.
+
+    Returns
+    -------
+    A, B, C, dropped : numpy.ndarray
+        As :func:`reduce_loop` returns them for :func:`plant.linearize.linearize`'s
+        ``A`` [1/s], ``B``, ``C``.
+    stable_step : float
+        The plant model's own stable RK4 step [s].
+    """
+    from drillcosim.plant.linearize import linearize
+
+    lin = linearize(scene.plant, "full3d")
+    return (*reduce_loop(lin.A, lin.B, lin.C), lin.model.stable_step())
+
+
 def spectral_radius(M: np.ndarray) -> float:
     """Largest eigenvalue modulus of ``M`` (stable iff < 1)."""
     if M.size == 0:
@@ -390,8 +410,7 @@ class LoopModel:
         **kwargs
             Override any field (e.g. ``algorithm="jacobi"``, ``method="rk4"``).
         """
-        from drillcosim.cosim.scenario.scene_system import controller_parameters, cosim_settings
-        from drillcosim.plant.linearize import linearize
+        from drillcosim.cosim.scenario.scene_system import cosim_settings, scene_controller
         from drillcosim.plant.scene import load_scene
 
         sc = load_scene(scene, overrides=dict(overrides) if overrides else None) \
@@ -399,15 +418,14 @@ class LoopModel:
         st = cosim_settings(sc)
         if st.controller_sample_ticks != 1:
             raise ValueError("LoopModel: only controller_sample_period = step is modelled")
-        lin = linearize(sc.plant, "full3d")
-        A, B, C, dropped = reduce_loop(lin.A, lin.B, lin.C)
+        A, B, C, dropped, stable_step = coupled_plant(sc)
         opts: dict[str, Any] = {
             "algorithm": st.algorithm, "order": tuple(st.order), "coupling": st.coupling,
             "sensor_delay": st.sensor_delay,
-            "lag_time_constant": float(controller_parameters(sc)["lag_time_constant"]),
+            "lag_time_constant": scene_controller(sc).lag_time_constant,
         }
         if kwargs.get("method") == "rk4" and "max_step" not in kwargs:
-            kwargs["max_step"] = lin.model.stable_step()
+            kwargs["max_step"] = stable_step
         opts.update(kwargs)
         return cls(A, B, C, dropped=dropped, **opts)
 
@@ -524,7 +542,7 @@ def _boundary_report(scene: str = "paper_closed_loop") -> list[str]:
     """The numbers of ``docs/delay_study.md`` (``python -m drillcosim.cosim.study.stability [SCENE]``)."""
     lm = LoopModel.from_scene(scene)
     lines = [f"scene {scene}: loop {lm.algorithm} (inherent delay "
-             f"{ALGORITHM_DELAY_STEPS[lm.algorithm]} step), coupling {lm.coupling}, "
+             f"{loop_delay_steps(lm.algorithm, lm.order)} step), coupling {lm.coupling}, "
              f"{lm.A.shape[0]} coupled states ({lm.dropped.size} decoupled modes dropped)"]
     for h in (1e-4, 2.5e-4):
         tau = lm.critical_delay(1e9, h, delay_max=1e-3, per_step=2)

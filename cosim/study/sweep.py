@@ -1,7 +1,7 @@
 """Parameter sweeps over controller gain x actuator delay x communication step.
 
-``drillcosim sweep SCENE --gain LIST --delay LIST --step LIST`` runs one
-co-simulation per point (:func:`cosim.study.point.run_point`), plus one
+``drillcosim sweep SCENE --gain LIST --delay LIST --step LIST`` simulates one
+co-simulation per point (:func:`cosim.study.point.measure_point`), plus one
 open-loop reference per step for the control benefit, and records each point
 as it finishes in ``OUT/results.csv`` / ``results.parquet``
 (:mod:`cosim.study.table`). Re-running the same sweep into the same folder
@@ -12,12 +12,13 @@ cores), an existing dask.distributed cluster (``scheduler``: an address or a
 ``distributed.Client``), or ``workers=0``: in this process, one after another.
 A point that raises, or whose worker process dies, is recorded as an ``error``
 row with its reason and never stops the sweep (``retry_errors`` re-runs them).
+The verdicts (stable / unstable / undecided, :mod:`cosim.study.verdict`) are the table's,
+computed from the finished rows whatever order they finished in.
 """
 
 from __future__ import annotations
 
 import json
-import math
 import os
 import time
 from collections.abc import Callable, Iterator, Mapping
@@ -28,17 +29,18 @@ from pathlib import Path
 from typing import Any
 
 from .grid import Point, SweepSpec, parse_list
-from .point import error_row, run_point
-from .table import ResultTable
+from .point import error_row, measure_point
+from .table import ResultTable, verdict_counts
 
-__all__ = ["SweepOutcome", "execute_point", "parse_list", "run_sweep", "SweepSpec"]
+__all__ = ["SweepOutcome", "SweepSpec", "execute_sweep", "judging_note", "parse_list", "point_row"]
 
-Runner = Callable[..., dict]
+#: A point measurement: ``measure(**point.kwargs()) -> dict`` (module-level, picklable).
+Measure = Callable[..., dict]
 
 
 @dataclass(frozen=True)
 class SweepOutcome:
-    """What :func:`run_sweep` did.
+    """What :func:`execute_sweep` did, and the verdicts of the sweep's points.
 
     Attributes
     ----------
@@ -48,24 +50,33 @@ class SweepOutcome:
     n_skipped : int
         Already in the table.
     n_run : int
-    n_errors : int
-        Points recorded with status ``error`` in this run.
-    n_unstable : int
-        Closed-loop points recorded unstable in this run.
     wall_time : float
         [s].
+    counts : dict of str -> int
+        Points of this sweep per verdict (:data:`cosim.study.verdict.VERDICTS`), from the
+        table after the run: the same for any completion order and after a resume.
     """
 
     folder: Path
     n_points: int
     n_skipped: int
     n_run: int
-    n_errors: int
-    n_unstable: int
     wall_time: float
+    counts: dict[str, int]
+
+    @property
+    def n_errors(self) -> int:
+        """Points recorded with status ``error``."""
+        return self.counts.get("error", 0)
+
+    def summary(self) -> str:
+        """One line of verdict counts (a function of the table only)."""
+        parts = [f"{n} {v}" for v, n in self.counts.items() if n]
+        return (f"sweep: {self.n_points} points: {', '.join(parts) or 'none finished'}; table "
+                f"{self.folder / 'results.csv'} and results.parquet")
 
 
-def execute_point(point: Point, runner: Runner = run_point) -> dict[str, Any]:
+def point_row(point: Point, measure: Measure = measure_point) -> dict[str, Any]:
     """Run a point and return its full table row; exceptions become an ``error`` row.
 
     Module-level and free of closures, so it pickles to process-pool and dask
@@ -76,25 +87,22 @@ def execute_point(point: Point, runner: Runner = run_point) -> dict[str, Any]:
             "kind": point.kind, "gain": point.gain, "delay": point.delay,
             "step": point.step, "stop_time": point.stop_time}
     try:
-        row = dict(runner(**point.kwargs()))
+        row = dict(measure(**point.kwargs()))
     except Exception as exc:  # one bad point never stops the sweep
         row = error_row(exc, time.perf_counter() - wall0)
-    if point.kind == "open_loop" and row.get("status") == "ok":
-        row["stable"] = 1.0          # the reference: its growth is the forced build-up
-        row["reason"] = ""
     row.update(base)
     return row
 
 
 def _lost_row(point: Point, reason: str) -> dict[str, Any]:
-    row = {"status": "error", "stable": math.nan, "reason": reason}
+    row = {"status": "error", "reason": reason}
     row.update({"key": point.key, "scene": point.scene, "engine": point.engine,
                 "kind": point.kind, "gain": point.gain, "delay": point.delay,
                 "step": point.step, "stop_time": point.stop_time})
     return row
 
 
-def _local(points: list[Point], runner: Runner, workers: int
+def _local(points: list[Point], measure: Measure, workers: int
            ) -> Iterator[dict[str, Any]]:
     """Process pool; a dead worker breaks the pool: restart it, retry each point once."""
     import multiprocessing
@@ -104,7 +112,7 @@ def _local(points: list[Point], runner: Runner, workers: int
     while todo:
         pool = ProcessPoolExecutor(max_workers=min(workers, len(todo)),
                                    mp_context=multiprocessing.get_context("spawn"))
-        futures = {pool.submit(execute_point, p, runner): p for p in todo}
+        futures = {pool.submit(point_row, p, measure): p for p in todo}
         todo = []
         try:
             pending = set(futures)
@@ -127,13 +135,13 @@ def _local(points: list[Point], runner: Runner, workers: int
             pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _dask(points: list[Point], runner: Runner, scheduler: Any
+def _dask(points: list[Point], measure: Measure, scheduler: Any
           ) -> Iterator[dict[str, Any]]:
     from distributed import Client, as_completed
 
     client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
     try:
-        futures = {client.submit(execute_point, p, runner, pure=False): p for p in points}
+        futures = {client.submit(point_row, p, measure, pure=False): p for p in points}
         for fut in as_completed(futures):
             p = futures[fut]
             try:
@@ -145,14 +153,14 @@ def _dask(points: list[Point], runner: Runner, scheduler: Any
             client.close()
 
 
-def _inline(points: list[Point], runner: Runner) -> Iterator[dict[str, Any]]:
+def _inline(points: list[Point], measure: Measure) -> Iterator[dict[str, Any]]:
     for p in points:
-        yield execute_point(p, runner)
+        yield point_row(p, measure)
 
 
-def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int | None = None,
-              scheduler: Any = None, progress: bool | None = None,
-              runner: Runner = run_point, retry_errors: bool = False) -> SweepOutcome:
+def execute_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int | None = None,
+                  scheduler: Any = None, progress: bool | None = None,
+                  measure: Measure = measure_point, retry_errors: bool = False) -> SweepOutcome:
     """Run (or resume) a sweep and record every point in ``out_dir``.
 
     Parameters
@@ -167,8 +175,8 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int | Non
         Submit to this dask.distributed cluster instead of a local pool.
     progress : bool or None
         Progress bar counting points (None: only on a TTY).
-    runner : callable
-        Point runner (module-level, picklable), default :func:`run_point`.
+    measure : callable
+        Point measurement (module-level, picklable), default :func:`measure_point`.
     retry_errors : bool
         Re-run points recorded as ``error``.
 
@@ -182,7 +190,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int | Non
     points = spec.points()
     table = ResultTable(out_dir)
     lock = table.lock()
-    table.rows = table.load()        # re-read under the lock
+    table.rows = table.load(repair=True)     # re-read and repaired under the lock
     done = table.keys(include_errors=not retry_errors)
     todo = [p for p in points if p.key not in done]
     meta = {"spec": {k: (list(v) if isinstance(v, (list, tuple)) else v)
@@ -190,25 +198,24 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int | Non
     (Path(out_dir) / "sweep.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
     n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
     if scheduler is not None:
-        rows = _dask(todo, runner, scheduler)
+        rows = _dask(todo, measure, scheduler)
     elif n_workers == 0 or not todo:
-        rows = _inline(todo, runner)
+        rows = _inline(todo, measure)
     else:
-        rows = _local(todo, runner, n_workers)
-    n_err = n_unst = 0
+        rows = _local(todo, measure, n_workers)
     bar = tqdm(total=len(points), initial=len(points) - len(todo), unit="point",
                desc="sweep", disable=None if progress is None else not progress)
     try:
         for row in rows:
-            full = table.append(row)
-            n_err += full["status"] == "error"
-            n_unst += full["kind"] == "closed_loop" and full["stable"] == 0.0
+            table.append(row)
             bar.update(1)
     finally:
         bar.close()
         lock.close()
+    keys = {p.key for p in points}
+    counts = verdict_counts(r for r in table.rows if r["key"] in keys)
     return SweepOutcome(Path(out_dir), len(points), len(points) - len(todo), len(todo),
-                        n_err, n_unst, time.perf_counter() - wall0)
+                        time.perf_counter() - wall0, counts)
 
 
 def sweep_from_args(scene: str, gain: str, delay: str, step: str, stop_time: float | None,
@@ -225,7 +232,33 @@ def sweep_from_args(scene: str, gain: str, delay: str, step: str, stop_time: flo
     if stop_time is None:
         stop_time = cosim_settings(load_scene(scene, overrides=dict(sets or {}) or None)
                                    ).stop_time
-    return SweepSpec(scene, gains, delays, steps, float(stop_time), engine,
+    spec = SweepSpec(scene, gains, delays, steps, float(stop_time), engine,
                      dict(sets or {}), True, dict(options or {}))
+    spec.points()                   # bad combinations fail here, before anything runs
+    return spec
 
 
+
+
+def judging_note(spec: SweepSpec) -> str:
+    """One line when ``spec.stop_time`` is below the scene's judging window, else ``""``.
+
+    See :func:`cosim.study.verdict.scene_judging_window`; closed-loop points of such a sweep
+    that do not diverge are ``undecided``.
+    """
+    import numpy as np
+
+    from .point import PointOptions
+    from .verdict import scene_judging_window
+
+    opts = PointOptions.from_kwargs(dict(spec.options))
+    try:
+        window = scene_judging_window(spec.scene, spec.overrides, opts.highpass,
+                                      opts.fit_fraction)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        return f"no judging window for {spec.scene} ({exc}); growth verdicts are unchecked"
+    if spec.stop_time >= window.min_stop_time:
+        return ""
+    return (f"stop time {spec.stop_time:g} s is below the {window.min_stop_time:.3g} s needed "
+            f"to judge growth in {spec.scene} ({window.describe()}): closed-loop points that do "
+            "not diverge will be 'undecided'")

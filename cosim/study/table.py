@@ -1,19 +1,26 @@
-"""The sweep's results table: one CSV appended row by row, and a Parquet copy.
+"""The sweep's results table: ``results.csv``, and ``results.parquet`` with the same rows.
 
-``results.csv`` is the record: a header line written atomically when the table
-is created, then one line per finished point, each appended with a single
-``write`` followed by ``flush`` + ``fsync``. A kill can at worst leave a partial
-last line; :meth:`ResultTable.load` drops it (and any line with the wrong number
-of fields) and rewrites the file atomically without it, so the table is never
-corrupt and a resumed sweep simply re-runs that point.
+Each row is one finished point. Its *measured* columns come from the point measurement
+(:func:`cosim.study.point.measure_point`); its *derived* columns (``verdict``, ``stable``,
+``growth_excess``, ``benefit_<span>`` and, for completed runs, ``reason``) are a function
+of that row and the open-loop reference row of the same scene, engine, step, stop time and
+overrides (:func:`derive`), never of the order the points finished in. Whenever a row is
+added, every row's derived columns are computed again: if only the new row has derived
+values, its line is appended to the CSV (one ``write``, ``flush`` + ``fsync``); if an older
+row's changed (its reference arrived), the CSV is rewritten atomically
+(:func:`cosim.master.files.atomic_write`). The Parquet copy is rewritten atomically from the
+same rows after every change, so both files hold the same table.
 
-Columns that need the open-loop reference of the same scene/engine/step/stop
-time are derived (:func:`fill_benefit`, applied when a row is appended if the
-reference is known, and again on reading): ``benefit_<span> = 1 - rms_<span> /
-rms_<span>(open loop)`` (1 = all deflection removed, 0 = none, < 0 = worse),
-``growth_excess`` and the final ``stable``. ``results.parquet`` holds all rows
-with them filled in, rewritten atomically (temporary file + ``os.replace``)
-after every row.
+A kill can at worst leave a partial last CSV line, or a Parquet copy one row behind:
+reading the table (:class:`ResultTable`, :func:`read_table`) drops the partial line, keeps the
+newest of duplicate keys and recomputes the derived columns; a writing sweep (holding the
+folder's lock, :meth:`ResultTable.load` with ``repair=True``) also rewrites whichever file
+differs from the result. A resumed sweep thus re-runs that point and re-judges the rows it
+depends on; a reader never writes (it may run while a sweep appends).
+
+``benefit_<span> = 1 - rms_<span> / rms_<span>(open loop)`` (1 = all deflection removed,
+0 = none, < 0 = worse); ``growth_excess = growth_rate - growth_rate(open loop)`` [1/s];
+``verdict`` and ``stable`` (1 stable, 0 unstable, NaN otherwise): :mod:`cosim.study.verdict`.
 """
 
 from __future__ import annotations
@@ -22,49 +29,31 @@ import csv
 import io
 import math
 import os
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["COLUMNS", "ResultTable"]
+from drillcosim.cosim.master.files import atomic_write
+
+from .verdict import VERDICTS, judge
+
+__all__ = ["COLUMNS", "DERIVED", "ResultTable", "derive", "read_table", "verdict_counts"]
 
 #: Column order of the table (units: gain N/strain, times s, deflections m, force N, power W,
-#: growth_rate 1/s).
+#: growth rates 1/s).
 COLUMNS: tuple[str, ...] = (
     "key", "scene", "engine", "kind", "gain", "delay", "step", "stop_time", "status",
-    "stable", "growth_rate", "divergence_time", "end_time", "rms_long", "rms_short",
-    "benefit_long", "benefit_short", "growth_excess", "peak_deflection_long", "peak_deflection_short",
-    "peak_force", "peak_power", "wall_time", "reason",
+    "verdict", "stable", "growth_rate", "growth_noise", "growth_excess", "divergence_time",
+    "end_time", "min_stop_time", "rms_long", "rms_short", "benefit_long", "benefit_short",
+    "peak_deflection_long", "peak_deflection_short", "peak_force", "peak_power", "wall_time",
+    "reason",
 )
-_TEXT = {"key", "scene", "engine", "kind", "status", "reason"}
+#: Columns computed from the rows by :func:`derive` (``reason`` too, for completed runs).
+DERIVED: tuple[str, ...] = ("verdict", "stable", "growth_excess", "benefit_long",
+                            "benefit_short")
+_TEXT = {"key", "scene", "engine", "kind", "status", "verdict", "reason"}
 SPANS = ("long", "short")
-#: A completed closed-loop run is unstable when its strain-envelope growth rate exceeds the
-#: open-loop run's (same scene/engine/step/stop time) by more than this [1/s].
-GROWTH_MARGIN = 0.5
-
-
-def _fsync_dir(path: Path) -> None:
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:  # pragma: no cover - platforms without directory fds
-        return
-    try:
-        os.fsync(fd)
-    except OSError:  # pragma: no cover
-        pass
-    finally:
-        os.close(fd)
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` via a temporary file in the same folder + ``os.replace``."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
-    _fsync_dir(path.parent)
+_STABLE = {"stable": 1.0, "unstable": 0.0}
 
 
 def _format(value: Any) -> str:
@@ -91,49 +80,86 @@ def _line(row: Mapping[str, Any]) -> str:
     return buf.getvalue()
 
 
-def fill_benefit(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Derived columns from the matching open-loop row (same scene/engine/step/stop).
+_HEADER = _line(dict(zip(COLUMNS, COLUMNS)))
 
-    ``benefit_<span> = 1 - rms / rms_open``; ``growth_excess = growth_rate -
-    growth_rate_open`` [1/s]; a completed closed-loop run with ``growth_excess >
-    GROWTH_MARGIN`` gets ``stable = 0`` and a reason.
+
+def _csv_text(rows: Iterable[Mapping[str, Any]]) -> str:
+    return _HEADER + "".join(_line(r) for r in rows)
+
+
+def full_row(row: Mapping[str, Any]) -> dict[str, Any]:
+    """``row`` with every column of :data:`COLUMNS` (missing numbers NaN, missing text '')."""
+    return {c: row.get(c, "" if c in _TEXT else math.nan) for c in COLUMNS}
+
+
+def reference_key(key: str) -> str:
+    """Key of the open-loop reference of a point's key (:func:`cosim.study.grid.point_key`)."""
+    scene, engine, _kind, _gain, _delay, rest = key.split("|", 5)
+    return "|".join((scene, engine, "open_loop", "0", "0", rest))
+
+
+def derive(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Rows with their derived columns computed from the measured ones (new dicts, same order).
+
+    The result depends on the set of rows only: every row is judged against the open-loop row
+    whose key is :func:`reference_key` of its own (:func:`cosim.study.verdict.judge`).
     """
-    ref: dict[tuple, dict[str, Any]] = {}
+    by_key = {r["key"]: r for r in rows}
+    out = []
     for r in rows:
-        if r.get("kind") == "open_loop" and r.get("status") == "ok":
-            ref[(r["scene"], r["engine"], r["step"], r["stop_time"])] = r
-    for r in rows:
-        o = ref.get((r.get("scene"), r.get("engine"), r.get("step"), r.get("stop_time")))
+        d = full_row(r)
+        ref = by_key.get(reference_key(d["key"])) if d["kind"] == "closed_loop" else None
+        verdict, reason, excess = judge(d, ref)
+        d["verdict"], d["stable"] = verdict, _STABLE.get(verdict, math.nan)
+        if verdict == "reference":
+            d["stable"] = 1.0
+        if d["status"] == "ok":
+            d["reason"] = reason
+        d["growth_excess"] = excess
+        ok_ref = ref is not None and ref.get("status") == "ok"
         for s in SPANS:
             b = math.nan
-            if r.get("kind") == "closed_loop" and o is not None:
-                rc, ro = r.get(f"rms_{s}", math.nan), o.get(f"rms_{s}", math.nan)
+            if d["kind"] == "open_loop":
+                b = 0.0 if d["status"] == "ok" else math.nan
+            elif ok_ref:
+                rc, ro = d[f"rms_{s}"], ref.get(f"rms_{s}", math.nan)
                 if isinstance(rc, float) and isinstance(ro, float) and ro > 0:
                     b = 1.0 - rc / ro
-            if r.get("kind") == "open_loop":
-                b = 0.0 if r.get("status") == "ok" else math.nan
-            r[f"benefit_{s}"] = b
-        if r.get("kind") == "closed_loop" and r.get("status") == "ok":
-            g0 = o.get("growth_rate", math.nan) if o is not None else math.nan
-            ex = r.get("growth_rate", math.nan) - g0
-            r["growth_excess"] = ex
-            if math.isfinite(ex) and ex > GROWTH_MARGIN:
-                r["stable"] = 0.0
-                r["reason"] = (f"strain envelope grows {ex:.3g} 1/s faster than open loop "
-                               f"(> {GROWTH_MARGIN:g} 1/s)")
-            elif math.isfinite(ex):
-                r["stable"] = 1.0
-                r["reason"] = ""
-    return rows
+            d[f"benefit_{s}"] = b
+        out.append(d)
+    return out
+
+
+def verdict_counts(rows: Iterable[Mapping[str, Any]]) -> dict[str, int]:
+    """Number of rows per verdict (every value of :data:`cosim.study.verdict.VERDICTS`)."""
+    counts = dict.fromkeys(VERDICTS, 0)
+    for r in rows:
+        counts[r["verdict"]] = counts.get(r["verdict"], 0) + 1
+    return counts
+
+
+def _same(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
+    """Equal rows (NaN equal to NaN)."""
+    for c in COLUMNS:
+        x, y = a.get(c), b.get(c)
+        if x != y and not (isinstance(x, float) and isinstance(y, float)
+                           and math.isnan(x) and math.isnan(y)):
+            return False
+    return True
 
 
 class ResultTable:
-    """Append-only results table of a sweep folder.
+    """The results table of a sweep folder.
 
     Parameters
     ----------
     folder : path-like
         Created if missing; holds ``results.csv`` and ``results.parquet``.
+
+    Attributes
+    ----------
+    rows : list of dict
+        Every row, derived columns filled, in the order the points finished.
     """
 
     def __init__(self, folder: str | os.PathLike):
@@ -144,49 +170,46 @@ class ResultTable:
         self.rows: list[dict[str, Any]] = self.load()
 
     # -- reading -------------------------------------------------------------------
-    def load(self) -> list[dict[str, Any]]:
-        """Read the CSV (creating it if missing); drop and repair a partial last line.
+    def load(self, repair: bool = False) -> list[dict[str, Any]]:
+        """Read the CSV: complete rows, newest of a repeated key, derived columns recomputed.
+
+        Parameters
+        ----------
+        repair : bool
+            Also bring the files up to date (for the sweep holding the folder's lock): create
+            the CSV if missing; rewrite it, and the Parquet copy, atomically where they differ
+            from the rows read (a partial last line, stale derived columns, a lagging copy).
 
         Returns
         -------
         list of dict
             One dict per complete row, numbers as float (NaN for empty cells).
         """
-        header = _line(dict(zip(COLUMNS, COLUMNS)))
         if not self.csv_path.exists():
-            atomic_write_bytes(self.csv_path, header.encode())
+            if repair:
+                atomic_write(self.csv_path, _HEADER)
             return []
-        raw = self.csv_path.read_bytes()
-        text = raw.decode("utf-8", errors="replace")
-        good_end = text.rfind("\n") + 1
-        lines = text[:good_end].splitlines(keepends=True)
-        rows: list[dict[str, Any]] = []
-        kept = [header]
-        bad = good_end != len(text)
-        if not lines or lines[0] != header:
-            raise ValueError(f"{self.csv_path}: not a sweep table (header differs); "
-                             "use another --out folder")
+        text = self.csv_path.read_bytes().decode("utf-8", errors="replace")
+        lines = text[: text.rfind("\n") + 1].splitlines(keepends=True)
+        if not lines or lines[0] != _HEADER:
+            raise ValueError(f"{self.csv_path}: not a sweep table of this version (header "
+                             "differs); use another --out folder")
+        parsed: dict[str, dict[str, Any]] = {}
         for line in lines[1:]:
             try:
                 fields = next(csv.reader([line]))
-            except (csv.Error, StopIteration):
-                bad = True
+                if len(fields) != len(COLUMNS):
+                    continue
+                row = {c: _parse(c, v) for c, v in zip(COLUMNS, fields)}
+            except (csv.Error, StopIteration, ValueError):
                 continue
-            if len(fields) != len(COLUMNS):
-                bad = True
-                continue
-            try:
-                rows.append({c: _parse(c, v) for c, v in zip(COLUMNS, fields)})
-            except ValueError:
-                bad = True
-                continue
-            if any(r["key"] == rows[-1]["key"] for r in rows[:-1]):
-                rows = [r for r in rows[:-1] if r["key"] != rows[-1]["key"]] + rows[-1:]
-                bad = True      # a duplicate key: keep the newest row
-            kept.append(line)
-        if bad:
-            kept = [header] + [_line(r) for r in rows]
-            atomic_write_bytes(self.csv_path, "".join(kept).encode())
+            parsed.pop(row["key"], None)      # a repeated key: the newest row, at its place
+            parsed[row["key"]] = row
+        rows = derive(list(parsed.values()))
+        if repair and _csv_text(rows) != text:
+            atomic_write(self.csv_path, _csv_text(rows))
+        if repair and rows and not self._parquet_holds(rows):
+            self._write_parquet(rows)
         return rows
 
     def lock(self):
@@ -210,51 +233,58 @@ class ResultTable:
 
     # -- writing -------------------------------------------------------------------
     def append(self, row: Mapping[str, Any]) -> dict[str, Any]:
-        """Append one finished point (fsync'ed) and refresh the Parquet copy.
+        """Add one finished point, re-derive every row, update both files.
 
-        A row whose key is already present replaces it (a retried error).
+        A row whose key is already present replaces it (a retried error). Returns the new
+        row as stored (derived columns filled).
         """
-        full = {c: row.get(c, "" if c in _TEXT else math.nan) for c in COLUMNS}
-        known = [r for r in self.rows if r["key"] == full["key"]]
-        if known:
-            self.rows = [r for r in self.rows if r["key"] != full["key"]]
-            self.rows.append(full)
-            fill_benefit(self.rows)
-            self._rewrite_csv()
-        else:
-            self.rows.append(full)
-            fill_benefit(self.rows)
+        new = full_row(row)
+        old = [r for r in self.rows if r["key"] != new["key"]]
+        rows = derive([*old, new])
+        if self.csv_path.exists() and len(old) == len(self.rows) and \
+                all(_same(a, b) for a, b in zip(self.rows, rows)):
             with open(self.csv_path, "a", encoding="utf-8") as fh:
-                fh.write(_line(full))
+                fh.write(_line(rows[-1]))
                 fh.flush()
                 os.fsync(fh.fileno())
-        self.write_parquet()
-        return full
+        else:   # a new file, a replaced row, or rows whose verdict depends on the new one
+            atomic_write(self.csv_path, _csv_text(rows))
+        self.rows = rows
+        self._write_parquet(rows)
+        return rows[-1]
 
-    def _rewrite_csv(self) -> None:
-        text = _line(dict(zip(COLUMNS, COLUMNS))) + "".join(_line(r) for r in self.rows)
-        atomic_write_bytes(self.csv_path, text.encode())
-
-    def write_parquet(self) -> Path:
-        """Write all rows (benefit filled) to ``results.parquet`` atomically."""
+    def _write_parquet(self, rows: Sequence[Mapping[str, Any]]) -> Path:
         import pyarrow as pa
         import pyarrow.parquet as pq
 
-        rows = fill_benefit([dict(r) for r in self.rows])
         cols = {c: pa.array([r[c] for r in rows], type=pa.string() if c in _TEXT
                             else pa.float64()) for c in COLUMNS}
         buf = pa.BufferOutputStream()
         pq.write_table(pa.table(cols), buf)
-        atomic_write_bytes(self.parquet_path, buf.getvalue().to_pybytes())
+        atomic_write(self.parquet_path, buf.getvalue().to_pybytes())
         return self.parquet_path
+
+    def _parquet_holds(self, rows: Sequence[Mapping[str, Any]]) -> bool:
+        """Does ``results.parquet`` hold exactly ``rows`` (same order)?"""
+        if not self.parquet_path.exists():
+            return False
+        import pyarrow.parquet as pq
+
+        try:
+            saved = pq.read_table(self.parquet_path).to_pylist()
+        except Exception:  # noqa: BLE001 - unreadable (e.g. cut by a kill): rewrite it
+            return False
+        return len(saved) == len(rows) and all(_same(a, b) for a, b in zip(saved, rows))
 
 
 def read_table(folder_or_file: str | os.PathLike) -> list[dict[str, Any]]:
-    """Rows of a sweep (folder, ``results.csv`` or ``results.parquet``), benefit filled."""
+    """Rows of a sweep (folder, ``results.csv`` or ``results.parquet``), derived columns filled.
+
+    A folder or CSV is read as a :class:`ResultTable` (rows re-derived; nothing is written).
+    """
     p = Path(folder_or_file)
     if p.suffix == ".parquet":
         import pyarrow.parquet as pq
 
         return pq.read_table(p).to_pylist()
-    folder = p.parent if p.suffix == ".csv" else p
-    return fill_benefit(ResultTable(folder).rows)
+    return ResultTable(p.parent if p.suffix == ".csv" else p).rows

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drillcosim.cosim.master.cosimulation import CoSimulation
+from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.master.ssp import export_ssp
 from drillcosim.cosim.master.system import SystemSpec
 from drillcosim.cosim.scenario.scene_system import scene_system
@@ -72,5 +72,5 @@ def closed_loop(plant_fmu: Path, controller_fmu: Path, folder: Path, step: float
     folder.mkdir(parents=True, exist_ok=True)
     exp = export_ssp(system, folder / f"{name}.ssp", name=name)
     assert exp.omitted == ()
-    data = CoSimulation(system).run(stop, ss.outputs).data
+    data = Master(system).simulate(stop, ss.outputs).data
     return ClosedLoop(system, ss.outputs, exp.path, name, data, step, stop)

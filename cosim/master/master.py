@@ -1,9 +1,17 @@
-"""Facade: run a :class:`~cosim.master.system.SystemSpec` and return a :class:`Result`."""
+"""The master: simulate a :class:`~cosim.master.system.SystemSpec` to a stop time and return
+its recorded :class:`Result`.
+
+:class:`Master` puts the pieces together for one simulation: an
+:class:`~cosim.master.execution.Execution` (time, slaves, algorithm), the
+:class:`~cosim.master.recorder.Recorder` (and a progress bar), the caller's observers and
+manipulators; a divergence ends the run with :attr:`Result.diverged` set, an FMU failure
+raises :class:`~cosim.master.errors.CosimError` carrying the partial result.
+"""
 
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -12,8 +20,8 @@ import numpy as np
 
 from .errors import CosimError, DivergenceError
 from .execution import Execution
-from .progress import ProgressObserver
 from .recorder import Recorder
+from .slave import Slave
 from .system import SystemSpec
 
 
@@ -28,7 +36,7 @@ class Divergence:
 
 @dataclass(frozen=True)
 class Result:
-    """Outcome of :meth:`CoSimulation.run`.
+    """Outcome of :meth:`Master.simulate`.
 
     Attributes
     ----------
@@ -54,21 +62,26 @@ class Result:
     csv_path: Path | None = None
 
 
-class CoSimulation:
-    """Run a co-simulation system.
+class Master:
+    """Simulate a co-simulation system.
 
     Parameters
     ----------
     system : SystemSpec
+    slaves : mapping of str to Slave, optional
+        Ready-made components (see :class:`~cosim.master.execution.Execution`), used by one
+        run (they are closed at its end).
     """
 
-    def __init__(self, system: SystemSpec):
+    def __init__(self, system: SystemSpec, slaves: Mapping[str, Slave] | None = None):
         self.system = system
+        self.slaves = slaves
 
-    def run(self, stop_time: float | None = None, outputs: Sequence[str] = (),
+    def simulate(self, stop_time: float | None = None, outputs: Sequence[str] = (),
             output_interval: float | None = None, progress: bool | None = False,
             csv_path: str | Path | None = None, flush_every: int = 1000,
-            observers: Sequence[Any] = (), manipulators: Sequence[Any] = ()) -> Result:
+            observers: Sequence[Any] = (), manipulators: Sequence[Any] = (),
+            output_ticks: int | None = None) -> Result:
         """Simulate from the start time to ``stop_time``.
 
         Parameters
@@ -80,6 +93,8 @@ class CoSimulation:
         output_interval : float, optional
             Recording interval [s], an integer multiple of the base step
             (default: every base step).
+        output_ticks : int, optional
+            The recording interval in base steps instead (not with ``output_interval``).
         progress : bool or None
             Show a progress bar (None: only on a TTY).
         csv_path : str or Path, optional
@@ -102,14 +117,17 @@ class CoSimulation:
         ------
         CosimError
             If an FMU call fails; ``error.result`` holds the partial
-            :class:`Result` (and the CSV is finalised).
+            :class:`Result` (and the CSV is finalised if at least one step was made;
+            a failure before the first step leaves an earlier file untouched).
         """
         system = self.system
         stop = system.stop_time if stop_time is None else stop_time
         if stop is None:
             raise ValueError("stop_time: required (the system has no stop_time)")
         H = system.base_step
-        interval = 1
+        interval = 1 if output_ticks is None else output_ticks
+        if output_interval is not None and output_ticks is not None:
+            raise ValueError("output_interval and output_ticks: give one of them")
         if output_interval is not None:
             interval = round(output_interval / H)
             if interval < 1 or abs(interval * H - output_interval) > 1e-9 * output_interval:
@@ -120,13 +138,15 @@ class CoSimulation:
         wall0 = time.perf_counter()
         diverged = None
         try:
-            execution = Execution(system, read_outputs=outputs)
+            execution = Execution(system, read_outputs=outputs, slaves=self.slaves)
             for obs in observers:
                 execution.add_observer(obs)
             for man in manipulators:
                 execution.add_manipulator(man)
             execution.add_observer(recorder)
             if progress is not False:
+                from .progress import ProgressObserver  # tqdm: imported only when used
+
                 execution.add_observer(ProgressObserver(stop, disable=None if progress
                                                         is None else not progress))
             execution.initialize()
@@ -148,11 +168,12 @@ class CoSimulation:
         wall = time.perf_counter() - wall0
         end = execution.time if execution is not None else float("nan")
         sim = (execution.time - execution.start_time) if execution is not None else 0.0
+        stepped = execution is not None and execution.tick > 0
         if execution is not None:
             execution.close()
-        if recorder.n_rows:
+        if stepped:
             recorder.close()
-        else:  # failed before the first row: leave any earlier file untouched
+        else:  # failed before the first step: leave any earlier file untouched
             recorder.abort()
         return Result(recorder.data, wall, sim / wall if wall > 0 else float("inf"), end,
                       diverged, recorder.csv_path)

@@ -1,0 +1,137 @@
+"""One master, two sets of slaves; and the start-up of ``drillcosim run``, side by side in one run.
+
+    python benchmarks/bench_one_master.py [--stop-time 10] [--repeat 3] [--out FILE]
+
+1. ``paper_closed_loop`` at its step (0.25 ms, Gauss-Seidel) through our master
+   (:class:`cosim.master.execution.Execution` + the recorder at 1 ms), once with the plant and
+   controller FMUs, once with the same models in process (:mod:`cosim.scenario.inprocess`):
+   real-time factors of the stepping loop and their ratio (issue 14 target: FMU >= 0.8x the
+   in-process slaves). Configurations interleaved, ``--repeat`` times, best reported.
+2. Start-up of ``drillcosim run paper_closed_loop`` in fresh processes: time from the start of
+   the interpreter to the first step, split into the interpreter itself (``python -c pass``),
+   imports (cli, scenario, plant scene), scene loading, system building (FMU staleness check),
+   FMU extraction and ``Execution.initialize`` (instantiation: the FMUs' own imports, numba cache
+   load, model build). Best of ``--repeat`` (target <= 1 s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: Run in a fresh interpreter: the path of ``drillcosim run`` up to its first step, timed.
+_STARTUP = r"""
+import time
+T0 = time.perf_counter()
+marks = {}
+from drillcosim.cosim import cli                       # the console script's module
+from drillcosim.cosim.scenario import run as run_module
+marks["import cli + scenario.run (numpy, fmpy, the master)"] = time.perf_counter()
+from drillcosim.plant.scene import load_scene
+marks["import plant.scene (numba, scipy, the plant model)"] = time.perf_counter()
+sc = load_scene("paper_closed_loop", overrides={"cosim": {"stop_time": 0.00025}})
+marks["load the scene"] = time.perf_counter()
+from drillcosim.cosim.scenario.scene_system import scene_system
+ss = scene_system(sc)
+marks["build the system (FMU staleness check)"] = time.perf_counter()
+from drillcosim.cosim.master.execution import Execution
+ex = Execution(ss.system, read_outputs=ss.outputs)
+marks["extract the FMUs"] = time.perf_counter()
+ex.initialize()
+marks["instantiate + initialize (FMU imports, numba cache, model build)"] = time.perf_counter()
+ex.simulate_until(0.00025)
+marks["first step"] = time.perf_counter()
+ex.close()
+import json, sys
+prev, out = T0, {}
+for k, v in marks.items():
+    out[k] = v - prev
+    prev = v
+json.dump(out, sys.stdout)
+"""
+
+
+def closed_loop(stop: float, engine: str) -> float:
+    """Wall time [s] of the stepping loop of paper_closed_loop for ``stop`` s."""
+    from drillcosim.cosim.master.execution import Execution
+    from drillcosim.cosim.master.recorder import Recorder
+    from drillcosim.cosim.scenario.inprocess import inprocess_slaves
+    from drillcosim.cosim.scenario.scene_system import scene_system
+    from drillcosim.plant.scene import load_scene
+
+    ss = scene_system(load_scene("paper_closed_loop", overrides={"cosim": {"stop_time": stop}}))
+    slaves = inprocess_slaves(ss) if engine == "in-process" else None
+    with Execution(ss.system, read_outputs=ss.outputs, slaves=slaves) as ex:
+        ex.add_observer(Recorder(ss.outputs, ss.settings.output_ticks))
+        ex.initialize()
+        t0 = time.perf_counter()
+        ex.simulate_until(stop)
+        return time.perf_counter() - t0
+
+
+def startup() -> dict[str, float]:
+    """Seconds per stage of one fresh ``drillcosim run`` up to its first step."""
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-c", "pass"], check=True)
+    interp = time.perf_counter() - t0
+    proc = subprocess.run([sys.executable, "-c", _STARTUP], check=True, capture_output=True,
+                          text=True, cwd=ROOT)
+    return {"interpreter (python -c pass)": interp, **json.loads(proc.stdout)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--stop-time", type=float, default=10.0, help="simulated time [s]")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--out", help="write the markdown section here (default: print)")
+    args = ap.parse_args(argv)
+    closed_loop(0.01, "fmu")          # build/compile/load caches once, outside the timing
+    walls: dict[str, list[float]] = {"fmu": [], "in-process": []}
+    starts: list[dict[str, float]] = []
+    for _ in range(args.repeat):
+        for engine in walls:
+            walls[engine].append(closed_loop(args.stop_time, engine))
+        starts.append(startup())
+    best = {k: min(v) for k, v in walls.items()}
+    first = min(starts, key=lambda d: sum(d.values()))
+    stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+    lines = [
+        "## One master: FMU slaves vs in-process slaves; start-up (benchmarks/bench_one_master.py)",
+        "",
+        f"Command: `python benchmarks/bench_one_master.py --stop-time {args.stop_time:g} "
+        f"--repeat {args.repeat}`; {platform.platform()}, {os.cpu_count()} cores, Python "
+        f"{platform.python_version()}, {stamp}; best of {args.repeat} interleaved runs; load "
+        f"average at the end {os.getloadavg()[0]:.1f}.",
+        "",
+        "| paper_closed_loop, 0.25 ms Gauss-Seidel, recorder at 1 ms | wall [s] | "
+        "real-time factor |",
+        "|---|---|---|",
+    ]
+    for engine, wall in best.items():
+        lines.append(f"| our master, {engine} slaves | {wall:.2f} | "
+                     f"{args.stop_time / wall:.2f} |")
+    lines += ["", f"FMU slaves / in-process slaves (real-time factor): "
+              f"{best['in-process'] / best['fmu']:.2f}x (target >= 0.8x).", "",
+              "Start-up of `drillcosim run paper_closed_loop` to its first step, fresh process "
+              f"(best of {args.repeat}):", "", "| stage | [s] |", "|---|---|"]
+    for stage, sec in first.items():
+        lines.append(f"| {stage} | {sec:.3f} |")
+    lines.append(f"| **total to the first step** | **{sum(first.values()):.3f}** |")
+    text = "\n".join(lines) + "\n"
+    if args.out:
+        Path(args.out).write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
