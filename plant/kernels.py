@@ -20,10 +20,16 @@ d x (-f) keeps it exactly conservative and angular-momentum preserving. Rotation
 stiffness is diag(k_bend, k_bend, k_tors) (g1 = k_tors, g3 = 2 k_bend - k_tors); this is exactly
 conservative at any angle, and needs no extra states. Dampers act on the relative velocities.
 
-``ip`` (int64): header [n, n_stab, n_contact, n_act, unbalance_body (0-based, -1 none), n_loads]
-followed by stabilizer bodies, contact bodies, actuator joints (0-based). ``fp`` (float64):
-stabilizer local z offsets [m], then the load table (``layout.NLD`` columns a row).
-``u`` (float64, 2 per actuator site): actuator forces [N] at C and E, > 0 opposing positive strain.
+``ip`` (int64): header [n, n_stab, n_contact, n_act, unbalance_body (0-based, -1 none), n_loads,
+top-drive mode, index of the top-drive angle in ``y`` (-1 none), bit mode, index of the bit's
+auxiliary state in ``y`` (-1 none)] followed by stabilizer bodies, contact bodies, actuator joints
+(0-based). ``fp`` (float64): stabilizer local z offsets [m], then the load table (``layout.NLD``
+columns a row). ``u`` (float64): 2 per actuator site, the actuator forces [N] at C and E (> 0
+opposing positive strain), then the top-drive input when ``top_drive.mode`` is not "prescribed"
+(speed command [rad/s] or motor torque [N m]).
+
+Auxiliary states (extensions beyond the paper, off by default) follow the bodies' states in ``y``:
+the top-drive angle [rad] (modes "speed" and "torque") and speed [rad/s] (mode "torque").
 """
 
 from __future__ import annotations
@@ -76,6 +82,7 @@ from .layout import (
     NLD,
     OMEGA0,
     T_RAMP,
+    TD_INERTIA,
     UNB,
     ZBIT0,
 )
@@ -89,7 +96,17 @@ IP_NC = 2
 IP_NA = 3
 IP_UNB = 4
 IP_NL = 5
-IP_HDR = 6
+IP_TD = 6  # top-drive mode: TD_PRESCRIBED, TD_SPEED, TD_TORQUE
+IP_TDX = 7  # index of the top-drive angle in y (speed: + 1) or -1
+IP_BIT = 8  # bit mode (BIT_PRESCRIBED)
+IP_BITX = 9  # index of the bit's auxiliary state in y or -1
+IP_HDR = 10
+
+# top-drive modes (params.TOP_DRIVE_MODES order)
+TD_PRESCRIBED = 0
+TD_SPEED = 1
+TD_TORQUE = 2
+BIT_PRESCRIBED = 0
 
 _CACHE = True
 
@@ -106,10 +123,43 @@ def top_drive(t: float, omega0: float, t_ramp: float) -> tuple[float, float]:
     return omega0 * (t - 0.5 * t_ramp), omega0
 
 
+@njit(cache=_CACHE, inline="always")
+def drive_motion(t, y, p, ip, u):
+    """Top-drive angle [rad] and speed [rad/s] at time ``t`` for state ``y`` and inputs ``u``.
+
+    Mode "prescribed": the ramp of :func:`top_drive`; "speed": the angle is an auxiliary state
+    and the speed the input ``u[2 n_act]``; "torque": angle and speed are auxiliary states.
+    """
+    mode = ip[IP_TD]
+    if mode == TD_PRESCRIBED:
+        return top_drive(t, p[OMEGA0], p[T_RAMP])
+    x = ip[IP_TDX]
+    if mode == TD_SPEED:
+        return y[x], u[2 * ip[IP_NA]]
+    return y[x], y[x + 1]
+
+
+@njit(cache=_CACHE, inline="always")
+def drive_rates(y, dy, p, ip, u, torque_on_string):
+    """Derivatives of the top-drive auxiliary states (nothing in mode "prescribed").
+
+    ``torque_on_string`` [N m]: torque of the top joint on body 1 about the well axis; the drive
+    feels its reaction: ``J_td domega/dt = u_torque - torque_on_string``.
+    """
+    mode = ip[IP_TD]
+    if mode == TD_PRESCRIBED:
+        return
+    x = ip[IP_TDX]
+    if mode == TD_SPEED:
+        dy[x] = u[2 * ip[IP_NA]]
+    else:
+        dy[x] = y[x + 1]
+        dy[x + 1] = (u[2 * ip[IP_NA]] - torque_on_string) / p[TD_INERTIA]
+
+
 @njit(cache=_CACHE)
-def bit_rock(t: float, p: np.ndarray) -> tuple[float, float]:
-    """Prescribed rock position Z_bit [m] and its rate [m/s] at time t."""
-    ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
+def bit_rock(ang: float, om: float, p: np.ndarray) -> tuple[float, float]:
+    """Prescribed rock position Z_bit [m] and its rate [m/s] for top-drive angle/speed."""
     lob = p[BIT_LOBES]
     a = p[BIT_AMP]
     return p[ZBIT0] + a * math.sin(lob * ang), a * lob * om * math.cos(lob * ang)
@@ -324,7 +374,7 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
     wx0 = y[oW]
     wy0 = y[oW + 1]
     wz0 = y[oW + 2]
-    ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
+    ang, om = drive_motion(t, y, p, ip, u)
     A0 = y[0] - h * R0[0, 2]
     A1 = y[1] - h * R0[1, 2]
     A2 = y[2] - h * R0[2, 2]
@@ -354,16 +404,21 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
             Rrel[0, j] = ca * R0[0, j] + sa * R0[1, j]
             Rrel[1, j] = -sa * R0[0, j] + ca * R0[1, j]
             Rrel[2, j] = R0[2, j]
-        wM[0, 0] += 0.5 * ktt * (Rrel[2, 1] + Rrel[1, 2])
-        wM[0, 1] += -0.5 * ktt * (Rrel[0, 2] + Rrel[2, 0])
-        wM[0, 2] += -0.5 * ktt * (Rrel[1, 0] - Rrel[0, 1]) - p[CT_TO] * (wz0 - om * R0[2, 2])
+        m0 = 0.5 * ktt * (Rrel[2, 1] + Rrel[1, 2])
+        m1 = -0.5 * ktt * (Rrel[0, 2] + Rrel[2, 0])
+        m2 = -0.5 * ktt * (Rrel[1, 0] - Rrel[0, 1]) - p[CT_TO] * (wz0 - om * R0[2, 2])
+        wM[0, 0] += m0
+        wM[0, 1] += m1
+        wM[0, 2] += m2
+        if ip[IP_TD] != TD_PRESCRIBED:
+            drive_rates(y, dy, p, ip, u, R0[2, 0] * m0 + R0[2, 1] * m1 + R0[2, 2] * m2)
 
     # bit: axial spring to the prescribed rock position, resisting torque
     e = n - 1
     Re = wR[e]
     kb = p[KB_AX]
     if kb > 0.0:
-        zr, vr = bit_rock(t, p)
+        zr, vr = bit_rock(ang, om, p)
         vB = _mv(Re, h * y[oW + 3 * e + 1], -h * y[oW + 3 * e], 0.0)
         Bz = y[3 * e + 2] + h * Re[2, 2]
         Fz = -kb * (Bz - zr) - p[CB_AX] * (y[oV + 3 * e + 2] + vB[2] - vr)
@@ -508,12 +563,15 @@ def rhs_at(t, y, dy, p, ip, fp, u, wR, wF, wM):
     dy[n + e] = y[oW + e]
     dy[oV + e] = mg + f_up
     dy[oW + e] = tq_up
-    ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
+    ang, om = drive_motion(t, y, p, ip, u)
     dy[oV] += -(p[KT_AX] * (y[0] - h) + p[CT_AX] * y[oV])
     if p[KT_TO] > 0.0:
-        dy[oW] += -(p[KT_TO] * sin_small(y[n] - ang) + p[CT_TO] * (y[oW] - om))
+        tq_top = -(p[KT_TO] * sin_small(y[n] - ang) + p[CT_TO] * (y[oW] - om))
+        dy[oW] += tq_top
+        if ip[IP_TD] != TD_PRESCRIBED:
+            drive_rates(y, dy, p, ip, u, tq_top)
     if p[KB_AX] > 0.0:
-        zr, vr = bit_rock(t, p)
+        zr, vr = bit_rock(ang, om, p)
         dy[oV + e] += -p[KB_AX] * (y[e] + h - zr) - p[CB_AX] * (y[oV + e] - vr)
     if p[BIT_TORQUE] > 0.0:
         dy[oW + e] -= p[BIT_TORQUE] * math.tanh(y[oW + e] / p[BIT_EPS])

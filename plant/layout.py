@@ -49,7 +49,9 @@ UNB = 36  # m e [kg m]
 ALPHA_LAT = 37  # lateral drag rate [1/s] (force = -alpha m v_lateral)
 ACT_ARM = 38  # moment arm of an actuator pair: 2 r [m]
 GAUGE_R = 39  # strain gauge radius [m]
-NP = 40
+# extensions beyond the paper (each off by default, see docs/physics.md)
+TD_INERTIA = 40  # top-drive rotor inertia [kg m^2] (top_drive.mode = 'torque')
+NP = 41
 
 # columns of the load table (one row a load)
 LD_KIND = 0  # 0 force (inertial axis), 1 torque (body axis)

@@ -58,10 +58,13 @@ def operating_params(params: PlantParams) -> PlantParams:
     """The parameters with forcing removed: no bit displacement, no unbalance, no loads.
 
     Forcing terms do not enter a linearization; removing them makes the straight spinning string
-    a steady motion.
+    a steady motion. A top drive driven by an input (``top_drive.mode`` "speed" or "torque") is
+    replaced by the prescribed steady speed ``top_drive.rotary_speed``: the linearization is
+    about a rigidly driven string.
     """
     return replace(
         params,
+        top_drive=replace(params.top_drive, mode="prescribed", inertia=0.0),
         bit=replace(params.bit, displacement_amplitude=0.0),
         unbalance=replace(params.unbalance, enabled=False),
         loads=(),

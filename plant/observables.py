@@ -19,10 +19,10 @@ from .kernels import (
     IP_NS,
     bit_rock,
     cardan,
+    drive_motion,
     one_minus_cos_small,
     relative_rotation,
     sin_small,
-    top_drive,
 )
 from .layout import (
     ACT_ARM,
@@ -49,8 +49,6 @@ from .layout import (
     KT_LAT,
     KT_TO,
     MASS,
-    OMEGA0,
-    T_RAMP,
 )
 
 _CACHE = True
@@ -102,8 +100,7 @@ def output_names(full3d: bool, contact_bodies: list[int], n_sites: int) -> list[
 
 
 @njit(cache=_CACHE)
-def _scalars_common(t, p, out, o, fb, tb, tt, hook, wbit, zdisp, twist, energy):
-    om = top_drive(t, p[OMEGA0], p[T_RAMP])[1]
+def _scalars_common(om, out, o, fb, tb, tt, hook, wbit, zdisp, twist, energy):
     out[o] = fb
     out[o + 1] = tb
     out[o + 2] = tt
@@ -219,7 +216,7 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
     r2 = R0[0, 2] * vA0 + R0[1, 2] * vA1 + R0[2, 2] * vA2
     c2 = y[oW] * e1 - y[oW + 1] * e0
     hook = p[KT_AX] * e2 + p[CT_AX] * (r2 - c2)
-    ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
+    ang, om = drive_motion(t, y, p, ip, u)
     ktt = p[KT_TO]
     tt = 0.0
     if ktt > 0.0:
@@ -237,7 +234,7 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
     fb = 0.0
     bz = y[3 * e + 2] + h * Re[2, 2]
     if p[KB_AX] > 0.0:
-        zr, vr = bit_rock(t, p)
+        zr, vr = bit_rock(ang, om, p)
         vbz = y[oV + 3 * e + 2] + h * (Re[2, 0] * y[oW + 3 * e + 1] - Re[2, 1] * y[oW + 3 * e])
         fb = p[KB_AX] * (bz - zr) + p[CB_AX] * (vbz - vr)
         pe += 0.5 * p[KB_AX] * (bz - zr) ** 2
@@ -252,7 +249,7 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
         P1 = y[3 * k + 1] + zl * wR[k][1, 2]
         pe += 0.5 * p[K_STAB] * (P0 * P0 + P1 * P1)
     pe += e_cont
-    _scalars_common(t, p, out, o, fb, tb, tt, hook, y[oW + 3 * e + 2], bz - zbit_ref,
+    _scalars_common(om, out, o, fb, tb, tt, hook, y[oW + 3 * e + 2], bz - zbit_ref,
                     y[oA + 3 * e] - ang, ke + pe)
 
 
@@ -275,7 +272,7 @@ def outputs_at(t, y, p, ip, fp, u, wR, zbit_ref, out):
         pe += 0.5 * p[K_AX] * d * d + p[G1] * one_minus_cos_small(y[n + a + 1] - y[n + a])
     pe += 0.5 * p[KT_AX] * (y[0] - h) ** 2
     hook = p[KT_AX] * (y[0] - h) + p[CT_AX] * y[2 * n]
-    ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
+    ang, om = drive_motion(t, y, p, ip, u)
     tt = 0.0
     if p[KT_TO] > 0.0:
         pe += p[KT_TO] * one_minus_cos_small(y[n] - ang)
@@ -284,12 +281,12 @@ def outputs_at(t, y, p, ip, fp, u, wR, zbit_ref, out):
     bz = y[e] + h
     fb = 0.0
     if p[KB_AX] > 0.0:
-        zr, vr = bit_rock(t, p)
+        zr, vr = bit_rock(ang, om, p)
         fb = p[KB_AX] * (bz - zr) + p[CB_AX] * (y[2 * n + e] - vr)
         pe += 0.5 * p[KB_AX] * (bz - zr) ** 2
     tb = 0.0
     if p[BIT_TORQUE] > 0.0:
         tb = p[BIT_TORQUE] * math.tanh(y[3 * n + e] / p[BIT_EPS])
-    _scalars_common(t, p, out, 0, fb, tb, tt, hook, y[3 * n + e], bz - zbit_ref,
+    _scalars_common(om, out, 0, fb, tb, tt, hook, y[3 * n + e], bz - zbit_ref,
                     y[n + e] - ang, ke + pe)
 

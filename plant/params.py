@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 __all__ = [
+    "TOP_DRIVE_MODES",
     "PipeParams",
     "DampingParams",
     "TopDriveParams",
@@ -27,6 +28,10 @@ __all__ = [
     "PlantParams",
     "describe",
 ]
+
+
+#: Top-drive boundary conditions (``top_drive.mode``), in the order of the kernels' integer code.
+TOP_DRIVE_MODES = ("prescribed", "speed", "torque")
 
 
 def _f(default: Any, unit: str, doc: str, **kw: Any) -> Any:
@@ -233,8 +238,17 @@ class TopDriveParams:
     torsional_stiffness: float = _f(
         math.inf, "N m/rad", "torsional spring to the top drive (inf = rigid drive)"
     )
-    rotary_speed: float = _f(20.0, "rad/s", "final rotary speed of the top drive")
-    ramp_time: float = _f(1.0, "s", "duration of the linear speed ramp from 0")
+    rotary_speed: float = _f(20.0, "rad/s", "final rotary speed of the top drive (mode 'prescribed')")
+    ramp_time: float = _f(1.0, "s", "duration of the linear speed ramp from 0 (mode 'prescribed')")
+    mode: str = _f(
+        "prescribed", "-",
+        "'prescribed': the speed ramp above; 'speed': an ideal speed source driven by the input "
+        "top_drive_speed_command [rad/s]; 'torque': a drive of rotor inertia `inertia` driven by "
+        "the input top_drive_torque [N m] (the motor torque)",
+    )
+    inertia: float = _f(
+        0.0, "kg m^2", "rotor inertia of the top drive (mode 'torque'; must then be > 0)"
+    )
 
     def __post_init__(self) -> None:
         _validate_types(self)
@@ -244,6 +258,17 @@ class TopDriveParams:
                          allow_inf=True)
         _check_range(o, "rotary_speed", self.rotary_speed, -1e3, 1e3, unit="rad/s")
         _check_range(o, "ramp_time", self.ramp_time, 0.0, 1e6, unit="s")
+        if self.mode not in TOP_DRIVE_MODES:
+            raise ValueError(f"{o}.mode = {self.mode!r} is not allowed: one of "
+                             + ", ".join(repr(m) for m in TOP_DRIVE_MODES))
+        _check_range(o, "inertia", self.inertia, 0.0, 1e6, unit="kg m^2")
+        if self.mode == "torque" and self.inertia <= 0.0:
+            raise ValueError(f"{o}.inertia = {self.inertia!r} is out of range for mode = "
+                             "'torque': allowed (0, 1e+06] kg m^2")
+        if self.mode != "prescribed" and self.torsional_stiffness == 0.0:
+            raise ValueError(f"{o}.torsional_stiffness = 0 is not allowed with mode = "
+                             f"{self.mode!r}: the drive must be connected to the string "
+                             "(allowed (0, inf] N m/rad)")
 
 
 @dataclass(frozen=True)
