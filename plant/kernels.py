@@ -216,6 +216,19 @@ def relative_rotation(Ra: np.ndarray, Rb: np.ndarray, Rrel: np.ndarray) -> None:
             Rrel[i, j] = Ra[0, i] * Rb[0, j] + Ra[1, i] * Rb[1, j] + Ra[2, i] * Rb[2, j]
 
 
+@njit(cache=_CACHE, inline="always")
+def gauge_strains(Rrel, rg, dx):
+    """Bending strains (C, E) [1] of a gauge site from the rotation ``Rrel`` across its joint.
+
+    Eq. 18-20: strain = (r / dx) * relative bending angle; gauge C reads bending about body y
+    (negative sign, right-hand rule), gauge E about body x. ``rg`` gauge radius [m], ``dx``
+    segment length [m].
+    """
+    thx = 0.5 * (Rrel[2, 1] - Rrel[1, 2])
+    thy = 0.5 * (Rrel[0, 2] - Rrel[2, 0])
+    return -rg / dx * thy, rg / dx * thx
+
+
 @njit(cache=_CACHE)
 def set_load_modes(ip, fp, t):
     """Switch the step loads on or off for time ``t`` [s] (``start <= t < end``).

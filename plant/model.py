@@ -478,7 +478,11 @@ class DrillstringModel:
         Contact adds at most k_w/m to the squared frequency of one body; that margin is added so
         that the step stays stable when the pipe touches the wellbore.
         """
-        J = self.initial_jacobian
+        return self.spectral_radius_with_margins(self.initial_jacobian)
+
+    def spectral_radius_with_margins(self, J: np.ndarray) -> float:
+        """Spectral radius [1/s] of ``J`` (a Jacobian of this model, possibly augmented) plus
+        the margins of :attr:`max_eigenvalue` for effects the initial state does not show."""
         with threadpool_limits(1):  # 6x faster than multithreaded BLAS on a loaded machine
             lam = float(np.max(np.abs(np.linalg.eigvals(J))))
         kc = self.p[lay.K_CONT] if self.contact_bodies and self.kind == "full3d" else 0.0

@@ -20,6 +20,7 @@ from .kernels import (
     bit_rock,
     cardan,
     drive_motion,
+    gauge_strains,
     one_minus_cos_small,
     relative_rotation,
     sin_small,
@@ -155,8 +156,7 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
         a = ip[IP_HDR + ns + nc + s]
         b = a + 1
         relative_rotation(wR[a], wR[b], Rrel)
-        thx = 0.5 * (Rrel[2, 1] - Rrel[1, 2])
-        thy = 0.5 * (Rrel[0, 2] - Rrel[2, 0])
+        eps_c, eps_e = gauge_strains(Rrel, rg, dx)
         wxa = y[oW + 3 * a]
         wya = y[oW + 3 * a + 1]
         wza = y[oW + 3 * a + 2]
@@ -164,8 +164,8 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
         q1 = Rrel[0, 1] * wxa + Rrel[1, 1] * wya + Rrel[2, 1] * wza
         wrx = y[oW + 3 * b] - q0
         wry = y[oW + 3 * b + 1] - q1
-        out[o] = -rg / dx * thy
-        out[o + 1] = rg / dx * thx
+        out[o] = eps_c
+        out[o + 1] = eps_e
         out[o + 2] = -arm * u[2 * s + 1] * wrx + arm * u[2 * s] * wry
         o += 3
     # energies
