@@ -246,7 +246,9 @@ def test_sampled_critical_delay_plus_half_a_step_tends_to_the_continuous_one(loo
         td = sampled_loop.critical_delay(1e9, h, delay_max=3e-4, per_step=1, atol=h * 1e-3)
         gaps.append(abs(td + h / 2 - tc))
         assert td < tc
-    assert gaps[-1] < 0.02 * tc and gaps[-1] <= gaps[0] + 1e-7, gaps
+    # measured: the gap is < 0.1 us at every H (the hold's phase lag is exactly H/2 and its
+    # gain sinc(w H / 2) ~ 1 for the 228 rad/s mode)
+    assert max(gaps) < 0.005 * tc, gaps
 
 
 def _growth(gain: float, tau: float, stop: float = 4.0) -> float:
