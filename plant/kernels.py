@@ -22,11 +22,11 @@ conservative at any angle, and needs no extra states. Dampers act on the relativ
 
 ``ip`` (int64): header [n, n_stab, n_contact, n_act, unbalance_body (0-based, -1 none), n_loads,
 top-drive mode, index of the top-drive angle in ``y`` (-1 none), bit mode, index of the bit's
-auxiliary state in ``y`` (-1 none)] followed by stabilizer bodies, contact bodies, actuator joints
-(0-based). ``fp`` (float64): stabilizer local z offsets [m], then the load table (``layout.NLD``
-columns a row). ``u`` (float64): 2 per actuator site, the actuator forces [N] at C and E (> 0
-opposing positive strain), then the top-drive input when ``top_drive.mode`` is not "prescribed"
-(speed command [rad/s] or motor torque [N m]).
+auxiliary state in ``y`` (-1 none), extended outputs (0/1)] followed by stabilizer bodies,
+contact bodies, actuator joints (0-based). ``fp`` (float64): stabilizer local z offsets [m], then
+the load table (``layout.NLD`` columns a row). ``u`` (float64): 2 per actuator site, the actuator
+forces [N] at C and E (> 0 opposing positive strain), then the top-drive input when
+``top_drive.mode`` is not "prescribed" (speed command [rad/s] or motor torque [N m]).
 
 Auxiliary states (extensions beyond the paper, off by default) follow the bodies' states in ``y``:
 the top-drive angle [rad] (modes "speed" and "torque") and speed [rad/s] (mode "torque").
@@ -79,11 +79,14 @@ from .layout import (
     LD_T0,
     LD_T1,
     MASS,
+    MU_WALL,
     NLD,
     OMEGA0,
+    R_OUT,
     T_RAMP,
     TD_INERTIA,
     UNB,
+    V_SLIP,
     ZBIT0,
 )
 
@@ -100,7 +103,8 @@ IP_TD = 6  # top-drive mode: TD_PRESCRIBED, TD_SPEED, TD_TORQUE
 IP_TDX = 7  # index of the top-drive angle in y (speed: + 1) or -1
 IP_BIT = 8  # bit mode (BIT_PRESCRIBED)
 IP_BITX = 9  # index of the bit's auxiliary state in y or -1
-IP_HDR = 10
+IP_XOUT = 10  # 1: the outputs include the extensions' (observables.output_names(extended=True))
+IP_HDR = 11
 
 # top-drive modes (params.TOP_DRIVE_MODES order)
 TD_PRESCRIBED = 0
@@ -253,6 +257,37 @@ def set_load_modes(ip, fp, t):
 @njit(cache=_CACHE, inline="always")
 def _load_active(fp, row):
     return fp[row + LD_ON] != 0.0
+
+
+@njit(cache=_CACHE, inline="always")
+def wall_friction(k, nx, ny, fn, mu, p, y, oV, oW, R, wF, wM):
+    """Regularized Coulomb friction of the wall on contact body ``k`` (0-based).
+
+    The contact point P sits on the collar surface at ``r_c`` (outer radius) along the outward
+    normal ``n = (nx, ny, 0)``. Its slip velocity has a circumferential part
+    ``v_t = v_G . t + r_c omega_Z`` (``t = e_Z x n``) and an axial part
+    ``v_z = v_G,Z + r_c (omega_X n_y - omega_Y n_x)`` (``omega`` inertial). The friction force
+    ``-mu fn (v_t t + v_z e_Z) / sqrt(v_t^2 + v_z^2 + v_eps^2)`` acts at P: on the centre and as
+    the moment ``r_c n x F`` (about the axis: ``r_c F_t``), added to ``wF`` (inertial) and ``wM``
+    (body frame).
+    """
+    rc = p[R_OUT]
+    wx = y[oW + 3 * k]
+    wy = y[oW + 3 * k + 1]
+    wz = y[oW + 3 * k + 2]
+    ox, oy, oz = _mv(R, wx, wy, wz)
+    vt = -ny * y[oV + 3 * k] + nx * y[oV + 3 * k + 1] + rc * oz
+    vz = y[oV + 3 * k + 2] + rc * (ox * ny - oy * nx)
+    g = mu * fn / math.sqrt(vt * vt + vz * vz + p[V_SLIP] * p[V_SLIP])
+    ft = -g * vt
+    fz = -g * vz
+    wF[k, 0] -= ft * ny
+    wF[k, 1] += ft * nx
+    wF[k, 2] += fz
+    m0, m1, m2 = _mtv(R, rc * ny * fz, -rc * nx * fz, rc * ft)
+    wM[k, 0] += m0
+    wM[k, 1] += m1
+    wM[k, 2] += m2
 
 
 @njit(cache=_CACHE)
@@ -460,10 +495,11 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
         wM[k, 0] += -zl * fb1
         wM[k, 1] += zl * fb0
 
-    # wellbore contact (eq. 14-17), frictionless; normal force never pulls
+    # wellbore contact (eq. 14-17); normal force never pulls; optional Coulomb friction
     kc = p[K_CONT]
     cc = p[C_CONT]
     clr = p[CLEAR]
+    mu = p[MU_WALL]
     if kc == 0.0 and cc == 0.0:
         nc = 0  # contact off: no cost
     for s in range(nc):
@@ -479,6 +515,8 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
             if fn > 0.0:
                 wF[k, 0] -= fn * nx
                 wF[k, 1] -= fn * ny
+                if mu > 0.0:
+                    wall_friction(k, nx, ny, fn, mu, p, y, oV, oW, wR[k], wF, wM)
 
     # mass unbalance: centrifugal force along body x
     if unb >= 0:

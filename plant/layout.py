@@ -51,7 +51,10 @@ ACT_ARM = 38  # moment arm of an actuator pair: 2 r [m]
 GAUGE_R = 39  # strain gauge radius [m]
 # extensions beyond the paper (each off by default, see docs/physics.md)
 TD_INERTIA = 40  # top-drive rotor inertia [kg m^2] (top_drive.mode = 'torque')
-NP = 41
+MU_WALL = 41  # Coulomb friction coefficient at the wellbore [1] (0 = off)
+V_SLIP = 42  # slip speed of the regularized friction [m/s]
+R_OUT = 43  # outer (collar) radius: contact point of the wall [m]
+NP = 44
 
 # columns of the load table (one row a load)
 LD_KIND = 0  # 0 force (inertial axis), 1 torque (body axis)

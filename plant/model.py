@@ -44,7 +44,8 @@ from .integrators import (
 from .observables import output_names, outputs3d, outputs_at
 from .params import TOP_DRIVE_MODES, PlantParams
 
-__all__ = ["DrillstringModel", "FIXED_STEP_METHODS", "ModelKind", "needs_lateral", "series"]
+__all__ = ["DrillstringModel", "FIXED_STEP_METHODS", "ModelKind", "extensions", "needs_lateral",
+           "series"]
 
 ModelKind = str  # "full3d" | "axial_torsional"
 # exponential-integrator matrices kept per step size (each costs one expm, ~10 ms at n = 30)
@@ -66,6 +67,19 @@ def series(k_boundary: float, k_half: float) -> float:
     if math.isinf(k_boundary):
         return k_half
     return 1.0 / (1.0 / k_boundary + 1.0 / k_half)
+
+
+def extensions(params: PlantParams) -> list[str]:
+    """The extensions beyond the paper a parameter set uses (``docs/physics.md``); [] for the
+    paper's model."""
+    out = []
+    if params.top_drive.mode != "prescribed":
+        out.append(f"top_drive.mode = {params.top_drive.mode!r}")
+    if params.contact.enabled and params.contact.friction_coefficient > 0.0:
+        out.append("wellbore friction")
+    if params.contact.whirl_outputs:
+        out.append("whirl outputs")
+    return out
 
 
 def needs_lateral(params: PlantParams) -> list[str]:
@@ -171,9 +185,14 @@ class DrillstringModel:
     kind : {"full3d", "axial_torsional"}
         Which model to build. ``axial_torsional`` is refused when the parameters need lateral
         DOFs (see :func:`needs_lateral`).
+    extended_outputs : bool, optional
+        List the outputs of the extensions beyond the paper (whirl speed and direction per
+        contact body, ...; :func:`plant.observables.output_names`). Default: when one of them
+        is active (:func:`extensions`), so that the paper's scenes keep the paper's interface.
     """
 
-    def __init__(self, params: PlantParams, kind: ModelKind = "full3d") -> None:
+    def __init__(self, params: PlantParams, kind: ModelKind = "full3d",
+                 extended_outputs: bool | None = None) -> None:
         if kind not in MODEL_KINDS:
             raise ValueError(f"model = {kind!r} is not allowed: one of {', '.join(MODEL_KINDS)}")
         if kind == "axial_torsional":
@@ -185,6 +204,8 @@ class DrillstringModel:
                 )
         self.params = params
         self.kind = kind
+        self.extended_outputs = (bool(extensions(params)) if extended_outputs is None
+                                 else bool(extended_outputs))
         self.model_id = kern.MODEL_FULL3D if kind == "full3d" else kern.MODEL_AXIAL_TORSIONAL
         self.derived = derive(params)
         self.n = params.pipe.n_segments
@@ -201,7 +222,8 @@ class DrillstringModel:
         self.wM = np.zeros((n, 3))
         self._scratch = [np.zeros(self.n_state) for _ in range(5)]
         self.verlet_lambda = 1.0  # velocity predictor of the Verlet damping forces (0.5 .. 1)
-        names = output_names(kind == "full3d", list(self.contact_bodies), self.n_sites)
+        names = output_names(kind == "full3d", list(self.contact_bodies), self.n_sites,
+                             extended=self.extended_outputs)
         self.input_names, self.input_units, self.input_docs = self._input_layout()
         self.n_inputs = len(self.input_names)
         self.u = np.zeros(self.n_inputs)
@@ -300,6 +322,9 @@ class DrillstringModel:
         p[lay.K_CONT] = ct.stiffness if ct.enabled else 0.0
         p[lay.C_CONT] = ct.damping if ct.enabled else 0.0
         p[lay.CLEAR] = ct.clearance
+        p[lay.MU_WALL] = ct.friction_coefficient if ct.enabled else 0.0
+        p[lay.V_SLIP] = ct.friction_velocity
+        p[lay.R_OUT] = 0.5 * pipe.outer_diameter
         ub = prm.unbalance
         p[lay.UNB] = ub.moment if ub.enabled else 0.0
         p[lay.ALPHA_LAT] = d.alpha_lateral
@@ -325,7 +350,7 @@ class DrillstringModel:
         aux = {name: self.n_body_state + i for i, name in enumerate(self.aux_names)}
         ip = [n, len(stab_body), len(self.contact_bodies), self.n_sites, unb, len(prm.loads),
               TOP_DRIVE_MODES.index(td.mode), aux.get("top_drive.angle", -1),
-              kern.BIT_PRESCRIBED, -1]
+              kern.BIT_PRESCRIBED, -1, int(self.extended_outputs)]
         assert len(ip) == kern.IP_HDR
         ip += stab_body + [b - 1 for b in self.contact_bodies] + [j - 1 for j in self.sites]
         self.ip = np.array(ip, dtype=np.int64)

@@ -17,6 +17,7 @@ from .kernels import (
     IP_NA,
     IP_NC,
     IP_NS,
+    IP_XOUT,
     bit_rock,
     cardan,
     drive_motion,
@@ -67,9 +68,12 @@ SCALAR_OUTPUTS = (
     ("total_energy", "J", "kinetic + elastic + gravity potential energy of the string"),
 )
 NSCAL = len(SCALAR_OUTPUTS)
+#: Whirl below this radius [m] is not defined (the centre sits on the well axis): speed 0.
+WHIRL_MIN_RADIUS = 1e-6
 
 
-def output_names(full3d: bool, contact_bodies: list[int], n_sites: int) -> list[tuple[str, str, str]]:
+def output_names(full3d: bool, contact_bodies: list[int], n_sites: int,
+                 extended: bool = False) -> list[tuple[str, str, str]]:
     """(name, unit, description) of each output of a model, in kernel order.
 
     Parameters
@@ -80,6 +84,11 @@ def output_names(full3d: bool, contact_bodies: list[int], n_sites: int) -> list[
         1-based contact bodies.
     n_sites : int
         Number of actuator sites.
+    extended : bool
+        Include the outputs of the extensions beyond the paper (``docs/physics.md``: whirl speed
+        and direction per contact body). The kernels always fill the extended list
+        (:class:`DrillstringModel` uses it); ``False`` gives the paper's interface (the default
+        plant FMU's outputs), a subset of it.
     """
     rows: list[tuple[str, str, str]] = []
     if full3d:
@@ -90,6 +99,15 @@ def output_names(full3d: bool, contact_bodies: list[int], n_sites: int) -> list[
                 (f"body{b}_radial_deflection", "m", f"radial deflection of body {b}"),
                 (f"body{b}_contact_force", "N", f"wellbore contact force on body {b}"),
             ]
+            if extended:
+                rows += [
+                    (f"body{b}_whirl_speed", "rad/s",
+                     f"angular velocity of the mass centre of body {b} about the well axis "
+                     f"(> 0 in the top drive's positive sense; 0 within "
+                     f"{WHIRL_MIN_RADIUS:g} m of the axis)"),
+                    (f"body{b}_whirl_direction", "1",
+                     f"+1 forward whirl (with the spin of body {b}), -1 backward, 0 none"),
+                ]
         for s in range(1, n_sites + 1):
             rows += [
                 (f"strain{s}_C", "1", f"bending strain at gauge C of site {s}"),
@@ -149,7 +167,23 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
         out[o + 1] = Y
         out[o + 2] = dl
         out[o + 3] = fc
-        o += 4
+        # whirl: angular velocity of the centre about the well axis, and its sense vs the spin
+        whirl = 0.0
+        sense = 0.0
+        if dl > WHIRL_MIN_RADIUS:
+            whirl = (X * y[oV + 3 * k + 1] - Y * y[oV + 3 * k]) / (dl * dl)
+            R = wR[k]
+            spin = R[2, 0] * y[oW + 3 * k] + R[2, 1] * y[oW + 3 * k + 1] + R[2, 2] * y[oW + 3 * k + 2]
+            if whirl * spin > 0.0:
+                sense = 1.0
+            elif whirl * spin < 0.0:
+                sense = -1.0
+        if ip[IP_XOUT] == 0:
+            o += 4
+            continue
+        out[o + 4] = whirl
+        out[o + 5] = sense
+        o += 6
     rg = p[GAUGE_R]
     arm = p[ACT_ARM]
     for s in range(na):

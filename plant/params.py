@@ -326,9 +326,21 @@ class ContactParams:
     bodies: tuple = _f(
         (), "1", "bodies (1 = top) checked for contact; [] = the body at each span's middle"
     )
-    clearance: float = _f(0.02, "m", "radial clearance between collar and wellbore")
+    clearance: float = _f(0.02, "m", "radial clearance between collar and wellbore (0: touching)")
     stiffness: float = _f(1e7, "N/m", "wellbore contact stiffness k_w")
     damping: float = _f(0.0, "N s/m", "contact damping (acts only while in contact)")
+    friction_coefficient: float = _f(
+        0.0, "1", "Coulomb friction coefficient mu at the wall (0 = frictionless, the paper's)"
+    )
+    friction_velocity: float = _f(
+        0.01, "m/s",
+        "slip speed of the regularized friction: F = mu N v / sqrt(v^2 + v_eps^2)",
+    )
+    whirl_outputs: bool = _f(
+        False, "-",
+        "add the outputs body<b>_whirl_speed [rad/s] and body<b>_whirl_direction per contact "
+        "body (always there when friction_coefficient > 0)",
+    )
 
     def __post_init__(self) -> None:
         _validate_types(self)
@@ -336,9 +348,12 @@ class ContactParams:
         for b in self.bodies:
             if isinstance(b, bool) or not isinstance(b, int):
                 raise ValueError(f"{o}.bodies: {b!r} is not allowed: must be integers >= 1")
-        _check_range(o, "clearance", self.clearance, 0.0, 10.0, lo_open=True, unit="m")
+        _check_range(o, "clearance", self.clearance, 0.0, 10.0, unit="m")
         _check_range(o, "stiffness", self.stiffness, 0.0, 1e13, unit="N/m")
         _check_range(o, "damping", self.damping, 0.0, 1e12, unit="N s/m")
+        _check_range(o, "friction_coefficient", self.friction_coefficient, 0.0, 2.0)
+        _check_range(o, "friction_velocity", self.friction_velocity, 0.0, 10.0, lo_open=True,
+                     unit="m/s")
 
 
 @dataclass(frozen=True)
