@@ -42,10 +42,18 @@ from numba import njit
 from .layout import (
     ACT_ARM,
     ALPHA_LAT,
+    BIT_A,
     BIT_AMP,
     BIT_EPS,
+    BIT_EPSI,
+    BIT_JX,
     BIT_LOBES,
+    BIT_MU,
     BIT_TORQUE,
+    BIT_WEAK,
+    BIT_WF,
+    BIT_WSPD,
+    BIT_ZETA,
     C_AX,
     C_BE,
     C_CONT,
@@ -111,6 +119,7 @@ TD_PRESCRIBED = 0
 TD_SPEED = 1
 TD_TORQUE = 2
 BIT_PRESCRIBED = 0
+BIT_CUTTING = 1
 
 _CACHE = True
 
@@ -167,6 +176,42 @@ def bit_rock(ang: float, om: float, p: np.ndarray) -> tuple[float, float]:
     lob = p[BIT_LOBES]
     a = p[BIT_AMP]
     return p[ZBIT0] + a * math.sin(lob * ang), a * lob * om * math.cos(lob * ang)
+
+
+@njit(cache=_CACHE, inline="always")
+def cutting_bit(zb, vb, zh, th, om, p):
+    """Cutting + wear-flat bit on a unilateral contact (Detournay & Defourny 2008).
+
+    ``zb`` [m], ``vb`` [m/s]: depth and axial velocity of the bit end; ``zh`` [m]: hole bottom
+    (an auxiliary state); ``th`` [rad], ``om`` [rad/s]: bit angle and speed. The rock surface
+    under the bit is ``zh + A sin(lobes th)`` (a lobed bottom-hole profile, ``A`` =
+    ``bit.displacement_amplitude``). On bottom the contact spring-damper gives the weight on bit
+    ``W >= 0`` (off bottom: everything 0, the bit bounces); the wear flats carry
+    ``W_f = min(W, W_f*)``, the cutters ``W_c = W - W_f`` at the depth of cut per revolution
+    ``d = W_c / (a zeta eps)``. Torque ``T = a/2 (W_c / zeta + mu(om) W_f) tanh(om / slip)``,
+    ``mu(om) = mu gamma (1 + weak exp(-|om| / om_w))``; the hole deepens at
+    ``d max(om, 0) / (2 pi)``. Returns ``(W [N], T [N m], rate of penetration [m/s], d [m])``.
+    """
+    lob = p[BIT_LOBES]
+    amp = p[BIT_AMP]
+    zs = zh + amp * math.sin(lob * th)
+    pen = zb - zs
+    if pen <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    w = p[KB_AX] * pen + p[CB_AX] * (vb - amp * lob * om * math.cos(lob * th))
+    if w <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    wf = min(w, p[BIT_WF])
+    wc = w - wf
+    a = p[BIT_A]
+    zeta = p[BIT_ZETA]
+    d = wc / (a * zeta * p[BIT_EPSI])
+    mu = p[BIT_MU]
+    if p[BIT_WEAK] > 0.0:
+        mu *= 1.0 + p[BIT_WEAK] * math.exp(-abs(om) / p[BIT_WSPD])
+    tq = 0.5 * a * (wc / zeta + mu * wf) * math.tanh(om / p[BIT_EPS])
+    rop = d * om / (2.0 * math.pi) if om > 0.0 else 0.0
+    return w, tq, rop, d
 
 
 @njit(cache=_CACHE)
@@ -461,11 +506,22 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
         if ip[IP_TD] != TD_PRESCRIBED:
             drive_rates(y, dy, p, ip, u, R0[2, 0] * m0 + R0[2, 1] * m1 + R0[2, 2] * m2)
 
-    # bit: axial spring to the prescribed rock position, resisting torque
+    # bit: axial spring to the prescribed rock position (or the cutting law), resisting torque
     e = n - 1
     Re = wR[e]
     kb = p[KB_AX]
-    if kb > 0.0:
+    if ip[IP_BIT] == BIT_CUTTING:
+        x = ip[IP_BITX]
+        vB = _mv(Re, h * y[oW + 3 * e + 1], -h * y[oW + 3 * e], 0.0)
+        wb, tqb, rop, dcut = cutting_bit(y[3 * e + 2] + h * Re[2, 2], y[oV + 3 * e + 2] + vB[2],
+                                         y[x], y[oA + 3 * e], y[oW + 3 * e + 2], p)
+        dy[x] = rop
+        wM[e, 2] -= tqb
+        wF[e, 2] -= wb
+        fb0, fb1, fb2 = _mtv(Re, 0.0, 0.0, -wb)
+        wM[e, 0] += -h * fb1
+        wM[e, 1] += h * fb0
+    elif kb > 0.0:
         zr, vr = bit_rock(ang, om, p)
         vB = _mv(Re, h * y[oW + 3 * e + 1], -h * y[oW + 3 * e], 0.0)
         Bz = y[3 * e + 2] + h * Re[2, 2]
@@ -549,6 +605,15 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
         dy[oW + 3 * k] = (wM[k, 0] - (jp - jt) * wy * wz) / jt
         dy[oW + 3 * k + 1] = (wM[k, 1] - (jt - jp) * wz * wx) / jt
         dy[oW + 3 * k + 2] = wM[k, 2] / jp
+    if p[BIT_JX] > 0.0:  # bit and bottom-hole assembly: more polar inertia on the bit body
+        k = n - 1
+        jpe = jp + p[BIT_JX]
+        wx = y[oW + 3 * k]
+        wy = y[oW + 3 * k + 1]
+        wz = y[oW + 3 * k + 2]
+        dy[oW + 3 * k] = (wM[k, 0] - (jpe - jt) * wy * wz) / jt
+        dy[oW + 3 * k + 1] = (wM[k, 1] - (jt - jpe) * wz * wx) / jt
+        dy[oW + 3 * k + 2] = wM[k, 2] / jpe
 
 
 @njit(cache=_CACHE, inline="always")
@@ -621,7 +686,13 @@ def rhs_at(t, y, dy, p, ip, fp, u, wR, wF, wM):
         dy[oW] += tq_top
         if ip[IP_TD] != TD_PRESCRIBED:
             drive_rates(y, dy, p, ip, u, tq_top)
-    if p[KB_AX] > 0.0:
+    if ip[IP_BIT] == BIT_CUTTING:
+        x = ip[IP_BITX]
+        wb, tqb, rop, dcut = cutting_bit(y[e] + h, y[oV + e], y[x], y[n + e], y[oW + e], p)
+        dy[oV + e] -= wb
+        dy[oW + e] -= tqb
+        dy[x] = rop
+    elif p[KB_AX] > 0.0:
         zr, vr = bit_rock(ang, om, p)
         dy[oV + e] += -p[KB_AX] * (y[e] + h - zr) - p[CB_AX] * (y[oV + e] - vr)
     if p[BIT_TORQUE] > 0.0:
@@ -639,6 +710,8 @@ def rhs_at(t, y, dy, p, ip, fp, u, wR, wF, wM):
     for k in range(n):
         dy[oV + k] *= im
         dy[oW + k] *= ij
+    if p[BIT_JX] > 0.0:  # bit and bottom-hole assembly: more polar inertia on the bit body
+        dy[oW + e] *= jp / (jp + p[BIT_JX])
 
 
 @njit(cache=_CACHE, inline="always")

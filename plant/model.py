@@ -42,7 +42,7 @@ from .integrators import (
     stable_step,
 )
 from .observables import output_names, outputs3d, outputs_at
-from .params import TOP_DRIVE_MODES, PlantParams
+from .params import BIT_MODELS, TOP_DRIVE_MODES, PlantParams
 
 __all__ = ["DrillstringModel", "FIXED_STEP_METHODS", "ModelKind", "extensions", "needs_lateral",
            "series"]
@@ -79,6 +79,8 @@ def extensions(params: PlantParams) -> list[str]:
         out.append("wellbore friction")
     if params.contact.whirl_outputs:
         out.append("whirl outputs")
+    if params.bit.model != "prescribed":
+        out.append(f"bit.model = {params.bit.model!r}")
     return out
 
 
@@ -246,6 +248,9 @@ class DrillstringModel:
         if mode == "torque":
             names.append("top_drive.speed")
             units.append("rad/s")
+        if self.params.bit.model == "cutting":
+            names.append("bit.hole_bottom")
+            units.append("m")
         return names, units
 
     def _input_layout(self) -> tuple[list[str], dict[str, str], dict[str, str]]:
@@ -314,7 +319,15 @@ class DrillstringModel:
         p[lay.BIT_AMP] = bit.displacement_amplitude if bit.axial_stiffness > 0.0 else 0.0
         p[lay.BIT_LOBES] = bit.lobes
         p[lay.BIT_TORQUE] = bit.torque
-        p[lay.BIT_EPS] = 0.1
+        p[lay.BIT_EPS] = bit.slip_speed
+        p[lay.BIT_A] = bit.radius
+        p[lay.BIT_EPSI] = bit.intrinsic_specific_energy
+        p[lay.BIT_ZETA] = bit.cutting_force_ratio
+        p[lay.BIT_WF] = bit.wearflat_force
+        p[lay.BIT_MU] = bit.friction_coefficient
+        p[lay.BIT_WEAK] = bit.static_friction_ratio - 1.0
+        p[lay.BIT_WSPD] = bit.weakening_speed
+        p[lay.BIT_JX] = bit.inertia
         st = prm.stabilizers
         p[lay.K_STAB] = st.stiffness
         p[lay.C_STAB] = d.beta_axial * st.stiffness if st.damping < 0.0 else st.damping
@@ -350,7 +363,8 @@ class DrillstringModel:
         aux = {name: self.n_body_state + i for i, name in enumerate(self.aux_names)}
         ip = [n, len(stab_body), len(self.contact_bodies), self.n_sites, unb, len(prm.loads),
               TOP_DRIVE_MODES.index(td.mode), aux.get("top_drive.angle", -1),
-              kern.BIT_PRESCRIBED, -1, int(self.extended_outputs)]
+              BIT_MODELS.index(prm.bit.model), aux.get("bit.hole_bottom", -1),
+              int(self.extended_outputs)]
         assert len(ip) == kern.IP_HDR
         ip += stab_body + [b - 1 for b in self.contact_bodies] + [j - 1 for j in self.sites]
         self.ip = np.array(ip, dtype=np.int64)
@@ -431,6 +445,9 @@ class DrillstringModel:
             zb = z[-1] + 0.5 * dx
             kb = self.p[lay.KB_AX]
             self.p[lay.ZBIT0] = zb - self.params.bit.weight_on_bit / kb
+            if self.params.bit.model == "cutting":  # the hole bottom under the pressed bit
+                self.p[lay.BIT_ZH0] = self.p[lay.ZBIT0]
+                y[self.aux_names.index("bit.hole_bottom") + self.n_body_state] = self.p[lay.ZBIT0]
         return y
 
     # ------------------------------------------------------------------ evaluation
@@ -600,7 +617,7 @@ class DrillstringModel:
         """
         p = self.p
         ramp = self.params.top_drive.mode == "prescribed" and p[lay.OMEGA0] != 0.0
-        return (self.kind == "axial_torsional" and not ramp
+        return (self.kind == "axial_torsional" and not ramp and self.params.bit.model != "cutting"
                 and (p[lay.BIT_AMP] == 0.0 or p[lay.KB_AX] == 0.0) and p[lay.BIT_TORQUE] == 0.0)
 
     @property

@@ -12,6 +12,9 @@ import math
 from numba import njit
 
 from .kernels import (
+    BIT_CUTTING,
+    IP_BIT,
+    IP_BITX,
     IP_HDR,
     IP_N,
     IP_NA,
@@ -20,6 +23,7 @@ from .kernels import (
     IP_XOUT,
     bit_rock,
     cardan,
+    cutting_bit,
     drive_motion,
     gauge_strains,
     one_minus_cos_small,
@@ -28,8 +32,12 @@ from .kernels import (
 )
 from .layout import (
     ACT_ARM,
+    BIT_AMP,
     BIT_EPS,
+    BIT_JX,
+    BIT_LOBES,
     BIT_TORQUE,
+    BIT_ZH0,
     C_CONT,
     CB_AX,
     CLEAR,
@@ -68,6 +76,13 @@ SCALAR_OUTPUTS = (
     ("total_energy", "J", "kinetic + elastic + gravity potential energy of the string"),
 )
 NSCAL = len(SCALAR_OUTPUTS)
+#: Scalars of the extensions (after :data:`SCALAR_OUTPUTS` when the outputs are extended).
+EXTENDED_SCALAR_OUTPUTS = (
+    ("rate_of_penetration", "m/s", "rate at which the hole bottom deepens (bit.model 'cutting')"),
+    ("drilled_depth", "m", "hole drilled since the start (bit.model 'cutting')"),
+    ("depth_of_cut", "m", "depth of cut per bit revolution d (bit.model 'cutting')"),
+    ("bit_on_bottom", "1", "1 while the bit presses on the rock, 0 off bottom (bit bounce)"),
+)
 #: Whirl below this radius [m] is not defined (the centre sits on the well axis): speed 0.
 WHIRL_MIN_RADIUS = 1e-6
 
@@ -115,6 +130,8 @@ def output_names(full3d: bool, contact_bodies: list[int], n_sites: int,
                 (f"actuator{s}_power", "W", f"power delivered by the actuators of site {s}"),
             ]
     rows += list(SCALAR_OUTPUTS)
+    if extended:
+        rows += list(EXTENDED_SCALAR_OUTPUTS)
     return rows
 
 
@@ -129,6 +146,23 @@ def _scalars_common(om, out, o, fb, tb, tt, hook, wbit, zdisp, twist, energy):
     out[o + 6] = zdisp
     out[o + 7] = twist
     out[o + 8] = energy
+
+
+@njit(cache=_CACHE)
+def _bit_contact_energy(zb, zh, th, p):
+    """Elastic energy [J] of the cutting bit's contact spring (0 off bottom)."""
+    pen = zb - (zh + p[BIT_AMP] * math.sin(p[BIT_LOBES] * th))
+    return 0.5 * p[KB_AX] * pen * pen if pen > 0.0 else 0.0
+
+
+@njit(cache=_CACHE)
+def _scalars_extended(out, o, ip, y, p, fb, rop, dcut):
+    """The extensions' scalars (:data:`EXTENDED_SCALAR_OUTPUTS`) at ``out[o:]``."""
+    cutting = ip[IP_BIT] == BIT_CUTTING
+    out[o] = rop
+    out[o + 1] = y[ip[IP_BITX]] - p[BIT_ZH0] if cutting else 0.0
+    out[o + 2] = dcut
+    out[o + 3] = 1.0 if (cutting and fb > 0.0) else 0.0
 
 
 @njit(cache=_CACHE)
@@ -267,14 +301,22 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
     Re = wR[e]
     fb = 0.0
     bz = y[3 * e + 2] + h * Re[2, 2]
-    if p[KB_AX] > 0.0:
+    tb = 0.0
+    rop = 0.0
+    dcut = 0.0
+    if ip[IP_BIT] == BIT_CUTTING:
+        vbz = y[oV + 3 * e + 2] + h * (Re[2, 0] * y[oW + 3 * e + 1] - Re[2, 1] * y[oW + 3 * e])
+        fb, tb, rop, dcut = cutting_bit(bz, vbz, y[ip[IP_BITX]], y[oA + 3 * e],
+                                        y[oW + 3 * e + 2], p)
+        pe += _bit_contact_energy(bz, y[ip[IP_BITX]], y[oA + 3 * e], p)
+    elif p[KB_AX] > 0.0:
         zr, vr = bit_rock(ang, om, p)
         vbz = y[oV + 3 * e + 2] + h * (Re[2, 0] * y[oW + 3 * e + 1] - Re[2, 1] * y[oW + 3 * e])
         fb = p[KB_AX] * (bz - zr) + p[CB_AX] * (vbz - vr)
         pe += 0.5 * p[KB_AX] * (bz - zr) ** 2
-    tb = 0.0
     if p[BIT_TORQUE] > 0.0:
-        tb = p[BIT_TORQUE] * math.tanh(y[oW + 3 * e + 2] / p[BIT_EPS])
+        tb += p[BIT_TORQUE] * math.tanh(y[oW + 3 * e + 2] / p[BIT_EPS])
+    ke += 0.5 * p[BIT_JX] * y[oW + 3 * e + 2] ** 2
     # stabilizers
     for s in range(ns):
         k = ip[IP_HDR + s]
@@ -285,6 +327,8 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
     pe += e_cont
     _scalars_common(om, out, o, fb, tb, tt, hook, y[oW + 3 * e + 2], bz - zbit_ref,
                     y[oA + 3 * e] - ang, ke + pe)
+    if ip[IP_XOUT] != 0:
+        _scalars_extended(out, o + NSCAL, ip, y, p, fb, rop, dcut)
 
 
 @njit(cache=_CACHE)
@@ -314,13 +358,22 @@ def outputs_at(t, y, p, ip, fp, u, wR, zbit_ref, out):
     e = n - 1
     bz = y[e] + h
     fb = 0.0
-    if p[KB_AX] > 0.0:
+    tb = 0.0
+    rop = 0.0
+    dcut = 0.0
+    if ip[IP_BIT] == BIT_CUTTING:
+        fb, tb, rop, dcut = cutting_bit(bz, y[2 * n + e], y[ip[IP_BITX]], y[n + e], y[3 * n + e],
+                                        p)
+        pe += _bit_contact_energy(bz, y[ip[IP_BITX]], y[n + e], p)
+    elif p[KB_AX] > 0.0:
         zr, vr = bit_rock(ang, om, p)
         fb = p[KB_AX] * (bz - zr) + p[CB_AX] * (y[2 * n + e] - vr)
         pe += 0.5 * p[KB_AX] * (bz - zr) ** 2
-    tb = 0.0
     if p[BIT_TORQUE] > 0.0:
-        tb = p[BIT_TORQUE] * math.tanh(y[3 * n + e] / p[BIT_EPS])
+        tb += p[BIT_TORQUE] * math.tanh(y[3 * n + e] / p[BIT_EPS])
+    ke += 0.5 * p[BIT_JX] * y[3 * n + e] ** 2
     _scalars_common(om, out, 0, fb, tb, tt, hook, y[3 * n + e], bz - zbit_ref,
                     y[n + e] - ang, ke + pe)
+    if ip[IP_XOUT] != 0:
+        _scalars_extended(out, NSCAL, ip, y, p, fb, rop, dcut)
 

@@ -58,3 +58,27 @@ def test_stiff_wall_with_a_finer_step_rolls_backward():
     assert _run(sim, 0.1)
     i = m.output_names.index("body6_whirl_direction")
     assert sim.outputs()[i] == -1.0
+
+
+BIT_CASES = {
+    "stick_slip: rock contact 1e12 N/m": ("stick_slip", {"bit": {"axial_stiffness": 1e12}}),
+    "stick_slip: friction 5, static/dynamic 10": (
+        "stick_slip", {"bit": {"friction_coefficient": 5.0, "static_friction_ratio": 10.0}}),
+    "stick_slip: slip speed 1e-4 rad/s": ("stick_slip", {"bit": {"slip_speed": 1e-4}}),
+    "bit_bounce: 1 cm profile": ("bit_bounce", {"bit": {"displacement_amplitude": 0.01}}),
+    "bit_bounce: no bit inertia, 5 lobes": ("bit_bounce", {"bit": {"inertia": 0.0,
+                                                                   "lobes": 5.0}}),
+}
+
+
+@pytest.mark.parametrize("case", list(BIT_CASES))
+def test_bit_case_finishes_finite_or_reports(case):
+    scene, over = BIT_CASES[case]
+    sc = load_scene(scene, overrides=over)
+    m = DrillstringModel(sc.plant, sc.model)
+    sim = PlantSimulator(m)
+    if _run(sim, 3.0):
+        assert sim.time == pytest.approx(3.0)
+        assert np.all(np.isfinite(sim.y))
+        i = m.output_names.index("drilled_depth")
+        assert sim.outputs()[i] >= 0.0  # the hole never fills back
