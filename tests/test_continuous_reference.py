@@ -50,14 +50,15 @@ def _one_blas_thread():
 
 
 @pytest.fixture(scope="module")
-def loop() -> ContinuousLoop:
-    return ContinuousLoop.from_scene("paper_closed_loop")
-
-
-@pytest.fixture(scope="module")
 def sampled_loop() -> LoopModel:
     """The discrete prediction of the scene's sampled loop (Gauss-Seidel, no loop delay)."""
     return LoopModel.from_scene("paper_closed_loop")
+
+
+@pytest.fixture(scope="module")
+def loop(sampled_loop) -> ContinuousLoop:
+    """Its continuous limit: the same linearization without the sampling."""
+    return ContinuousLoop.from_loop_model(sampled_loop)
 
 
 # ------------------------------------------------------------------------------ (a) vs sampled

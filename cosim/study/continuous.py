@@ -40,7 +40,7 @@ import scipy.linalg
 import scipy.signal
 from threadpoolctl import threadpool_limits
 
-from .stability import _bisect, _first_crossing, reduce_loop
+from .stability import _bisect, _first_crossing
 
 __all__ = [
     "ContinuousLoop",
@@ -112,27 +112,23 @@ class ContinuousLoop:
     @classmethod
     def from_scene(cls, scene: str | Any = "paper_closed_loop",
                    overrides: Mapping[str, Any] | None = None, **kwargs: Any) -> ContinuousLoop:
-        """Linearize a scene's plant (``plant.linearize``) and take the lag from ``[controller]``.
+        """The continuous limit of the scene's sampled loop (:meth:`from_loop_model` of
+        ``LoopModel.from_scene(scene, overrides)``: the same linearization and lag).
 
-        Parameters
-        ----------
-        scene : str or Scene
-            Scene name/path or a loaded :class:`plant.scene.Scene`.
-        overrides : mapping, optional
-            Nested overrides for :func:`plant.scene.load_scene`.
-        **kwargs
-            Override any field (e.g. ``pade_order=8``).
+        ``kwargs`` override fields (e.g. ``pade_order=8``).
         """
-        from drillcosim.cosim.scenario.scene_system import controller_parameters
-        from drillcosim.plant.linearize import linearize
+        from .stability import LoopModel
 
-        sc = _load(scene, overrides)
-        lin = linearize(sc.plant, "full3d")
-        A, B, C, dropped = reduce_loop(lin.A, lin.B, lin.C)
-        opts: dict[str, Any] = {
-            "lag_time_constant": float(controller_parameters(sc)["lag_time_constant"])}
+        return cls.from_loop_model(LoopModel.from_scene(scene, overrides), **kwargs)
+
+    @classmethod
+    def from_loop_model(cls, lm: Any, **kwargs: Any) -> ContinuousLoop:
+        """The continuous loop of a discrete :class:`cosim.study.stability.LoopModel`: its plant
+        ``(A, B, C)``, dropped modes and lag time constant, without the sampling."""
+        opts: dict[str, Any] = {"lag_time_constant": lm.lag_time_constant,
+                                "dropped": lm.dropped}
         opts.update(kwargs)
-        return cls(A, B, C, dropped=dropped, **opts)
+        return cls(lm.A, lm.B, lm.C, **opts)
 
     # -- matrices ----------------------------------------------------------------------------
     def matrix(self, gain: float) -> np.ndarray:
@@ -391,7 +387,8 @@ def _report(scene: str = "paper_closed_loop") -> list[str]:
     """The numbers of ``docs/continuous_reference.md``."""
     from .stability import LoopModel
 
-    cl = ContinuousLoop.from_scene(scene)
+    lm = LoopModel.from_scene(scene)
+    cl = ContinuousLoop.from_loop_model(lm)
     lines = [f"scene {scene}: {cl.A.shape[0]} coupled states ({cl.dropped.size} decoupled modes "
              f"dropped, slowest {np.max(cl.dropped.real):+.3f} 1/s); Pade order {cl.pade_order}"]
     kc = cl.critical_gain(0.0, gain_min=1e5, gain_max=1e13, per_decade=2, rtol=0.01)
@@ -401,7 +398,6 @@ def _report(scene: str = "paper_closed_loop") -> list[str]:
         lines.append(f"critical gain, delay {tau * 1e3:g} ms, continuous: {k:.3g} N/strain")
     tc = cl.critical_delay(1e9, delay_max=1e-3, points=20, atol=1e-8)
     lines.append(f"critical delay at K = 1e9, continuous: {tc * 1e6:.2f} us")
-    lm = LoopModel.from_scene(scene)
     for h in (2.5e-4, 1e-4, 5e-5, 2.5e-5):
         td = lm.critical_delay(1e9, h, delay_max=1e-3, per_step=2, atol=h * 1e-3)
         lines.append(f"critical delay at K = 1e9, sampled H = {h * 1e3:g} ms: {td * 1e6:.2f} us "
