@@ -299,22 +299,15 @@ def _load(scene: Any, overrides: Mapping[str, Any] | None) -> Any:
 def law_from_scene(scene: Any, delay: float = 0.0, gain: float | None = None) -> Any:
     """The scene's ``[controller]`` law as a :class:`plant.closed_loop.StrainLaw` [SI units].
 
-    The table is validated by the controller package (``controller.ControllerParams``);
-    ``gain`` overrides the scene's gain [N per unit strain], ``delay`` is the actuator delay [s].
+    The table is validated once, by ``cosim.scenario.scene_system.scene_controller``; ``gain``
+    overrides the scene's gain [N per unit strain], ``delay`` is the actuator delay [s].
     """
-    from drillcosim.controller import ControllerParams
-    from drillcosim.cosim.scenario.scene_system import controller_parameters
+    from drillcosim.cosim.scenario.scene_system import scene_controller
     from drillcosim.plant.closed_loop import StrainLaw
 
-    c = controller_parameters(_load(scene, None))
-    sym = float(c["symmetric_force_limit"])
-    params = ControllerParams(
-        gain=float(c["gain"] if gain is None else gain),
-        mode=("unrestricted", "compressive_only")[int(c["mode"])],
-        force_limit=float(c["force_limit"]),
-        symmetric_force_limit=math.inf if sym >= 1e30 else sym,
-        switch_on_time=float(c["switch_on_time"]),
-        lag_time_constant=float(c["lag_time_constant"]), enabled=bool(c["enabled"]))
+    params = scene_controller(_load(scene, None))
+    if gain is not None:
+        params = replace(params, gain=float(gain))
     return StrainLaw.from_controller(params, delay=delay)
 
 
