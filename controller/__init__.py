@@ -1,4 +1,5 @@
-"""drillcosim controller package: pure strain-feedback laws (no FMI code).
+"""drillcosim controller package: pure controller laws (no FMI code): the strain feedback of
+the bending actuators and the top-drive speed controller.
 
 All imports inside this package are relative and it depends on numpy only: the
 FMU build vendors a copy of it under a versioned name (``_dcs_controller_<ver>``)
@@ -6,12 +7,21 @@ into the controller FMU, so that copy can never shadow, or be shadowed by, a
 ``controller`` package imported by the host process.
 """
 
-from .params import MODES, ControllerParams, Mode
-from .strain_feedback import CHANNELS, N_CHANNELS, SWITCH_TIME_RTOL, StrainController
+from .params import MODES, ControllerParams, Mode, check_gain_matrix
+from .strain_feedback import (
+    AXES,
+    CHANNELS,
+    N_CHANNELS,
+    SWITCH_TIME_RTOL,
+    StrainController,
+    channels,
+)
+from .top_drive import TopDriveController, TopDriveControllerParams
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "AXES",
     "CHANNELS",
     "MODES",
     "N_CHANNELS",
@@ -19,5 +29,9 @@ __all__ = [
     "ControllerParams",
     "Mode",
     "StrainController",
+    "TopDriveController",
+    "TopDriveControllerParams",
     "__version__",
+    "channels",
+    "check_gain_matrix",
 ]

@@ -13,7 +13,7 @@ from typing import Literal
 
 import numpy as np
 
-__all__ = ["MODES", "ControllerParams", "Mode"]
+__all__ = ["MODES", "ControllerParams", "Mode", "check_gain_matrix"]
 
 Mode = Literal["unrestricted", "compressive_only"]
 #: Allowed values of :attr:`ControllerParams.mode`, in the order of the FMU's
@@ -62,6 +62,45 @@ def _check_real(name: str, value: object, low: float, high: float, *, low_open: 
     return x
 
 
+def check_gain_matrix(value: object) -> tuple[tuple[float, ...], ...]:
+    """``value`` as a validated square matrix of relative gains; ``()`` for none or the identity.
+
+    Parameters
+    ----------
+    value : sequence of sequences of real numbers, shape (n, n)
+        Row i = force of site i, column j = strain of site j [1]. An empty sequence means none.
+
+    Returns
+    -------
+    tuple of tuple of float
+        The matrix, or ``()`` when it is empty or the identity (the identity is the SISO law:
+        one representation for one law, so every implementation computes it the same way).
+
+    Raises
+    ------
+    ValueError
+        Not a square matrix of finite real numbers (the message names ``gain_matrix``).
+    """
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+        raise ValueError(f"gain_matrix = {value!r} is not allowed; allowed: a square matrix "
+                         "(list of rows) of finite real numbers, or [] for none")
+    rows = list(value)  # type: ignore[call-overload]
+    n = len(rows)
+    out = []
+    for i, row in enumerate(rows):
+        if isinstance(row, (str, bytes)) or not hasattr(row, "__len__") or len(row) != n:
+            raise ValueError(f"gain_matrix row {i + 1} = {row!r} is not allowed; allowed: a "
+                             f"square matrix, here {n} rows of {n} finite real numbers")
+        for j, x in enumerate(row):
+            if isinstance(x, bool) or not isinstance(x, Real) or not math.isfinite(float(x)):
+                raise ValueError(f"gain_matrix[{i + 1}][{j + 1}] = {x!r} is not allowed; "
+                                 "allowed: a finite real number")
+        out.append(tuple(float(x) for x in row))
+    if all(out[i][j] == (1.0 if i == j else 0.0) for i in range(n) for j in range(n)):
+        return ()
+    return tuple(out)
+
+
 @dataclass(frozen=True)
 class ControllerParams:
     """Parameters of the proportional strain-feedback law (paper section 4).
@@ -89,6 +128,12 @@ class ControllerParams:
         ``0 <= lag_time_constant < inf``.
     enabled : bool
         ``False`` forces a zero output at all times (open loop).
+    gain_matrix : tuple of tuple of float, shape (n_sites, n_sites), optional
+        Relative gains [1] of a MIMO law across the sites, the same for both axes:
+        ``F_axis = gain * gain_matrix @ strain_axis`` (row i = force of site i, column j =
+        strain of site j), i.e. the gain matrix ``G = gain * gain_matrix`` [N per unit
+        strain]. ``()`` (default) or the identity: the SISO law ``F = gain * strain`` per
+        channel (the identity is stored as ``()``).
 
     Raises
     ------
@@ -104,6 +149,7 @@ class ControllerParams:
     switch_on_time: float = 0.0
     lag_time_constant: float = 0.0
     enabled: bool = True
+    gain_matrix: tuple = ()
 
     def __post_init__(self) -> None:
         inf = math.inf
@@ -123,6 +169,7 @@ class ControllerParams:
         if not isinstance(self.enabled, (bool, np.bool_)):
             raise ValueError(f"enabled = {self.enabled!r} is not allowed; allowed: True or False")
         checked["enabled"] = bool(self.enabled)
+        checked["gain_matrix"] = check_gain_matrix(self.gain_matrix)
         for name, value in checked.items():
             object.__setattr__(self, name, value)
 

@@ -16,8 +16,21 @@ with the default infinite limit).
 
 Channels
 --------
-Four channels, always in this order (:data:`CHANNELS`):
-site 1 (long span) axis C, site 1 axis E, site 2 (short span) axis C, site 2 axis E.
+Two channels per actuator site, always in this order (:func:`channels`): site 1 axis C,
+site 1 axis E, site 2 axis C, ... The default is two sites (:data:`CHANNELS`: site 1 = long
+span, site 2 = short span, the paper's layout); ``StrainController(params, n_sites=4)`` serves
+four.
+
+SISO and MIMO
+-------------
+Without ``params.gain_matrix`` every channel has its own P law, ``F = gain * strain``. With a
+matrix M (n_sites x n_sites, relative gains [1]) each axis couples the sites:
+
+    F_axis = gain * (M @ strain_axis),    axis = C, E,
+
+row i of M giving the force of site i from the strains of every site j (the gain matrix is
+``G = gain * M`` [N per unit strain]). Saturation, switch-on and lag act on each channel's
+force afterwards, as in the SISO law.
 
 Time discretisation
 -------------------
@@ -39,10 +52,19 @@ import numpy as np
 
 from .params import ControllerParams
 
-__all__ = ["CHANNELS", "N_CHANNELS", "SWITCH_TIME_RTOL", "StrainController"]
+__all__ = ["AXES", "CHANNELS", "N_CHANNELS", "SWITCH_TIME_RTOL", "StrainController", "channels"]
 
-#: Channel names in array order: (site, axis).
-CHANNELS: tuple[str, ...] = ("site1_C", "site1_E", "site2_C", "site2_E")
+#: Gauge axes of a site, in channel order.
+AXES: tuple[str, ...] = ("C", "E")
+
+
+def channels(n_sites: int) -> tuple[str, ...]:
+    """Channel names in array order for ``n_sites`` sites: ``site1_C, site1_E, site2_C, ...``."""
+    return tuple(f"site{s}_{a}" for s in range(1, n_sites + 1) for a in AXES)
+
+
+#: Channel names of the default two-site controller.
+CHANNELS: tuple[str, ...] = channels(2)
 N_CHANNELS = len(CHANNELS)
 #: Relative tolerance on the switch-on comparison, so that a time accumulated
 #: in floating point (e.g. ``25000 * 1e-3``) that lands a few ulp below
@@ -51,33 +73,47 @@ SWITCH_TIME_RTOL = 1e-12
 
 
 class StrainController:
-    """Four-channel proportional strain-feedback controller.
+    """Proportional strain-feedback controller, two channels (C, E) per actuator site.
 
     Parameters
     ----------
     params : ControllerParams, optional
         Controller parameters; defaults to ``ControllerParams()``.
+    n_sites : int
+        Actuator sites served (default 2); ``params.gain_matrix``, if any, must be
+        ``n_sites x n_sites``.
 
     Notes
     -----
-    The only state is the actuator force vector (4,) [N] (the lag state),
+    The only state is the actuator force vector (2 n_sites,) [N] (the lag state),
     available through :meth:`get_state` / :meth:`set_state`. A call that fails
     validation (NaN strain, bad time step) raises ``ValueError`` and leaves the
     state unchanged.
     """
 
-    def __init__(self, params: ControllerParams | None = None) -> None:
-        self._params = ControllerParams() if params is None else params
-        self._check_params_type(self._params)
-        self._force = np.zeros(N_CHANNELS)
+    def __init__(self, params: ControllerParams | None = None, n_sites: int = 2) -> None:
+        if isinstance(n_sites, bool) or not isinstance(n_sites, int) or n_sites < 1:
+            raise ValueError(f"n_sites = {n_sites!r} is not allowed; allowed: an integer >= 1")
+        self.n_sites = n_sites
+        #: channel names in array order (:func:`channels`)
+        self.channels = channels(n_sites)
+        self.n_channels = len(self.channels)
+        self._matrix: np.ndarray | None = None
+        self._params = ControllerParams()
+        self.params = ControllerParams() if params is None else params
+        self._force = np.zeros(self.n_channels)
         self._decay_dt = math.nan  # dt for which self._decay is valid
         self._decay = 0.0
 
     # ------------------------------------------------------------------ params
-    @staticmethod
-    def _check_params_type(params: object) -> None:
+    def _check_params(self, params: object) -> None:
         if not isinstance(params, ControllerParams):
             raise TypeError(f"params must be a ControllerParams, got {type(params).__name__}")
+        m = params.gain_matrix
+        if m and len(m) != self.n_sites:
+            raise ValueError(f"gain_matrix is {len(m)} x {len(m)}; this controller serves "
+                             f"{self.n_sites} sites: allowed an {self.n_sites} x {self.n_sites} "
+                             "matrix")
 
     @property
     def params(self) -> ControllerParams:
@@ -86,8 +122,9 @@ class StrainController:
 
     @params.setter
     def params(self, params: ControllerParams) -> None:
-        self._check_params_type(params)
+        self._check_params(params)
         self._params = params
+        self._matrix = np.array(params.gain_matrix, dtype=float) if params.gain_matrix else None
         self._decay_dt = math.nan
 
     # ------------------------------------------------------------------- state
@@ -100,7 +137,7 @@ class StrainController:
 
         Returns
         -------
-        numpy.ndarray, shape (4,)
+        numpy.ndarray, shape (2 n_sites,)
             Actuator forces [N] at the end of the last step (the lag state).
         """
         return self._force.copy()
@@ -110,7 +147,7 @@ class StrainController:
 
         Parameters
         ----------
-        state : array_like, shape (4,)
+        state : array_like, shape (2 n_sites,)
             Actuator forces [N]; must be finite.
 
         Raises
@@ -119,15 +156,15 @@ class StrainController:
             If the shape is wrong or a value is not finite.
         """
         arr = np.asarray(state, dtype=float)
-        if arr.shape != (N_CHANNELS,):
-            raise ValueError(f"state must have shape ({N_CHANNELS},), got {arr.shape}")
+        if arr.shape != (self.n_channels,):
+            raise ValueError(f"state must have shape ({self.n_channels},), got {arr.shape}")
         if not np.all(np.isfinite(arr)):
             raise ValueError(f"state must be finite, got {arr.tolist()}")
         self._force[:] = arr
 
     @property
     def forces(self) -> np.ndarray:
-        """numpy.ndarray, shape (4,): copy of the current actuator forces [N]."""
+        """numpy.ndarray, shape (2 n_sites,): copy of the current actuator forces [N]."""
         return self._force.copy()
 
     # -------------------------------------------------------------------- law
@@ -157,14 +194,15 @@ class StrainController:
         ----------
         t : float
             Time [s] at which the strains were sampled.
-        strains : array_like, shape (4,)
-            Strains [1] in channel order :data:`CHANNELS`; must be finite.
+        strains : array_like, shape (2 n_sites,)
+            Strains [1] in channel order :attr:`channels`; must be finite.
 
         Returns
         -------
-        numpy.ndarray, shape (4,)
-            ``clip(gain * strains, lower_limit, upper_limit)`` [N], or zeros
-            when the controller is not active at ``t``.
+        numpy.ndarray, shape (2 n_sites,)
+            ``clip(gain * strains, lower_limit, upper_limit)`` [N] (with a gain matrix M,
+            ``gain * (M @ strain_axis)`` per axis before the clip), or zeros when the
+            controller is not active at ``t``.
 
         Raises
         ------
@@ -173,9 +211,12 @@ class StrainController:
         """
         eps = self._check_strains(strains)
         if not self.is_active(t):
-            return np.zeros(N_CHANNELS)
+            return np.zeros(self.n_channels)
         p = self._params
-        u = p.gain * eps
+        if self._matrix is None:
+            u = p.gain * eps
+        else:  # rows of eps.reshape(n, 2) are sites, columns the axes C, E
+            u = p.gain * (self._matrix @ eps.reshape(self.n_sites, len(AXES))).ravel()
         return np.clip(u, p.lower_limit, p.upper_limit)
 
     def step(self, t: float, dt: float, strains: np.ndarray) -> np.ndarray:
@@ -187,12 +228,12 @@ class StrainController:
             Start of the step [s] (time at which the strains were sampled).
         dt : float
             Step size [s], ``dt >= 0`` and finite.
-        strains : array_like, shape (4,)
-            Strains [1] in channel order :data:`CHANNELS`, held over the step.
+        strains : array_like, shape (2 n_sites,)
+            Strains [1] in channel order :attr:`channels`, held over the step.
 
         Returns
         -------
-        numpy.ndarray, shape (4,)
+        numpy.ndarray, shape (2 n_sites,)
             Actuator forces [N] at ``t + dt`` (a copy; also the new state).
 
         Raises
@@ -215,12 +256,11 @@ class StrainController:
             self._force[:] = u + (self._force - u) * self._decay
         return self._force.copy()
 
-    @staticmethod
-    def _check_strains(strains: np.ndarray) -> np.ndarray:
+    def _check_strains(self, strains: np.ndarray) -> np.ndarray:
         eps = np.asarray(strains, dtype=float)
-        if eps.shape != (N_CHANNELS,):
-            raise ValueError(f"strains must have shape ({N_CHANNELS},), got {eps.shape}")
+        if eps.shape != (self.n_channels,):
+            raise ValueError(f"strains must have shape ({self.n_channels},), got {eps.shape}")
         if not np.all(np.isfinite(eps)):
-            bad = [CHANNELS[i] for i in np.flatnonzero(~np.isfinite(eps))]
+            bad = [self.channels[i] for i in np.flatnonzero(~np.isfinite(eps))]
             raise ValueError(f"non-finite strain in channel(s) {', '.join(bad)}: {eps.tolist()}")
         return eps

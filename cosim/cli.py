@@ -93,10 +93,18 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
 
 
 def _cmd_build(args: argparse.Namespace) -> int:
-    from drillcosim.fmu_src.build import build_all, default_out
+    from drillcosim.fmu_src.build import build_all, build_one, default_out
     from drillcosim.fmu_src.build_c import build_c_controller
 
     out = args.out or default_out()
+    if args.scene:
+        from drillcosim.cosim.scenario.scene_system import scene_recipes
+        from drillcosim.plant.scene import load_scene
+
+        for instance, recipe in scene_recipes(load_scene(args.scene)).items():
+            kind = "built for the scene" if recipe.base else "the default build"
+            print(f"built {build_one(recipe, out)} ({instance}: {kind})")
+        return 0
     build_all(out)  # prints "built <path>" per FMU
     try:
         print(f"built {build_c_controller(out)}")
@@ -173,7 +181,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     from drillcosim.cosim.study.sweep import execute_sweep, judging_note, sweep_from_args
 
     spec = sweep_from_args(args.scene, args.gain, args.delay, args.step, args.stop_time,
-                           args.engine, parse_set(args.set))
+                           args.engine, parse_set(args.set), gain_key=args.gain_key)
     note = judging_note(spec)
     if note:
         print(f"drillcosim sweep: note: {note}", file=sys.stderr)
@@ -233,6 +241,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: build/fmus of the "
                    "checkout, or the per-user FMU folder of an installed package; "
                    "`drillcosim run` looks there)")
+    p.add_argument("--scene", metavar="SCENE", help="build the FMUs that run this scene (name "
+                   "or path): plant and controllers for its layout (DrillstringPlant_<scene>, "
+                   "StrainController_<scene>), or the default ones where they fit")
     p.set_defaults(func=_cmd_build)
     p = sub.add_parser("bench", help="plant work-precision benchmarks -> BENCHMARKS.md")
     p.add_argument("--quick", action="store_true", help="short horizons (< 3 min)")
@@ -274,7 +285,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("scene", nargs="?", default="paper_closed_loop",
                    help="scene name from scenes/ or a path (default: paper_closed_loop)")
     p.add_argument("--gain", default="1e9", metavar="LIST",
-                   help="controller gains [N per unit strain] (default 1e9)")
+                   help="controller gains (default 1e9): values of --gain-key")
+    p.add_argument("--gain-key", metavar="TABLE.KEY",
+                   help="the scene key the gains set: controller.gain [N per unit strain] "
+                        "(default), or top_drive_controller.p_gain [N m s/rad] (the default "
+                        "for a scene with a top-drive controller and no strain controller)")
     p.add_argument("--delay", default="0", metavar="LIST", help="actuator delays [s] (default 0)")
     p.add_argument("--step", default="2.5e-4", metavar="LIST",
                    help="communication steps [s] (default 2.5e-4)")

@@ -50,13 +50,28 @@ Add (or edit) one entry in :data:`REGISTRY`, e.g.::
 the ``.fmu``); the adapter imports ``_dcs_plant_0_1_0``; ``extra_files`` (paths
 relative to the repository root, files or folders) land in ``resources/`` under
 their own base name.
+
+Variants: one adapter, another interface
+----------------------------------------
+An FMU whose interface is a variant of an adapter's (the plant built for a scene's layout,
+the controller for its number of sites) is a recipe with ``base`` (the adapter class) and
+``class_attributes`` (JSON: the layout): the build generates the slave module, a subclass
+named ``name`` of ``base`` carrying those attributes, and ships the adapter script beside it
+under its usual module name. The wrapper imports a slave module once per process
+(``sys.modules``), so every variant has its own module name (:attr:`FmuRecipe.slave_module`,
+with a hash of the layout): two variants, and the default FMU, live in one process. The
+adapter module they share is the same file in every FMU of this version. ``resource_files``
+copies single files to chosen places in ``resources/`` (e.g. a user's scene file into
+``resources/scenes/``).
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
+import pprint
 import re
 import shutil
 import subprocess
@@ -147,6 +162,7 @@ UNIT_DEFINITIONS: dict[str, dict[str, int]] = {
     "N.s/m": {"kg": 1, "s": -1},
     "N.m": {"kg": 1, "m": 2, "s": -2},
     "N.m/rad": {"kg": 1, "m": 2, "s": -2, "rad": -1},
+    "N.m.s/rad": {"kg": 1, "m": 2, "s": -1, "rad": -1},
     "Pa": {"kg": 1, "m": -1, "s": -2},
     "W": {"kg": 1, "m": 2, "s": -3},
     "J": {"kg": 1, "m": 2, "s": -2},
@@ -185,6 +201,15 @@ class FmuRecipe:
     exclude : tuple of str
         Files of the vendored packages (relative to the root) left out of the FMU: code the
         FMU never imports (tests' and benchmarks' reference implementations, analysis tools).
+    base : str
+        For a variant (see the module docstring): the adapter class in ``script`` that the
+        generated class ``name`` derives from; ``""`` (default): ``script`` defines ``name``.
+    class_attributes : str
+        For a variant: a JSON object, the class attributes of the generated class (JSON
+        values: numbers, strings, lists, objects).
+    resource_files : tuple of (str, str)
+        ``(source file, destination relative to resources/)``: single files placed where the
+        adapter looks for them (copied after ``extra_files``, replacing a file of that name).
     """
 
     name: str
@@ -194,10 +219,28 @@ class FmuRecipe:
     options: tuple[tuple[str, bool], ...] = field(default=_DEFAULT_OPTIONS)
     requires: tuple[str, ...] = ()
     exclude: tuple[str, ...] = ()
+    base: str = ""
+    class_attributes: str = ""
+    resource_files: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
         if not self.name.isidentifier():
             raise ValueError(f"FMU name {self.name!r} is not a Python identifier")
+        if self.base:
+            if not self.base.isidentifier() or self.base == self.name:
+                raise ValueError(f"base {self.base!r} must be the adapter class (an identifier "
+                                 f"other than the variant's name {self.name!r})")
+            attributes = json.loads(self.class_attributes or "{}")
+            if not isinstance(attributes, dict) or not all(
+                    isinstance(k, str) and k.isidentifier() for k in attributes):
+                raise ValueError("class_attributes must be a JSON object of identifiers")
+        elif self.class_attributes:
+            raise ValueError("class_attributes need a base class (a variant)")
+        for _src, dest in self.resource_files:
+            parts = Path(dest).parts
+            if Path(dest).is_absolute() or ".." in parts or not parts:
+                raise ValueError(f"resource_files: destination {dest!r} must be a relative "
+                                 "path inside resources/")
         for _package, vname in self.vendored:
             if not (vname.isidentifier() and vname.startswith("_dcs_")):
                 raise ValueError(f"vendored name {vname!r} must be an identifier starting "
@@ -225,14 +268,40 @@ class FmuRecipe:
         for extra in self.extra_files:
             path = ROOT / extra
             files += sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+        files += [ROOT / src for src, _dest in self.resource_files]
         return files
 
     @property
-    def slave_module(self) -> str:
-        """str: import name of the adapter inside the FMU, ``_dcs_<script stem>_<version>``."""
+    def script_module(self) -> str:
+        """str: import name of the adapter script inside the FMU, ``_dcs_<stem>_<version>``."""
         from drillcosim import __version__
 
         return f"_dcs_{self.script_path.stem}_{__version__.replace('.', '_')}"
+
+    @property
+    def slave_module(self) -> str:
+        """str: the module the wrapper imports: :attr:`script_module`, or for a variant
+        ``_dcs_<name>_<hash of base and attributes>_<version>`` (unique per layout)."""
+        if not self.base:
+            return self.script_module
+        from drillcosim import __version__
+
+        digest = hashlib.sha256(json.dumps([self.name, self.base, self.class_attributes])
+                                .encode()).hexdigest()[:10]
+        return f"_dcs_{self.name.lower()}_{digest}_{__version__.replace('.', '_')}"
+
+    def variant_source(self) -> str:
+        """Python source of a variant's slave module: the subclass ``name`` of ``base``."""
+        attributes = json.loads(self.class_attributes or "{}")
+        lines = [f'"""{self.name}: a variant of {self.base} generated by drillcosim\'s FMU '
+                 f'build (fmu_src/build.py); the class attributes are its layout."""', "",
+                 f"from {self.script_module} import {self.base}", "", "",
+                 f"class {self.name}({self.base}):",
+                 f'    """{self.base} with the layout below."""', ""]
+        for key, value in attributes.items():
+            text = pprint.pformat(value, width=92, sort_dicts=False)
+            lines.append(f"    {key} = " + text.replace("\n", "\n" + " " * (7 + len(key))))
+        return "\n".join(lines) + "\n"
 
 
 #: The FMUs of the project.
@@ -255,6 +324,13 @@ REGISTRY: tuple[FmuRecipe, ...] = (
         # continuous-time closed loop (study layer): the FMU never imports them (tested)
         exclude=("plant/numpy_rhs.py", "plant/linearize.py", "plant/modal.py",
                  "plant/closed_loop.py"),
+    ),
+    FmuRecipe(
+        name="TopDriveController",
+        script="fmu_src/top_drive_controller_fmu.py",
+        vendored=(("controller", "_dcs_controller_0_1_0"),
+                  ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
+        requires=("numpy",),
     ),
 )
 
@@ -395,6 +471,28 @@ def _vendor(recipe: FmuRecipe, package: str, dst: Path) -> None:
     shutil.copytree(src, dst, ignore=ignore)
 
 
+def _stage_resources(recipe: FmuRecipe, dest: Path) -> list[Path]:
+    """Copy ``extra_files`` then ``resource_files`` into ``dest``; its top-level entries."""
+    dest.mkdir(parents=True)
+    for extra in recipe.extra_files:
+        path = ROOT / extra
+        if not path.exists():
+            raise FileNotFoundError(f"extra file {path} of {recipe.name} does not exist")
+        if path.is_dir():
+            shutil.copytree(path, dest / path.name,
+                            ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        else:
+            shutil.copy2(path, dest / path.name)
+    for src, rel in recipe.resource_files:
+        path = ROOT / src
+        if not path.is_file():
+            raise FileNotFoundError(f"resource file {path} of {recipe.name} does not exist")
+        target = dest / rel
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(path, target)
+    return sorted(dest.iterdir())
+
+
 def _build_in_this_process(recipe: FmuRecipe, workdir: Path) -> Path:
     """Build one FMU into ``workdir/out`` (run in a dedicated subprocess)."""
     import pythonfmu
@@ -423,18 +521,19 @@ def _build_in_this_process(recipe: FmuRecipe, workdir: Path) -> Path:
     for package, vname in recipe.vendored:
         _vendor(recipe, package, staging / vname)
         project_files.append(staging / vname)
-    for extra in recipe.extra_files:
-        path = ROOT / extra
-        if not path.exists():
-            raise FileNotFoundError(f"extra file {path} of {recipe.name} does not exist")
-        project_files.append(path)
+    project_files += _stage_resources(recipe, workdir / "resources")
 
     source = recipe.script_path.read_text()
     if re.search(r"^\s*(from|import)\s+pythonfmu\b", source, re.M):
         raise RuntimeError(f"{recipe.script_path}: import pythonfmu as {PYTHONFMU_VENDORED} "
                            f"(the FMU ships it under that name only)")
     script = staging / f"{recipe.slave_module}.py"
-    shutil.copy2(recipe.script_path, script)
+    if recipe.base:  # the adapter under its own module name, the variant as the slave module
+        shutil.copy2(recipe.script_path, staging / f"{recipe.script_module}.py")
+        project_files.append(staging / f"{recipe.script_module}.py")
+        script.write_text(recipe.variant_source())
+    else:
+        shutil.copy2(recipe.script_path, script)
     sys.path.insert(0, str(staging))  # so pythonfmu can import the adapter at build time
     fmu = FmuBuilder.build_FMU(script, dest=workdir / "out",
                                project_files=project_files, **dict(recipe.options))
@@ -547,16 +646,19 @@ def stale(fmu: Path | str, recipe: FmuRecipe) -> bool:
     """Whether ``fmu`` must be (re)built from ``recipe``.
 
     True if it is missing or unreadable, was made by an earlier build (pythonfmu's binary, or
-    our wrapper before ``resources/python_requires.txt``), or is older than any file it is
-    made of (:meth:`FmuRecipe.sources`).
+    our wrapper before ``resources/python_requires.txt``), was made from another recipe
+    (another slave module: e.g. a variant for another layout under the same name), or is
+    older than any file it is made of (:meth:`FmuRecipe.sources`).
     """
     fmu = Path(fmu)
     try:
         with zipfile.ZipFile(fmu) as zf:
             if "resources/python_requires.txt" not in zf.namelist():
                 return True
+            if zf.read("resources/slavemodule.txt").decode().strip() != recipe.slave_module:
+                return True
         mtime = fmu.stat().st_mtime
-    except (OSError, zipfile.BadZipFile):
+    except (OSError, KeyError, zipfile.BadZipFile):
         return True
     return any(p.stat().st_mtime > mtime for p in recipe.sources() if p.is_file())
 
@@ -570,6 +672,8 @@ def _recipe_from_json(text: str) -> FmuRecipe:
         options=tuple(tuple(o) for o in raw["options"]),
         requires=tuple(raw["requires"]),
         exclude=tuple(raw["exclude"]),
+        base=raw["base"], class_attributes=raw["class_attributes"],
+        resource_files=tuple(tuple(r) for r in raw["resource_files"]),
     )
 
 

@@ -62,7 +62,20 @@ The declared outputs need the 3D model with contact bodies 11 and 26 and two
 actuator sites. If the chosen scene, model or parameters give a model lacking any
 of them (``model = "auto"`` or ``"axial_torsional"`` resolving to the
 axial-torsional chain, contact disabled, other contact bodies), initialization
-fails with an error naming the missing outputs; they are never silently zero.
+fails with an error naming the missing outputs; they are never silently zero. A
+model whose inputs differ from the declared ones (another number of sites, a
+top-drive input) is refused the same way.
+
+Built for a scene (a variant)
+-----------------------------
+``drillcosim build --scene SCENE`` builds this adapter for another layout: a generated
+subclass ``DrillstringPlant_<scene>`` (``fmu_src/build.py``, "Variants") whose class
+attribute ``LAYOUT`` holds the scene name (the ``scene`` parameter's start), the model kind
+(the ``model`` parameter's start), whether the extended outputs are listed, and the inputs
+and outputs (name, unit, description) of that scene's model. :meth:`DrillstringPlant.__init_subclass__`
+derives the variable tables from it; nothing else differs. The inputs are those that act on
+the model (:attr:`plant.model.DrillstringModel.acting_inputs`: no actuator forces for the
+axial-torsional chain, which has no bending); the model's other inputs are held at 0.
 
 Parameter errors name the FMU variable: a value set through the FMI API is checked
 against its own range first (``pipe.n_segments = 1 is out of range: allowed [2, 2000]``,
@@ -280,6 +293,18 @@ def _parameter_table() -> list[tuple[str, str, str, Any, str, str, bool]]:
     return rows
 
 
+def _default_inputs() -> list[tuple[str, str, str]]:
+    """(name, unit, doc) of the default build's inputs: the two sites' actuator forces."""
+    sites = {"1": "site 1 (long span)", "2": "site 2 (short span)"}
+    rows = []
+    for name in INPUTS:
+        site, axis = name[8], name[-1]
+        other = {"C": "D", "E": "F"}[axis]
+        rows.append((name, "N", f"Actuator force at {sites[site]}, axis {axis}; > 0 opposes "
+                                f"positive strain (compressive at {other}, tensile at {axis})"))
+    return rows
+
+
 def _declared_outputs() -> list[tuple[str, str, str]]:
     """(name, unit, doc) of the outputs of the full 3D model with the default scene.
 
@@ -304,10 +329,10 @@ def _xml_double(value: float) -> str:
     return repr(float(value))
 
 
-def _variable_units() -> dict[str, str]:
+def _variable_units(input_rows: Any, output_rows: Any) -> dict[str, str]:
     """Unit of every Real variable that has one (FMI unit names)."""
-    units = dict.fromkeys(INPUTS, "N")
-    for name, unit, _doc in _OUTPUT_ROWS:
+    units = {name: fmi_unit(unit) or "1" for name, unit, _doc in input_rows}
+    for name, unit, _doc in output_rows:
         units[name] = fmi_unit(unit) or "1"
     for name, _sec, _field, default, unit, _doc, integer in PARAMETERS:
         fmi = fmi_unit(unit)
@@ -350,19 +375,46 @@ class DrillstringPlant(DcsSlave):
         "Parameters: scene (shipped name or TOML path) first, then every parameter set to a "
         "value different from its start overrides the scene")
 
+    #: The layout: start of ``scene`` and ``model``, extended outputs (True: listed whatever
+    #: the parameters; False: as the model decides), inputs and outputs (name, plant unit,
+    #: description). A variant sets ``LAYOUT`` (a dict of these) and gets them derived.
+    SCENE: ClassVar[str] = DEFAULT_SCENE
+    MODEL: ClassVar[str] = "full3d"
+    EXTENDED: ClassVar[bool] = False
+    INPUT_ROWS: ClassVar[tuple[tuple[str, str, str], ...]] = tuple(_default_inputs())
+    OUTPUT_ROWS: ClassVar[tuple[tuple[str, str, str], ...]] = tuple(_OUTPUT_ROWS)
     REAL_INPUTS = INPUTS
     REAL_OUTPUTS = OUTPUTS
     #: Units of the Real variables, written into modelDescription.xml by the build.
-    VARIABLE_UNITS: ClassVar[dict[str, str]] = _variable_units()
+    VARIABLE_UNITS: ClassVar[dict[str, str]] = _variable_units(INPUT_ROWS, OUTPUT_ROWS)
     #: Outputs change only in doStep: no output depends directly on an input.
     DIRECT_FEEDTHROUGH: ClassVar[dict[str, tuple[str, ...]]] = dict.fromkeys(OUTPUTS, ())
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """A variant: the class tables from its ``LAYOUT`` (see "Built for a scene")."""
+        super().__init_subclass__(**kwargs)
+        layout = cls.__dict__.get("LAYOUT")
+        if layout is None:
+            return
+        cls.SCENE, cls.MODEL = str(layout["scene"]), str(layout["model"])
+        if cls.MODEL not in MODEL_CHOICES:
+            raise ValueError(f"{cls.__name__}: LAYOUT model {cls.MODEL!r} is not one of "
+                             f"{MODEL_CHOICES}")
+        cls.EXTENDED = bool(layout["extended"])
+        cls.INPUT_ROWS = tuple((str(n), str(u), str(d)) for n, u, d in layout["inputs"])
+        cls.OUTPUT_ROWS = tuple((str(n), str(u), str(d)) for n, u, d in layout["outputs"])
+        cls.REAL_INPUTS = tuple(r[0] for r in cls.INPUT_ROWS)
+        cls.REAL_OUTPUTS = tuple(r[0] for r in cls.OUTPUT_ROWS)
+        cls.VARIABLE_UNITS = _variable_units(cls.INPUT_ROWS, cls.OUTPUT_ROWS)
+        cls.DIRECT_FEEDTHROUGH = dict.fromkeys(cls.REAL_OUTPUTS, ())
+        cls.description = str(layout["description"])
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=30.0,
                                                     step_size=1e-3)
-        self.scene = DEFAULT_SCENE
-        self.model = "full3d"
+        self.scene = self.SCENE
+        self.model = self.MODEL
         self.max_internal_step = 0.0
         self._values: dict[str, Any] = {row[0]: row[3] for row in PARAMETERS}
 
@@ -370,21 +422,18 @@ class DrillstringPlant(DcsSlave):
         self._start_time = 0.0
         self._sim: Any = None
         self._out_index: np.ndarray = np.zeros(0, dtype=np.int64)
+        self._in_index: np.ndarray = np.zeros(0, dtype=np.int64)
+        self._u: np.ndarray = np.zeros(0)  # the model's input vector (undeclared entries 0)
         self._built_key: tuple[Any, ...] | None = None
         self._init_error: str | None = None  # invalid parameters: every doStep refused
         self._halted: str | None = None  # divergence, until a state is restored
         self._scenes = scenes_folder(self.resources)
 
         cont, fixed = Fmi2Variability.continuous, Fmi2Variability.fixed
-        sites = {"1": "site 1 (long span)", "2": "site 2 (short span)"}
-        for name in INPUTS:
-            site, axis = name[8], name[-1]
-            other = {"C": "D", "E": "F"}[axis]
+        for name, _unit, doc in self.INPUT_ROWS:
             self.register_real_io(_Real(
-                name, causality=Fmi2Causality.input, variability=cont,
-                description=(f"Actuator force at {sites[site]}, axis {axis}; > 0 opposes "
-                             f"positive strain (compressive at {other}, tensile at {axis})")))
-        for name, _unit, doc in _OUTPUT_ROWS:
+                name, causality=Fmi2Causality.input, variability=cont, description=doc))
+        for name, _unit, doc in self.OUTPUT_ROWS:
             self.register_real_io(_Real(
                 name, causality=Fmi2Causality.output, variability=cont,
                 initial=Fmi2Initial.calculated, description=doc))
@@ -473,23 +522,30 @@ class DrillstringPlant(DcsSlave):
             names = ", ".join(f"{n} = {v!r}" for n, _s, _f, v in self._set_through_fmi())
             raise ValueError(f"the FMU parameters set ({names or 'model = ' + repr(self.model)})"
                              f" do not fit scene {self.scene!r}: {exc}") from None
-        model = _model_mod.DrillstringModel(scene.plant, scene.model)
-        missing = [n for n in OUTPUTS if n not in model.output_names]
+        model = _model_mod.DrillstringModel(scene.plant, scene.model,
+                                            extended_outputs=True if self.EXTENDED else None)
+        missing = [n for n in self.REAL_OUTPUTS if n not in model.output_names]
+        fix = (f"build the plant FMU for that scene (drillcosim build --scene {self.scene}) or "
+               f"use the scene this FMU was built for ({self.SCENE}, model = {self.MODEL!r})")
         if missing:
             raise ValueError(
                 f"scene {self.scene!r} with model = {self.model!r} builds the {model.kind} model "
                 f"with contact bodies {list(model.contact_bodies)} and {model.n_sites} actuator "
-                f"sites; it lacks the declared outputs {', '.join(missing)}. Use model = "
-                f"'full3d' and a scene with contact bodies [11, 26] and two actuator sites "
-                f"(a contact with stiffness 0 observes without touching)")
-        if model.n_sites != len(INPUTS) // 2:
-            raise ValueError(f"the model has {model.n_sites} actuator sites; this FMU's inputs "
-                             f"need {len(INPUTS) // 2}")
+                f"sites; it lacks the declared outputs {', '.join(missing)}: {fix}")
+        acting, declared = model.acting_inputs, self.REAL_INPUTS
+        if set(declared) - set(model.input_names) or set(acting) - set(declared):
+            raise ValueError(
+                f"scene {self.scene!r} with model = {self.model!r} builds the {model.kind} model "
+                f"whose inputs are [{', '.join(acting)}]; this FMU's inputs are "
+                f"[{', '.join(declared)}]: {fix}")
         key = (scene.plant, scene.model, step)
         sim = _sim_mod.PlantSimulator(model, _STABLE_STEPS.get(key, None if step == 0.0 else step))
         _STABLE_STEPS.setdefault(key, sim.max_step)
         sim.time = float(self._start_time)
-        self._out_index = np.array([model.output_names.index(n) for n in OUTPUTS])
+        self._out_index = np.array([model.output_names.index(n) for n in self.REAL_OUTPUTS])
+        self._in_index = np.array([model.input_names.index(n) for n in declared],
+                                  dtype=np.int64)
+        self._u = np.zeros(model.n_inputs)
         return sim
 
     def _build(self) -> None:
@@ -536,7 +592,8 @@ class DrillstringPlant(DcsSlave):
                                f"({self._halted}); restore an FMU state saved before "
                                f"(fmi2SetFMUstate) or reset", Fmi2Status.discard)
         sim = self._sim
-        sim.set_inputs(self.inputs)
+        self._u.put(self._in_index, self.inputs)
+        sim.set_inputs(self._u)
         result = sim.do_step(t, h)
         if not result.ok:
             if not result.quantity:  # refused before integrating: state unchanged

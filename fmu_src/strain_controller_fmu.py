@@ -27,6 +27,16 @@ parameters:
 Integer parameters (and SSP parameter sets), String parameters are often
 unsupported, and pythonfmu cannot declare an Enumeration.
 
+Built for a scene (a variant)
+-----------------------------
+``drillcosim build --scene SCENE`` builds this adapter for the scene's number of sites: a
+generated subclass ``StrainController_<scene>`` (``fmu_src/build.py``, "Variants") whose
+class attribute ``LAYOUT`` holds the number of sites and the scene's gain matrix. It has
+``strain<s>_<C|E>`` inputs and ``actuator<s>_force_<C|E>`` outputs for every site s and,
+besides the parameters above, the tunable relative gains ``gain_matrix_<i>_<j>`` [1] (start:
+the scene's matrix, else the identity): per axis ``F = gain * M @ strain`` across the sites
+(``controller/strain_feedback.py``); the identity is the SISO law.
+
 Error handling (the wrapper's status protocol, see ``fmu_src/slave_support``)
 ------------------------------------------------------------------------------
 * parameter out of range: fmi2ExitInitializationMode -> fmi2Error naming it; the instance
@@ -45,7 +55,7 @@ in step mode the wrapper moves them without Python, and ``fmi2DoStep`` is one Py
 
 FMU state (``fmi2Get/SetFMUstate``, serialisable): pythonfmu's default saves the
 registered variables only (here including the buffered inputs and outputs);
-``_get_fmu_state`` / ``_set_fmu_state`` are overridden to add the lag state of the
+``_get_fmu_state`` / ``_set_fmu_state`` (``slave_support.LawSlave``) add the lag state of the
 controller and the initialization flag (JSON-safe Python floats, so serialisation
 round-trips bit for bit).
 """
@@ -54,7 +64,6 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-import numpy as np
 from _dcs_controller_0_1_0 import MODES, ControllerParams
 from _dcs_controller_0_1_0 import StrainController as StrainLaw
 from _dcs_pythonfmu_0_7_0 import (
@@ -66,23 +75,38 @@ from _dcs_pythonfmu_0_7_0 import (
     Integer,
     Real,
 )
-from _dcs_slave_support_0_1_0 import DcsSlave
+from _dcs_slave_support_0_1_0 import LawSlave
 
 #: Name under which the build vendors ``controller/`` into this FMU's resources.
 VENDORED_CONTROLLER = "_dcs_controller_0_1_0"
 
-INPUTS: tuple[str, ...] = ("strain1_C", "strain1_E", "strain2_C", "strain2_E")
-OUTPUTS: tuple[str, ...] = (
-    "actuator1_force_C", "actuator1_force_E", "actuator2_force_C", "actuator2_force_E")
+
+def _io_names(n_sites: int) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(inputs, outputs): the strains and the actuator forces of ``n_sites`` sites."""
+    channels = [(s, a) for s in range(1, n_sites + 1) for a in ("C", "E")]
+    return (tuple(f"strain{s}_{a}" for s, a in channels),
+            tuple(f"actuator{s}_force_{a}" for s, a in channels))
+
+
+def _matrix_names(n_sites: int) -> tuple[str, ...]:
+    """Parameter names of the relative gain matrix, row by row."""
+    return tuple(f"gain_matrix_{i}_{j}" for i in range(1, n_sites + 1)
+                 for j in range(1, n_sites + 1))
+
+
+def _units(inputs: tuple[str, ...], outputs: tuple[str, ...], n_matrix: int) -> dict[str, str]:
+    return {**dict.fromkeys(inputs, "1"), **dict.fromkeys(outputs, "N"),
+            **dict.fromkeys(_matrix_names(n_matrix), "1"),
+            "gain": "N", "force_limit": "N", "symmetric_force_limit": "N",
+            "switch_on_time": "s", "lag_time_constant": "s"}
+
+
+INPUTS, OUTPUTS = _io_names(2)
 TUNABLE: tuple[str, ...] = ("gain", "force_limit", "symmetric_force_limit", "switch_on_time")
 FIXED: tuple[str, ...] = ("mode", "lag_time_constant", "enabled")
 
-_STATE_KEY = "__dcs_controller_state__"
-_INIT_KEY = "__dcs_initialized__"
-_INIT_ERROR_KEY = "__dcs_init_error__"
 
-
-class StrainController(DcsSlave):
+class StrainController(LawSlave):
     """FMI 2.0 co-simulation adapter of :class:`controller.StrainController`."""
 
     author = "drillcosim"
@@ -92,21 +116,38 @@ class StrainController(DcsSlave):
         "(4 channels: sites 1/2 x gauges C/E); F = gain*strain, F > 0 = compressive at "
         "D / tensile at C; saturation, switch-on time, first-order actuator lag")
 
+    #: Sites served and the start of the relative gain matrix (None: no matrix parameters,
+    #: the default build). A variant sets ``LAYOUT`` and gets them derived.
+    N_SITES: ClassVar[int] = 2
+    GAIN_MATRIX: ClassVar[tuple[tuple[float, ...], ...] | None] = None
+    SITE_NAMES: ClassVar[dict[int, str]] = {1: "site 1 (long span)", 2: "site 2 (short span)"}
     REAL_INPUTS = INPUTS
     REAL_OUTPUTS = OUTPUTS
+    TUNABLE = TUNABLE
+    FIXED = FIXED
     #: Units of the Real variables, written into modelDescription.xml by the build.
-    VARIABLE_UNITS: ClassVar[dict[str, str]] = {
-        **dict.fromkeys(INPUTS, "1"),
-        **dict.fromkeys(OUTPUTS, "N"),
-        "gain": "N",
-        "force_limit": "N",
-        "symmetric_force_limit": "N",
-        "switch_on_time": "s",
-        "lag_time_constant": "s",
-    }
+    VARIABLE_UNITS: ClassVar[dict[str, str]] = _units(INPUTS, OUTPUTS, 0)
     #: Inputs each output depends on *directly* (within the same communication
     #: point): none for every output, they change only in doStep.
     DIRECT_FEEDTHROUGH: ClassVar[dict[str, tuple[str, ...]]] = dict.fromkeys(OUTPUTS, ())
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """A variant: the class tables from its ``LAYOUT`` (``n_sites``, ``gain_matrix``)."""
+        super().__init_subclass__(**kwargs)
+        layout = cls.__dict__.get("LAYOUT")
+        if layout is None:
+            return
+        n = int(layout["n_sites"])
+        cls.N_SITES = n
+        cls.GAIN_MATRIX = tuple(tuple(float(x) for x in row) for row in layout["gain_matrix"])
+        if len(cls.GAIN_MATRIX) != n or any(len(row) != n for row in cls.GAIN_MATRIX):
+            raise ValueError(f"{cls.__name__}: LAYOUT gain_matrix must be {n} x {n}")
+        cls.SITE_NAMES = {s: f"site {s}" for s in range(1, n + 1)}
+        cls.REAL_INPUTS, cls.REAL_OUTPUTS = _io_names(n)
+        cls.TUNABLE = TUNABLE + _matrix_names(n)
+        cls.VARIABLE_UNITS = _units(cls.REAL_INPUTS, cls.REAL_OUTPUTS, n)
+        cls.DIRECT_FEEDTHROUGH = dict.fromkeys(cls.REAL_OUTPUTS, ())
+        cls.description = str(layout["description"])
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
@@ -120,21 +161,16 @@ class StrainController(DcsSlave):
         self.mode = MODES.index(defaults.mode)
         self.lag_time_constant = defaults.lag_time_constant
         self.enabled = defaults.enabled
+        self._law = StrainLaw(defaults, self.N_SITES)
 
-        self._law = StrainLaw(defaults)
-        self._initialized = False
-        self._init_error: str | None = None  # invalid parameters at initialization
-        self._fixed_values: tuple[Any, ...] = ()
-        self._tunable_values: tuple[Any, ...] | None = None
-
-        sites = {"1": "site 1 (long span)", "2": "site 2 (short span)"}
-        for name in INPUTS:
-            site, axis = name[6], name[-1]
+        sites = self.SITE_NAMES
+        for name in self.REAL_INPUTS:
+            site, axis = int(name[6:-2]), name[-1]
             self.register_real_io(Real(
                 name, causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
                 description=f"Surface strain at gauge {axis}, {sites[site]}; tensile > 0"))
-        for name in OUTPUTS:
-            site, axis = name[8], name[-1]
+        for name in self.REAL_OUTPUTS:
+            site, axis = int(name[8:-8]), name[-1]
             other = {"C": "D", "E": "F"}[axis]
             self.register_real_io(Real(
                 name, causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
@@ -164,84 +200,49 @@ class StrainController(DcsSlave):
         self.register_variable(Boolean(
             "enabled", causality=param, variability=fixed,
             description="false = open loop (zero force at all times)"))
+        if self.GAIN_MATRIX is not None:
+            self._register_matrix()
 
-    # ------------------------------------------------------------------ helpers
+    def _register_matrix(self) -> None:
+        """The tunable relative gains ``gain_matrix_<i>_<j>`` [1], start = the layout's."""
+        n = self.N_SITES
+        for name, start in zip(_matrix_names(n), (x for row in self.GAIN_MATRIX for x in row)):
+            i, j = name.split("_")[2:]
+            self.param_values[name] = start
+
+            def getter(name: str = name) -> float:
+                return self.param_values[name]
+
+            def setter(value: float, name: str = name) -> None:
+                self.param_values[name] = value
+
+            self.register_variable(Real(
+                name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable,
+                getter=getter, setter=setter,
+                description=(f"Relative gain from the strain of site {j} to the force of site "
+                             f"{i}, both axes: F_axis = gain * M @ strain_axis; identity = "
+                             f"one P law per channel")), nested=False)
+
+    # ------------------------------------------------------------------ the law
     def _params_from_variables(self) -> ControllerParams:
         """Build validated parameters from the FMU variables (ValueError if invalid)."""
         mode = self.mode
         if isinstance(mode, bool) or not isinstance(mode, int) or not 0 <= mode < len(MODES):
             raise ValueError(f"mode = {mode!r} is not allowed; allowed: 0 (unrestricted) or "
                              f"1 (compressive_only)")
+        matrix: tuple = ()
+        if self.GAIN_MATRIX is not None:
+            n = self.N_SITES
+            flat = [self.param_values[name] for name in _matrix_names(n)]
+            matrix = tuple(tuple(flat[i * n:(i + 1) * n]) for i in range(n))
         return ControllerParams(
             gain=self.gain, mode=MODES[mode], force_limit=self.force_limit,
             symmetric_force_limit=self.symmetric_force_limit,
             switch_on_time=self.switch_on_time, lag_time_constant=self.lag_time_constant,
-            enabled=bool(self.enabled))
+            enabled=bool(self.enabled), gain_matrix=matrix)
 
-    def _snapshot(self, names: tuple[str, ...]) -> tuple[Any, ...]:
-        return tuple(getattr(self, n) for n in names)
+    def _make_law(self, params: ControllerParams) -> StrainLaw:
+        return StrainLaw(params, self.N_SITES)
 
-    # ---------------------------------------------------------------- FMI calls
-    def exit_initialization_mode(self) -> None:
-        try:
-            params = self._params_from_variables()
-        except ValueError as exc:
-            self._init_error = f"invalid parameter: {exc}"
-            self._initialized = False
-            self._error(f"fmi2ExitInitializationMode: {self._init_error}; every doStep "
-                        f"will be rejected (reset or re-instantiate with valid parameters)")
-            return
-        self._init_error = None
-        self._law = StrainLaw(params)
-        self._fixed_values = self._snapshot(FIXED)
-        self._tunable_values = self._snapshot(TUNABLE)
-        self._initialized = True
-
-    def do_step(self, current_time: float, step_size: float) -> None:
-        if self._init_error is not None:
-            return self._error(f"step rejected: {self._init_error}")
-        if not self._initialized:
-            return self._error("doStep called before initialization "
-                               "(fmi2ExitInitializationMode); step rejected")
-        if self._snapshot(FIXED) != self._fixed_values:
-            return self._error(f"fixed parameters {FIXED} changed after initialization; "
-                               f"step rejected")
-        tunable = self._snapshot(TUNABLE)
-        if tunable != self._tunable_values:
-            try:
-                self._law.params = self._params_from_variables()  # keeps the lag state
-            except ValueError as exc:
-                return self._error(f"invalid parameter: {exc}; step rejected")
-            self._tunable_values = tunable
-        try:
-            forces = self._law.step(current_time, step_size, self.inputs)
-        except ValueError as exc:
-            return self._error(f"at t = {current_time!r}: {exc}; step rejected")
-        self.outputs[:] = forces
-        return None
-
-    # ------------------------------------------------------------- FMU state
-    def _get_fmu_state(self) -> dict[str, Any]:
-        state = super()._get_fmu_state()
-        state[_STATE_KEY] = self._law.get_state().tolist()
-        state[_INIT_KEY] = self._initialized
-        state[_INIT_ERROR_KEY] = self._init_error
-        return state
-
-    def _set_fmu_state(self, state: dict[str, Any]) -> None:
-        try:
-            state = dict(state)  # the importer may set the same state again: do not mutate it
-            law_state = np.array(state.pop(_STATE_KEY), dtype=float)
-            initialized = state.pop(_INIT_KEY)
-            init_error = state.pop(_INIT_ERROR_KEY)
-            super()._set_fmu_state(state)
-            self._law.set_state(law_state)
-        except Exception as exc:  # noqa: BLE001 - a foreign state is the importer's error
-            return self._error(f"fmi2SetFMUstate: not a state of this FMU ({exc!r})")
-        self._init_error = init_error
-        self._initialized = bool(initialized)
-        # the parameters came back with the registered variables: take the fixed ones
-        # as the reference and make the next doStep re-validate and apply all of them
-        self._fixed_values = self._snapshot(FIXED)
-        self._tunable_values = None
-        return None
+    def _step_law(self, t: float, h: float) -> None:
+        self.outputs[:] = self._law.step(t, h, self.inputs)

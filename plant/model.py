@@ -228,6 +228,11 @@ class DrillstringModel:
                              extended=self.extended_outputs)
         self.input_names, self.input_units, self.input_docs = self._input_layout()
         self.n_inputs = len(self.input_names)
+        #: the inputs that act on this model, in input order: the actuator forces only in the
+        #: 3D model (the axial-torsional chain has no bending: it ignores them), then the
+        #: top-drive input (what an FMU of this model needs to declare)
+        self.acting_inputs = [nm for nm in self.input_names
+                              if kind == "full3d" or nm not in self._actuator_inputs()]
         self.u = np.zeros(self.n_inputs)
         self.output_names = [r[0] for r in names]
         self.output_units = {r[0]: r[1] for r in names}
@@ -253,6 +258,10 @@ class DrillstringModel:
             units.append("m")
         return names, units
 
+    def _actuator_inputs(self) -> list[str]:
+        """Names of the actuator force inputs, two per site (C, E)."""
+        return [f"actuator{s}_force_{a}" for s in range(1, self.n_sites + 1) for a in "CE"]
+
     def _input_layout(self) -> tuple[list[str], dict[str, str], dict[str, str]]:
         """Names, units and descriptions of the entries of the input vector ``u``.
 
@@ -260,13 +269,12 @@ class DrillstringModel:
         (``top_drive_speed_command`` [rad/s]) and "torque" (``top_drive_torque`` [N m]).
         """
         names, units, docs = [], {}, {}
-        for s in range(1, self.n_sites + 1):
-            for a in "CE":
-                nm = f"actuator{s}_force_{a}"
-                names.append(nm)
-                units[nm] = "N"
-                docs[nm] = (f"actuator force at {a} of site {s}, > 0 opposing a positive strain "
-                            f"(a bending couple of arm {self.p[lay.ACT_ARM]:g} m)")
+        for nm in self._actuator_inputs():
+            s, a = nm[len("actuator"):].split("_force_")
+            names.append(nm)
+            units[nm] = "N"
+            docs[nm] = (f"actuator force at {a} of site {s}, > 0 opposing a positive strain "
+                        f"(a bending couple of arm {self.p[lay.ACT_ARM]:g} m)")
         mode = self.params.top_drive.mode
         if mode == "speed":
             names.append("top_drive_speed_command")

@@ -1,14 +1,17 @@
-"""In-process slaves: the plant simulator and the controller law behind the master's slave
+"""In-process slaves: the plant simulator and the controller laws behind the master's slave
 protocol (:class:`cosim.master.slave.Slave`), without FMI.
 
 The FMUs wrap the same objects (``fmu_src/``): :class:`PlantSlave` steps a
-:class:`plant.simulator.PlantSimulator` and :class:`ControllerSlave` a
-:class:`controller.StrainController` exactly as the FMU adapters do (same times, same step
-sizes, outputs taken after each step, a failed plant step discarded with the plant's own
-message), so the master (:class:`cosim.master.execution.Execution`, its algorithms, delay
-lines and observers) gives the same numbers with either, bit for bit
-(``tests/test_sweep.py``), while the in-process pair saves the FMI boundary. Parameters stay
-typed (:class:`plant.model.DrillstringModel`, :class:`controller.ControllerParams`).
+:class:`plant.simulator.PlantSimulator`, :class:`ControllerSlave` a
+:class:`controller.StrainController` (any number of sites, SISO or with a gain matrix) and
+:class:`TopDriveSlave` a :class:`controller.TopDriveController` exactly as the FMU adapters do
+(same times, same step sizes, outputs taken after each step, a failed plant step discarded with
+the plant's own message; the plant is the model the plant FMU builds: the scene's, or the 3D
+model for a scene the default plant FMU runs), so the master
+(:class:`cosim.master.execution.Execution`, its algorithms, delay lines and observers) gives
+the same numbers with either, bit for bit (``tests/test_sweep.py``), while the in-process
+slaves save the FMI boundary. Parameters stay typed (:class:`plant.model.DrillstringModel`,
+:class:`controller.ControllerParams`).
 
 :func:`inprocess_slaves` makes the slaves that stand in for the FMUs of a
 :class:`~.scene_system.SceneSystem` (the FMU files still describe the system: instance names,
@@ -21,16 +24,30 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from drillcosim.controller import ControllerParams, StrainController
+from drillcosim.controller import (
+    ControllerParams,
+    StrainController,
+    TopDriveController,
+    TopDriveControllerParams,
+)
 from drillcosim.cosim.master.errors import FMI2_DISCARD, FMI2_ERROR, CosimError
 from drillcosim.cosim.master.slave import Slave
 from drillcosim.cosim.master.system import ParameterValue, _did_you_mean
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.simulator import PlantSimulator
 
-from .scene_system import AXES, CONTROLLER, CONTROLLER_SITES, PLANT, SceneSystem, scene_controller
+from .scene_fmus import plant_layout
+from .scene_system import (
+    AXES,
+    CONTROLLER,
+    PLANT,
+    TOP_DRIVE,
+    SceneSystem,
+    scene_controller,
+    scene_top_drive_controller,
+)
 
-__all__ = ["ControllerSlave", "PlantSlave", "inprocess_slaves"]
+__all__ = ["ControllerSlave", "PlantSlave", "TopDriveSlave", "inprocess_slaves"]
 
 
 class _ArraySlave(Slave):
@@ -168,20 +185,22 @@ class PlantSlave(_ArraySlave):
 
 class ControllerSlave(_ArraySlave):
     """:class:`controller.StrainController` as a slave (inputs: the strains, outputs: the
-    actuator forces [N] of :data:`~.scene_system.CONTROLLER_SITES`, gauges C and E).
+    actuator forces [N] of sites 1 .. n_sites, gauges C and E).
 
     Parameters
     ----------
     name : str
         Instance name.
     params : ControllerParams
+    n_sites : int
+        Sites served (default 2, the default controller FMU's).
     """
 
-    def __init__(self, name: str, params: ControllerParams):
-        sites = [(s, a) for s in CONTROLLER_SITES for a in AXES]
+    def __init__(self, name: str, params: ControllerParams, n_sites: int = 2):
+        sites = [(s, a) for s in range(1, n_sites + 1) for a in AXES]
         super().__init__(name, [f"strain{s}_{a}" for s, a in sites],
                          [f"actuator{s}_force_{a}" for s, a in sites])
-        self.law = StrainController(params)
+        self.law = StrainController(params, n_sites)
 
     def instantiate(self, start_time: float, stop_time: float | None) -> None:
         """Zero force (the lag state) at the start."""
@@ -204,18 +223,59 @@ class ControllerSlave(_ArraySlave):
         self.law.set_state(state)
 
 
+class TopDriveSlave(_ArraySlave):
+    """:class:`controller.TopDriveController` as a slave (inputs: ``top_rotary_speed``
+    [rad/s], ``top_torque`` [N m]; output: ``top_drive_torque`` [N m]).
+
+    Parameters
+    ----------
+    name : str
+        Instance name.
+    params : TopDriveControllerParams
+    """
+
+    def __init__(self, name: str, params: TopDriveControllerParams):
+        super().__init__(name, ["top_rotary_speed", "top_torque"], ["top_drive_torque"])
+        self.law = TopDriveController(params)
+
+    def instantiate(self, start_time: float, stop_time: float | None) -> None:
+        """Zero integral and torque at the start."""
+        self.law.reset()
+        self.y[0] = self.law.torque
+
+    def do_step(self, t: float, h: float) -> int:
+        """The motor torque at ``t + h`` from the speed and torque held over the step."""
+        try:
+            self.y[0] = self.law.step(t, h, float(self.u[0]), float(self.u[1]))
+        except ValueError as exc:
+            self._problem = f"at t = {t!r}: {exc}"
+            return FMI2_ERROR
+        return 0
+
+    def _save(self):
+        return self.law.get_state()
+
+    def _restore(self, state) -> None:
+        self.law.set_state(state)
+
+
 def inprocess_slaves(ss: SceneSystem) -> dict[str, Slave]:
     """In-process slaves standing in for the FMUs of a scene's system (built from the scene).
 
     Returns
     -------
     dict
-        ``{"plant": PlantSlave, "controller": ControllerSlave}`` (no controller when the
-        scene's controller is disabled), for ``Execution(..., slaves=...)``.
+        ``{"plant": PlantSlave, "controller": ControllerSlave, "top_drive_controller":
+        TopDriveSlave}`` (the controllers the system has), for ``Execution(..., slaves=...)``.
     """
     scene = ss.scene
+    kind = "full3d" if plant_layout(scene) is None else scene.model
     slaves: dict[str, Slave] = {
-        PLANT: PlantSlave(PLANT, PlantSimulator(DrillstringModel(scene.plant, scene.model)))}
-    if CONTROLLER in {f.name for f in ss.system.fmus}:
-        slaves[CONTROLLER] = ControllerSlave(CONTROLLER, scene_controller(scene))
+        PLANT: PlantSlave(PLANT, PlantSimulator(DrillstringModel(scene.plant, kind)))}
+    instances = {f.name for f in ss.system.fmus}
+    if CONTROLLER in instances:
+        slaves[CONTROLLER] = ControllerSlave(CONTROLLER, scene_controller(scene),
+                                             len(scene.plant.actuator_joints))
+    if TOP_DRIVE in instances:
+        slaves[TOP_DRIVE] = TopDriveSlave(TOP_DRIVE, scene_top_drive_controller(scene))
     return slaves

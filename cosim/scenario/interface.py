@@ -1,17 +1,22 @@
-"""Plant + controller FMU pair: wiring by name and the interface check before the first step.
+"""A plant FMU and its controller FMUs: wiring by name and the interface check before the
+first step.
 
-Any plant FMU and any controller FMU can be paired (``[plant] fmu`` / ``[controller] fmu``
+Any plant FMU and any controller FMUs can be paired (``[plant] fmu`` / ``[controller] fmu``
 in a scene, ``drillcosim run --plant-fmu P --controller-fmu C``). They connect by name:
 every input of one is fed by the variable of the same name of the other (the strains
-``strain<s>_<C|E>`` plant -> controller, the forces ``actuator<s>_force_<C|E>`` controller ->
-plant). Before the first step :func:`wire_pair` checks the pair with
-:func:`cosim.master.interface.check_system` (causality, type, unit, nothing connected twice,
-start values) and reports every problem, one line each naming both FMUs and the variable.
+``strain<s>_<C|E>`` plant -> strain controller, the forces ``actuator<s>_force_<C|E>``
+controller -> plant; ``top_rotary_speed`` / ``top_torque`` plant -> top-drive controller,
+``top_drive_torque`` back). Controllers are not connected to each other. Before the first step
+:func:`wire_system` checks the system with :func:`cosim.master.interface.check_system`
+(causality, type, unit, nothing connected twice, start values) and reports every problem, one
+line each naming both FMUs and the variable.
 
 Unfed inputs
 ------------
-An input the other FMU does not feed is a problem, with one exception: the inputs of a
-whole *site* the other FMU does not serve. A site ``s`` is the number in ``actuator<s>_...``
+An input no other FMU feeds is a problem, with two exceptions: the inputs of a plant that runs
+alone (the open loop: they keep their start value; a warning names the inputs other than the
+actuator forces, e.g. a top-drive torque), and the inputs of a whole *site* the other FMU
+does not serve. A site ``s`` is the number in ``actuator<s>_...``
 (plant inputs) and ``strain<s>_...`` (controller inputs). If the controller has no
 variable ``actuator<s>_...`` at all (it serves fewer sites than the plant has), the plant's
 ``actuator<s>_...`` inputs keep their start value (0 N for the project's plant: no
@@ -36,7 +41,8 @@ from drillcosim.cosim.master.interface import (
 )
 from drillcosim.cosim.master.system import Connection, FmuSpec
 
-__all__ = ["InterfaceWarning", "PairWiring", "connections_of", "site_of", "wire_pair"]
+__all__ = ["InterfaceWarning", "PairWiring", "connections_of", "site_of", "wire_pair",
+           "wire_system"]
 
 _SITE = re.compile(r"^(actuator|strain)(\d+)_")
 
@@ -73,15 +79,23 @@ class PairWiring:
 
 def wire_pair(plant: FmuInterface, controller: FmuInterface, fmus: Sequence[FmuSpec],
               extra_problems: Sequence[str] = ()) -> PairWiring:
-    """Connect ``plant`` and ``controller`` by name and check the pair.
+    """:func:`wire_system` of a plant and one controller."""
+    return wire_system(plant, [controller], fmus, extra_problems)
+
+
+def wire_system(plant: FmuInterface, controllers: Sequence[FmuInterface],
+                fmus: Sequence[FmuSpec], extra_problems: Sequence[str] = ()) -> PairWiring:
+    """Connect ``plant`` with each of ``controllers`` by name and check the system.
 
     Parameters
     ----------
-    plant, controller : FmuInterface
+    plant : FmuInterface
+    controllers : sequence of FmuInterface
+        Possibly none (the plant runs alone).
     fmus : sequence of FmuSpec
-        The two instances with the start values the system will set (checked too).
+        The instances with the start values the system will set (checked too).
     extra_problems : sequence of str
-        Problems the caller found (e.g. a scene key the controller FMU cannot take),
+        Problems the caller found (e.g. a scene key a controller FMU cannot take),
         reported together with the others.
 
     Returns
@@ -96,27 +110,48 @@ def wire_pair(plant: FmuInterface, controller: FmuInterface, fmus: Sequence[FmuS
     Warns
     -----
     InterfaceWarning
-        Inputs of whole sites the other FMU does not serve (they keep their start value).
+        Inputs of whole sites the other FMU does not serve, or plant inputs other than the
+        actuator forces that nothing feeds (they keep their start value).
     """
-    pairs = pair_by_name(plant, controller)
-    report = check_system(fmus, pairs, {plant.instance: plant, controller.instance: controller})
+    pairs = [pair for c in controllers for pair in pair_by_name(plant, c)]
+    faces = {plant.instance: plant, **{c.instance: c for c in controllers}}
+    report = check_system(fmus, pairs, faces)
     problems = list(report.problems)
-    unserved = []
-    for face, other, kind in ((plant, controller, "actuator"), (controller, plant, "strain")):
-        for name in report.unconnected.get(face.instance, []):
+    unserved, idle = [], []
+    others = " nor ".join(c.label for c in controllers)
+    for name in report.unconnected.get(plant.instance, []):
+        site = site_of(name)
+        if site is not None and site[0] == "actuator" and not any(
+                _serves(c, "actuator", site[1]) for c in controllers):
+            if controllers:
+                unserved.append(f"{plant.instance}.{name}")
+        elif not controllers:
+            idle.append(f"{plant.instance}.{name}")
+        else:
+            problems.append(f"{plant.label} input '{name}' is not fed: {others} has no "
+                            f"variable '{name}'")
+    for c in controllers:
+        for name in report.unconnected.get(c.instance, []):
             site = site_of(name)
-            if site is not None and site[0] == kind and not _serves(other, kind, site[1]):
-                unserved.append(f"{face.instance}.{name}")
+            if site is not None and site[0] == "strain" and not _serves(plant, "strain", site[1]):
+                unserved.append(f"{c.instance}.{name}")
             else:
-                problems.append(f"{face.label} input '{name}' is not fed: {other.label} has "
-                                f"no variable '{name}'")
+                problems.append(f"{c.label} input '{name}' is not fed: {plant.label} has no "
+                                f"variable '{name}'")
     problems += list(extra_problems)
     if problems:
-        raise InterfaceError(f"{plant.label} and {controller.label} do not fit", problems)
+        label = " and ".join([plant.label, *(c.label for c in controllers)])
+        header = f"{label} do not fit" if controllers else f"{label} cannot take the scene's settings"
+        raise InterfaceError(header, problems)
     if unserved:
         warnings.warn(InterfaceWarning(
-            f"{plant.label} and {controller.label}: inputs of sites the other FMU does not "
-            f"serve keep their start value: {', '.join(unserved)}"), stacklevel=3)
+            f"{' and '.join([plant.label, *(c.label for c in controllers)])}: inputs of sites "
+            f"the other FMU does not serve keep their start value: {', '.join(unserved)}"),
+            stacklevel=3)
+    if idle:
+        warnings.warn(InterfaceWarning(
+            f"{plant.label} runs without a controller: its inputs {', '.join(idle)} keep their "
+            f"start value"), stacklevel=3)
     return PairWiring(tuple(pairs), tuple(unserved))
 
 

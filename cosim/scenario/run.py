@@ -188,7 +188,7 @@ def simulate_system(ss, out_dir: str | Path, stop_time: float | None = None,
     CosimError
         If the run failed before its first step (earlier files are kept).
     """
-    from .scene_system import scene_controller, span_info
+    from .scene_system import scene_controller, scene_top_drive_controller, span_info
     from .summary import summarize, write_json
 
     out = Path(out_dir)
@@ -209,6 +209,9 @@ def simulate_system(ss, out_dir: str | Path, stop_time: float | None = None,
                         real_time_factor=result.real_time_factor, end_time=result.end_time,
                         switch_on_time=switch, diverged=failure)
     summary["controller"] = dataclasses.asdict(ctrl)
+    top_drive = scene_top_drive_controller(scene)
+    if top_drive.enabled:
+        summary["top_drive_controller"] = dataclasses.asdict(top_drive)
     summary["cosim"] = {**vars(ss.settings), "output_interval": ss.settings.output_interval}
     files = [csv, write_json(summary, out / "summary.json")]
     if plots and len(result.data) > 1:

@@ -1,27 +1,32 @@
 """Scene -> co-simulation system: the plant FMU, the controller FMU and their wiring.
 
 :func:`scene_system` turns a :class:`plant.scene.Scene` into a
-:class:`cosim.master.system.SystemSpec` with two FMU instances, ``plant``
-(``DrillstringPlant.fmu``) and ``controller`` (``StrainController.fmu``), connected
-by name both ways:
+:class:`cosim.master.system.SystemSpec` with up to three FMU instances: ``plant`` (the plant
+FMU), ``controller`` (the strain controller, when ``[controller] enabled``) and
+``top_drive_controller`` (the top-drive speed controller, when ``[top_drive_controller]
+enabled``), connected by name both ways:
 
-* sensors: ``plant.strain<s>_<C|E>`` -> ``controller.strain<s>_<C|E>`` (delay
+* sensors: ``plant.strain<s>_<C|E>`` -> ``controller.strain<s>_<C|E>``,
+  ``plant.top_rotary_speed`` / ``plant.top_torque`` -> ``top_drive_controller.*`` (delay
   ``sensor_delay``),
-* actuators: ``controller.actuator<s>_force_<C|E>`` ->
-  ``plant.actuator<s>_force_<C|E>`` (delay ``actuator_delay``),
+* actuators: ``controller.actuator<s>_force_<C|E>`` -> ``plant.actuator<s>_force_<C|E>``,
+  ``top_drive_controller.top_drive_torque`` -> ``plant.top_drive_torque`` (delay
+  ``actuator_delay``),
 
-for every input of one FMU that the other declares (:mod:`cosim.scenario.interface`: the
-pair is checked before the first step, every problem in one line; inputs of sites the
-controller does not serve keep their start value, with a warning). When
-``[controller] enabled`` is false the plant runs alone (its actuator inputs stay at their
-start value 0).
+for every input of one FMU that another declares (:mod:`cosim.scenario.interface`: the
+system is checked before the first step, every problem in one line; inputs of sites no
+controller serves keep their start value, with a warning). Without a controller the plant
+runs alone (its inputs stay at their start value 0).
 
-The FMUs are taken from ``build/fmus/`` (or the folder given) and built there
-with :func:`fmu_src.build.build_all` if missing or older than their sources. Other FMU
-files (any maker) are used as they are when given: ``[plant] fmu = "path"`` /
-``[controller] fmu = "path"`` in the scene (relative to the scene file's folder), or the
-``plant_fmu`` / ``controller_fmu`` arguments (``drillcosim run --plant-fmu P
---controller-fmu C``), which take precedence.
+Which FMUs: the project's, taken from ``build/fmus/`` (or the folder given) and built there
+if missing or older than their sources: the default ``DrillstringPlant.fmu`` and
+``StrainController.fmu`` when they fit the scene, else FMUs built for the scene's layout
+(``DrillstringPlant_<scene>``, ``StrainController_<scene>``; :mod:`.scene_fmus`), and
+``TopDriveController.fmu``. Other FMU files (any maker) are used as they are when given:
+``[plant] fmu = "path"`` / ``[controller] fmu = "path"`` / ``[top_drive_controller] fmu =
+"path"`` in the scene (relative to the scene file's folder), or the ``plant_fmu`` /
+``controller_fmu`` arguments (``drillcosim run --plant-fmu P --controller-fmu C``), which take
+precedence.
 
 Parameters passed to the FMUs
 -----------------------------
@@ -37,9 +42,15 @@ controller
     ``mode`` (``"unrestricted"`` -> Integer 0, ``"compressive_only"`` -> 1),
     ``force_limit`` [N], ``symmetric_force_limit`` [N] (``inf`` is passed as
     1e30, the FMU's "no limit"), ``switch_on_time`` [s],
-    ``lag_time_constant`` [s], ``enabled`` (Boolean). Each is passed if the controller FMU
-    declares it; a key the scene sets explicitly that the FMU lacks is an interface problem,
-    a default it lacks is not passed.
+    ``lag_time_constant`` [s], ``enabled`` (Boolean), and ``gain_matrix`` as the relative
+    gains ``gain_matrix_<i>_<j>`` (identity when not given). Each is passed if the
+    controller FMU declares it; a key the scene sets explicitly that the FMU lacks is an
+    interface problem, a default it lacks is not passed.
+top_drive_controller
+    ``[top_drive_controller]``, validated by :class:`controller.TopDriveControllerParams`:
+    ``target_speed`` [rad/s], ``p_gain`` [N m s/rad], ``i_gain`` [N m/rad],
+    ``torque_feedback`` [1], ``ramp_time`` [s], ``enabled``; passed the same way. The plant
+    must be in ``top_drive.mode = "torque"``.
 
 The ``[cosim]`` table of a scene
 --------------------------------
@@ -49,11 +60,12 @@ Every key is optional::
     step = 1e-3                    # base communication step H [s], > 0 (default 1e-3)
     stop_time = 30.0               # default stop time [s], > 0 (default 30)
     algorithm = "jacobi"           # "jacobi" | "gauss_seidel" (default "jacobi")
-    order = ["plant", "controller"]  # Gauss-Seidel stepping order (default plant first)
+    order = ["plant", "controller"]  # Gauss-Seidel stepping order (default plant first; with a
+                                   # top-drive controller also "top_drive_controller")
     coupling = "zoh"               # "zoh" | "linear" on all connections (default "zoh")
     actuator_delay = 0.0           # transport delay controller -> plant forces [s], >= 0
     sensor_delay = 0.0             # transport delay plant -> controller strains [s], >= 0
-    controller_sample_period = 1e-3  # controller period [s], integer multiple of step
+    controller_sample_period = 1e-3  # controllers' period [s], integer multiple of step
                                    # (default: step); the plant steps every base step
     output_interval = 1e-3         # recording interval [s], integer multiple of step
                                    # (default: the smallest multiple of step >= 1 ms)
@@ -72,6 +84,7 @@ with a "did you mean" suggestion for unknown keys.
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import math
 import warnings
@@ -80,17 +93,14 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from drillcosim.controller import MODES, ControllerParams
+from drillcosim.controller import MODES, ControllerParams, TopDriveControllerParams
 from drillcosim.cosim.master.interface import (
     FmuInterface,
-    InterfaceError,
-    check_system,
     read_interface,
 )
 from drillcosim.cosim.master.system import (
     ALGORITHMS,
     COUPLINGS,
-    Connection,
     FmuSpec,
     SystemSpec,
     integer_multiple,
@@ -98,12 +108,21 @@ from drillcosim.cosim.master.system import (
 from drillcosim.plant.observables import output_names
 from drillcosim.plant.scene import Scene, scenes_dir
 
-from .interface import InterfaceWarning, connections_of, wire_pair
+from .interface import InterfaceWarning, connections_of, wire_system
+from .scene_fmus import (
+    TOP_DRIVE_CONTROLLER,
+    controller_recipe,
+    default_fmu_dir,
+    ensure_recipes,
+    plant_recipe,
+    recipe_named,
+)
 
 __all__ = [
     "CONTROLLER",
     "COSIM_KEYS",
     "PLANT",
+    "TOP_DRIVE",
     "CosimSettings",
     "SceneSystem",
     "controller_parameters",
@@ -112,15 +131,16 @@ __all__ = [
     "default_fmu_dir",
     "ensure_fmus",
     "scene_controller",
+    "scene_instances",
     "scene_system",
+    "scene_top_drive_controller",
     "span_info",
+    "top_drive_controller_parameters",
 ]
 
 PLANT = "plant"            #: instance name of the plant FMU
-CONTROLLER = "controller"  #: instance name of the controller FMU
-PLANT_FMU = "DrillstringPlant.fmu"
-CONTROLLER_FMU = "StrainController.fmu"
-CONTROLLER_SITES = (1, 2)  #: actuator sites the controller FMU handles
+CONTROLLER = "controller"  #: instance name of the strain controller FMU
+TOP_DRIVE = "top_drive_controller"  #: instance name of the top-drive controller FMU
 AXES = ("C", "E")
 NO_LIMIT = 1e30            #: the controller FMU's "no symmetric force limit"
 
@@ -130,12 +150,13 @@ COSIM_KEYS: dict[str, tuple[Any, str, str]] = {
     "stop_time": (30.0, "s", "default stop time, > 0"),
     "algorithm": ("jacobi", "-", "'jacobi' (parallel) or 'gauss_seidel' (sequential)"),
     "order": (None, "-", "Gauss-Seidel stepping order, a permutation of "
-              "['plant', 'controller'] (default plant first)"),
+              "['plant', 'controller'] (and 'top_drive_controller' when enabled; default "
+              "plant first)"),
     "coupling": ("zoh", "-", "'zoh' (hold) or 'linear' (extrapolation) on every connection"),
     "actuator_delay": (0.0, "s", "transport delay of the forces controller -> plant, >= 0"),
     "sensor_delay": (0.0, "s", "transport delay of the strains plant -> controller, >= 0"),
-    "controller_sample_period": (None, "s", "controller step, an integer multiple of step "
-                                 "(default: step)"),
+    "controller_sample_period": (None, "s", "the controllers' step, an integer multiple of "
+                                 "step (default: step)"),
     "output_interval": (None, "s", "recording interval, an integer multiple of step "
                         "(default: the smallest multiple of step >= 1 ms)"),
 }
@@ -235,10 +256,11 @@ def cosim_settings(scene: Scene) -> CosimSettings:
         if value not in choices:
             raise ValueError(f"{scene.source}: [cosim] {key} = {value!r} is not allowed"
                              f"{_suggest(str(value), choices)}")
-    order = get("order", [PLANT, CONTROLLER])
-    if not isinstance(order, (list, tuple)) or sorted(order) != sorted([PLANT, CONTROLLER]):
+    names = [PLANT, CONTROLLER] + ([TOP_DRIVE] if TOP_DRIVE in scene_instances(scene) else [])
+    order = get("order", names)
+    if not isinstance(order, (list, tuple)) or sorted(order) != sorted(names):
         raise ValueError(f"{scene.source}: [cosim] order = {order!r} must be a permutation of "
-                         f"['{PLANT}', '{CONTROLLER}']")
+                         f"{names}")
     delays = {k: _number(scene, k, get(k, 0.0), positive=False)
               for k in ("actuator_delay", "sensor_delay")}
     ctrl_period = _number(scene, "controller_sample_period",
@@ -269,9 +291,65 @@ def scene_controller(scene: Scene) -> ControllerParams:
                              f"{_suggest(key, [*names, 'fmu'])}")
     raw = {"enabled": False, **{k: v for k, v in scene.controller.items() if k != "fmu"}}
     try:
-        return ControllerParams(**raw)
+        params = ControllerParams(**raw)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{scene.source}: [controller] {exc}") from None
+    n_sites = len(scene.plant.actuator_joints)
+    if params.gain_matrix and len(params.gain_matrix) != n_sites:
+        size = len(params.gain_matrix)
+        raise ValueError(f"{scene.source}: [controller] gain_matrix is {size} x {size}; the "
+                         f"scene has {n_sites} actuator sites: allowed an {n_sites} x {n_sites} "
+                         "matrix")
+    return params
+
+
+def scene_instances(scene: Scene) -> list[str]:
+    """The FMU instances of the scene's system: the plant, then each enabled controller."""
+    out = [PLANT]
+    for name, table in ((CONTROLLER, scene.controller), (TOP_DRIVE, scene.top_drive_controller)):
+        if table.get("enabled", False) is True:
+            out.append(name)
+    return out
+
+
+def scene_top_drive_controller(scene: Scene) -> TopDriveControllerParams:
+    """The scene's ``[top_drive_controller]`` table as validated, typed parameters
+    (``enabled`` false when the scene does not enable it).
+
+    Raises
+    ------
+    ValueError
+        Unknown key (with suggestion), invalid value, or an enabled controller with a plant
+        whose top drive is not in mode "torque", naming the scene file.
+    """
+    table = scene.top_drive_controller
+    names = [f.name for f in fields(TopDriveControllerParams)]
+    for key in table:
+        if key not in names and key != "fmu":
+            raise ValueError(f"{scene.source}: [top_drive_controller] unknown key '{key}'"
+                             f"{_suggest(key, [*names, 'fmu'])}")
+    raw = {"enabled": False, **{k: v for k, v in table.items() if k != "fmu"}}
+    try:
+        params = TopDriveControllerParams(**raw)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{scene.source}: [top_drive_controller] {exc}") from None
+    mode = scene.plant.top_drive.mode
+    if params.enabled and mode != "torque":
+        raise ValueError(f"{scene.source}: [top_drive_controller] drives the motor torque of a "
+                         f"top drive in mode 'torque', but top_drive.mode = {mode!r}: set "
+                         "[top_drive] mode = \"torque\" and inertia")
+    return params
+
+
+def top_drive_controller_parameters(scene: Scene) -> dict[str, float | bool]:
+    """The top-drive controller FMU's parameters for the scene (:func:`scene_top_drive_controller`).
+
+    Raises
+    ------
+    ValueError
+        As :func:`scene_top_drive_controller`.
+    """
+    return dataclasses.asdict(scene_top_drive_controller(scene))
 
 
 def controller_parameters(scene: Scene) -> dict[str, float | int | bool]:
@@ -283,7 +361,8 @@ def controller_parameters(scene: Scene) -> dict[str, float | int | bool]:
     dict
         ``gain`` [N], ``mode`` (Integer: index in :data:`controller.MODES`),
         ``force_limit`` [N], ``symmetric_force_limit`` [N] (inf -> 1e30),
-        ``switch_on_time`` [s], ``lag_time_constant`` [s], ``enabled``.
+        ``switch_on_time`` [s], ``lag_time_constant`` [s], ``enabled``, and the relative
+        gains ``gain_matrix_<i>_<j>`` [1] (the identity when the scene gives no matrix).
 
     Raises
     ------
@@ -292,10 +371,17 @@ def controller_parameters(scene: Scene) -> dict[str, float | int | bool]:
     """
     p = scene_controller(scene)
     sym = p.symmetric_force_limit
-    return {"gain": p.gain, "mode": MODES.index(p.mode), "force_limit": p.force_limit,
-            "symmetric_force_limit": NO_LIMIT if math.isinf(sym) else sym,
-            "switch_on_time": p.switch_on_time, "lag_time_constant": p.lag_time_constant,
-            "enabled": p.enabled}
+    out: dict[str, float | int | bool] = {
+        "gain": p.gain, "mode": MODES.index(p.mode), "force_limit": p.force_limit,
+        "symmetric_force_limit": NO_LIMIT if math.isinf(sym) else sym,
+        "switch_on_time": p.switch_on_time, "lag_time_constant": p.lag_time_constant,
+        "enabled": p.enabled}
+    n = len(scene.plant.actuator_joints)
+    matrix = p.gain_matrix or tuple(tuple(float(i == j) for j in range(n)) for i in range(n))
+    for i, row in enumerate(matrix, start=1):
+        for j, value in enumerate(row, start=1):
+            out[f"gain_matrix_{i}_{j}"] = value
+    return out
 
 
 def _flatten(overrides: Mapping[str, Any], source: str) -> dict[str, float | int | bool | str]:
@@ -352,56 +438,24 @@ def span_info(scene: Scene) -> dict[int, dict[str, float | str]]:
     return out
 
 
-def default_fmu_dir() -> Path:
-    """``build/fmus/`` in the repository."""
-    from drillcosim.fmu_src.build import DEFAULT_OUT
-
-    return DEFAULT_OUT
-
-
-def _stale(fmu: Path, name: str) -> bool:
-    from drillcosim.fmu_src.build import REGISTRY, stale
-
-    recipe = next((r for r in REGISTRY if r.name == name), None)
-    return recipe is not None and stale(fmu, recipe)
-
-
 def ensure_fmus(fmu_dir: str | Path | None = None, names: Sequence[str] = (
         "DrillstringPlant", "StrainController")) -> dict[str, Path]:
-    """Paths of the project FMUs in ``fmu_dir``, building missing (or stale) ones.
-
-    In the default folder (``build/fmus``) an FMU that :func:`fmu_src.build.stale` calls
-    stale (older than a file it is made of, or made by an earlier build) is rebuilt;
-    an explicitly given folder is used as is (built only if missing), so a frozen
-    set of FMUs stays frozen.
+    """Paths of the registered project FMUs ``names`` in ``fmu_dir``, building missing (or
+    stale) ones (:func:`.scene_fmus.ensure_recipes`).
 
     Raises
     ------
     FileNotFoundError
         If an FMU is still missing after the build (e.g. no adapter yet).
     """
-    from drillcosim.fmu_src.build import REGISTRY, build_one
-
-    folder = Path(fmu_dir) if fmu_dir is not None else default_fmu_dir()
-    paths = {}
-    for name in names:
-        path = folder / f"{name}.fmu"
-        if not path.is_file() or (fmu_dir is None and _stale(path, name)):
-            spec = next((s for s in REGISTRY if s.name == name), None)
-            if spec is not None and spec.script_path.is_file():
-                build_one(spec, folder)
-        if not path.is_file():
-            raise FileNotFoundError(f"FMU '{path}' does not exist and cannot be built "
-                                    f"(no adapter for {name} yet)")
-        paths[name] = path
-    return paths
+    return ensure_recipes([recipe_named(n) for n in names], fmu_dir)
 
 
 def _plant_outputs(scene: Scene, declared: Sequence[str]) -> list[str]:
     """The scene's plant outputs to record, those the plant FMU declares (in this order)."""
     plant = scene.plant
     names = [r[0] for r in output_names(scene.model == "full3d", list(plant.contact_bodies),
-                                        len(plant.actuator_joints))]
+                                        len(plant.actuator_joints), extended=True)]
     wanted = []
     for b in plant.contact_bodies:
         wanted += [f"body{b}_{q}" for q in ("X", "Y", "radial_deflection", "contact_force")]
@@ -409,11 +463,17 @@ def _plant_outputs(scene: Scene, declared: Sequence[str]) -> list[str]:
         wanted += [f"strain{s}_{a}" for a in AXES] + [f"actuator{s}_power"]
     wanted += ["bit_axial_force", "bit_torque", "hook_load", "top_rotary_speed",
                "bit_rotary_speed", "total_energy", *scene.outputs]
+    if plant.top_drive.mode != "prescribed":
+        wanted.append("top_torque")
     out = []
     for n in wanted:
         if n in names and n in declared and n not in out:
             out.append(n)
     return out
+
+
+#: Scene table of each controller instance.
+_TABLES = {CONTROLLER: "controller", TOP_DRIVE: "top_drive_controller"}
 
 
 def _scene_fmu(scene: Scene, table: str, given: str | Path | None) -> Path | None:
@@ -423,7 +483,8 @@ def _scene_fmu(scene: Scene, table: str, given: str | Path | None) -> Path | Non
     """
     if given:
         return Path(given)
-    raw = scene.plant_fmu if table == "plant" else scene.controller
+    raw = {"plant": scene.plant_fmu, "controller": scene.controller,
+           "top_drive_controller": scene.top_drive_controller}[table]
     if table == "plant":
         for key in raw:
             if key != "fmu":
@@ -444,18 +505,38 @@ def _scene_fmu(scene: Scene, table: str, given: str | Path | None) -> Path | Non
     return path
 
 
+def scene_recipes(scene: Scene) -> dict[str, Any]:
+    """The project FMUs the scene's system uses where it names no FMU file, by instance:
+    ``{"plant": FmuRecipe, "controller": ..., "top_drive_controller": ...}`` (controllers only
+    when enabled). Building them ahead: :func:`.scene_fmus.ensure_recipes`.
+
+    Raises
+    ------
+    ValueError
+        Invalid ``[controller]`` / ``[top_drive_controller]`` tables (one line).
+    """
+    ctrl = scene_controller(scene)
+    recipes: dict[str, Any] = {PLANT: plant_recipe(scene)}
+    if ctrl.enabled:
+        recipes[CONTROLLER] = controller_recipe(scene, len(scene.plant.actuator_joints),
+                                                ctrl.gain_matrix)
+    if scene_top_drive_controller(scene).enabled:
+        recipes[TOP_DRIVE] = recipe_named(TOP_DRIVE_CONTROLLER)
+    return recipes
+
+
 def scene_system(scene: Scene, fmu_dir: str | Path | None = None, *,
                  plant_fmu: str | Path | None = None,
                  controller_fmu: str | Path | None = None,
                  plant_overrides: Mapping[str, Any] | None = None) -> SceneSystem:
-    """Build the co-simulation system of a scene and check its FMU pair.
+    """Build the co-simulation system of a scene and check its FMUs.
 
     Parameters
     ----------
     scene : Scene
     fmu_dir : path-like, optional
-        Folder of ``DrillstringPlant.fmu`` and ``StrainController.fmu``
-        (default ``build/fmus/``); missing or stale FMUs are built there.
+        Folder of the project's FMUs (default ``build/fmus/``); missing or stale FMUs are built
+        there (the default ones, or those built for the scene's layout, :mod:`.scene_fmus`).
     plant_fmu, controller_fmu : path-like, optional
         Use these FMU files instead (nothing is built for them); they take precedence over
         ``[plant] fmu`` / ``[controller] fmu`` of the scene.
@@ -471,40 +552,41 @@ def scene_system(scene: Scene, fmu_dir: str | Path | None = None, *,
     Raises
     ------
     ValueError
-        Invalid ``[cosim]``, ``[controller]`` or ``[plant]`` keys or values (one line,
-        naming the scene file and the key).
+        Invalid ``[cosim]``, ``[controller]``, ``[top_drive_controller]`` or ``[plant]`` keys or
+        values (one line, naming the scene file and the key).
     cosim.master.interface.InterfaceError
-        The plant and controller FMUs do not fit (a ``ValueError``; one line per problem,
-        each naming both FMUs and the variable).
+        The FMUs do not fit (a ``ValueError``; one line per problem, each naming both FMUs and
+        the variable).
     FileNotFoundError
         An FMU is missing and cannot be built.
 
     Warns
     -----
     InterfaceWarning
-        Plant inputs of sites the controller does not serve (they keep their start value),
-        or a plant FMU without a ``scene`` parameter.
+        Plant inputs no controller feeds (they keep their start value), or a plant FMU without
+        a ``scene`` parameter.
     """
     settings = cosim_settings(scene)
-    ctrl = controller_parameters(scene)
-    enabled = bool(ctrl["enabled"])
-    n_sites = len(scene.plant.actuator_joints)
-    if controller_fmu and not enabled:
+    params = {CONTROLLER: controller_parameters(scene),
+              TOP_DRIVE: top_drive_controller_parameters(scene)}
+    enabled = [name for name in (CONTROLLER, TOP_DRIVE) if params[name]["enabled"]]
+    if controller_fmu and CONTROLLER not in enabled:
         raise ValueError(f"{scene.source}: a controller FMU was given ({controller_fmu}) but "
                          "the scene's controller is off: set controller.enabled=true")
-    plant_fmu = _scene_fmu(scene, "plant", plant_fmu)
-    controller_fmu = _scene_fmu(scene, "controller", controller_fmu) if enabled else None
-    if enabled and scene.model != "full3d":
+    files = {PLANT: _scene_fmu(scene, "plant", plant_fmu),
+             CONTROLLER: _scene_fmu(scene, "controller", controller_fmu)
+             if CONTROLLER in enabled else None,
+             TOP_DRIVE: _scene_fmu(scene, "top_drive_controller", None)
+             if TOP_DRIVE in enabled else None}
+    if CONTROLLER in enabled and scene.model != "full3d":
         raise ValueError(f"{scene.source}: the controller needs model = 'full3d', "
                          f"got '{scene.model}'")
-    if enabled and controller_fmu is None and n_sites != len(CONTROLLER_SITES):
-        raise ValueError(f"{scene.source}: [actuators] the controller FMU handles "
-                         f"{len(CONTROLLER_SITES)} sites, the plant has {n_sites}")
     overrides = _flatten(plant_overrides or {}, scene.source)
-    need = ([] if plant_fmu else ["DrillstringPlant"]) + \
-        ([] if controller_fmu or not enabled else ["StrainController"])
-    paths = ensure_fmus(fmu_dir, need) if need else {}
-    plant_face = read_interface(PLANT, plant_fmu or paths["DrillstringPlant"])
+    recipes = scene_recipes(scene)
+    need = [recipes[i] for i in (PLANT, *enabled) if files[i] is None]
+    built = ensure_recipes(need, fmu_dir) if need else {}
+    path = {i: files[i] or built[recipes[i].name] for i in (PLANT, *enabled)}
+    plant_face = read_interface(PLANT, path[PLANT])
     plant_params: dict[str, float | int | bool | str] = {}
     if "scene" in plant_face.ports:
         plant_params["scene"] = scene_reference(scene)
@@ -514,35 +596,32 @@ def scene_system(scene: Scene, fmu_dir: str | Path | None = None, *,
             f"{scene.source} are not applied to it"), stacklevel=2)
     plant_params.update(overrides)
     fmus = [FmuSpec(PLANT, plant_face.path, plant_params)]
-    connections: list[Connection] = []
-    outputs = [f"{PLANT}.{n}" for n in _plant_outputs(scene, plant_face.outputs())]
-    order: tuple[str, ...] = (PLANT,)
-    if enabled:
-        ctrl_face = read_interface(CONTROLLER, controller_fmu or paths["StrainController"])
-        fmus.append(FmuSpec(CONTROLLER, ctrl_face.path,
-                            {k: v for k, v in ctrl.items() if k in ctrl_face.ports},
+    faces = [read_interface(i, path[i]) for i in enabled]
+    for face in faces:
+        fmus.append(FmuSpec(face.instance, face.path,
+                            {k: v for k, v in params[face.instance].items() if k in face.ports},
                             settings.controller_sample_ticks))
-        wiring = wire_pair(plant_face, ctrl_face, fmus, _lacking(scene, ctrl_face))
-        connections = connections_of(wiring, {CONTROLLER: settings.sensor_delay,
-                                              PLANT: settings.actuator_delay}, settings.coupling)
-        outputs += [s for s, t in wiring.connections if s.startswith(f"{CONTROLLER}.")]
-        order = settings.order
-    elif overrides:
-        # the plant alone: its start values are checked the same way
-        problems = check_system(fmus, (), {PLANT: plant_face}).problems
-        if problems:
-            raise InterfaceError(f"{plant_face.label} cannot take the scene's settings",
-                                 problems)
+    wiring = wire_system(plant_face, faces, fmus,
+                         [p for face in faces for p in _lacking(scene, face)])
+    delays = {PLANT: settings.actuator_delay, **dict.fromkeys(enabled, settings.sensor_delay)}
+    connections = connections_of(wiring, delays, settings.coupling)
+    outputs = [f"{PLANT}.{n}" for n in _plant_outputs(scene, plant_face.outputs())]
+    outputs += [s for s, _t in wiring.connections if not s.startswith(f"{PLANT}.")]
+    order = tuple(i for i in settings.order if i in (PLANT, *enabled)) if enabled else (PLANT,)
     system = SystemSpec(fmus, connections, settings.step, settings.algorithm, order,
                         0.0, settings.stop_time)
     return SceneSystem(scene, system, settings, tuple(outputs))
 
 
-def _lacking(scene: Scene, ctrl_face: FmuInterface) -> list[str]:
-    """``[controller]`` keys the scene sets explicitly that the controller FMU does not declare."""
-    return [f"{ctrl_face.label} has no parameter '{key}' for [controller] {key} of "
-            f"{scene.source}" for key in scene.controller
-            if key not in ("enabled", "fmu") and key not in ctrl_face.ports]
+def _lacking(scene: Scene, face: FmuInterface) -> list[str]:
+    """Keys of the instance's scene table the scene sets explicitly that the FMU does not
+    declare (``gain_matrix``: its entries ``gain_matrix_1_1`` ...)."""
+    table = _TABLES[face.instance]
+    raw = scene.controller if face.instance == CONTROLLER else scene.top_drive_controller
+    port = {"gain_matrix": "gain_matrix_1_1"}
+    return [f"{face.label} has no parameter '{key}' for [{table}] {key} of "
+            f"{scene.source}" for key in raw
+            if key not in ("enabled", "fmu") and port.get(key, key) not in face.ports]
 
 
 def cosim_schema_markdown() -> str:

@@ -33,6 +33,10 @@ Keys of the summary
     1), and ``before_switch_on_strain_rms`` (last third before the switch-on)
     when the controller switches on during the run. Forces are 0 when the
     controller is disabled.
+``torsional``
+    When the bit speed was recorded: :func:`stick_slip_metrics` of the steady window
+    (``bit_speed_min/max/mean_rad_s``, ``stick_slip_severity``, ``stick_fraction``), and, with a
+    top-drive controller, ``peak_motor_torque_N_m``.
 ``diverged``
     ``null``, or ``{"time_s", "quantity", "value", "message"}`` of the failure
     that stopped the run.
@@ -50,10 +54,14 @@ import numpy as np
 
 from drillcosim.cosim.master.files import atomic_write
 
-from .scene_system import CONTROLLER, PLANT
+from .scene_system import CONTROLLER, PLANT, TOP_DRIVE
 
-__all__ = ["SUMMARY_KEYS", "column", "contact_bodies", "load_results", "summarize",
-           "write_json"]
+__all__ = ["STICK_SPEED", "SUMMARY_KEYS", "column", "contact_bodies", "load_results",
+           "stick_slip_metrics", "summarize", "write_json"]
+
+#: The bit counts as stuck below this speed [rad/s] (the cutting bit's friction is regularized
+#: over ``bit.slip_speed``, 0.05 rad/s in stick_slip: a stuck bit creeps at < 0.04 rad/s).
+STICK_SPEED = 0.1
 
 #: Top-level keys every summary has.
 SUMMARY_KEYS = ("scene", "scene_file", "stop_time_s", "end_time_s", "completed", "wall_time_s",
@@ -100,6 +108,30 @@ def _peak(x: np.ndarray | None) -> float:
         return 0.0
     finite = x[np.isfinite(x)]
     return float(np.max(np.abs(finite))) if finite.size else math.nan
+
+
+def stick_slip_metrics(t: np.ndarray, bit_speed: np.ndarray, t0: float) -> dict[str, float]:
+    """Stick-slip measures of the bit speed [rad/s] over ``t >= t0`` [s].
+
+    Returns
+    -------
+    dict
+        ``bit_speed_min_rad_s``, ``bit_speed_max_rad_s``, ``bit_speed_mean_rad_s``;
+        ``stick_slip_severity`` = (max - min) / mean [1] (0 for steady rotation; about 2 and
+        more for full stick-slip, where the bit stops and slips at up to ~3 times its mean
+        speed; NaN if the mean is not > 0) and ``stick_fraction`` [1], the fraction of the
+        samples with the bit speed below :data:`STICK_SPEED`. NaN for an empty window.
+    """
+    sel = (t >= t0) & np.isfinite(bit_speed)
+    if not np.any(sel):
+        return dict.fromkeys(("bit_speed_min_rad_s", "bit_speed_max_rad_s",
+                              "bit_speed_mean_rad_s", "stick_slip_severity", "stick_fraction"),
+                             math.nan)
+    w = bit_speed[sel]
+    lo, hi, mean = float(np.min(w)), float(np.max(w)), float(np.mean(w))
+    return {"bit_speed_min_rad_s": lo, "bit_speed_max_rad_s": hi, "bit_speed_mean_rad_s": mean,
+            "stick_slip_severity": (hi - lo) / mean if mean > 0 else math.nan,
+            "stick_fraction": float(np.mean(w < STICK_SPEED))}
 
 
 def _contact(t: np.ndarray, f: np.ndarray | None, dt: float) -> tuple[int, float, float]:
@@ -208,13 +240,20 @@ def summarize(data: np.ndarray, *, scene: str = "", scene_file: str = "",
             else 0.0,
             **extra,
         }
+    torsional: dict[str, float] = {}
+    bit_speed = column(data, PLANT, "bit_rotary_speed")
+    if bit_speed is not None:
+        torsional = stick_slip_metrics(t, bit_speed, w0)
+        motor = column(data, TOP_DRIVE, "top_drive_torque")
+        if motor is not None:
+            torsional["peak_motor_torque_N_m"] = _peak(motor)
     return {
         "scene": scene, "scene_file": scene_file, "stop_time_s": stop_time, "end_time_s": end,
         "completed": bool(diverged is None and math.isfinite(end)
                           and end >= stop_time - 1e-9 * max(1.0, abs(stop_time))),
         "wall_time_s": wall_time, "real_time_factor": real_time_factor, "step_s": step,
         "output_interval_s": output_interval, "steady_window_s": [w0, t_last],
-        "spans": out_spans, "actuators": actuators,
+        "spans": out_spans, "actuators": actuators, "torsional": torsional,
         "diverged": dict(diverged) if diverged is not None else None,
     }
 

@@ -21,9 +21,24 @@ import numpy as np
 
 from drillcosim.cosim.master.system import integer_multiple
 
-__all__ = ["Point", "SweepSpec", "parse_list", "point_key"]
+__all__ = ["DEFAULT_GAIN_KEY", "GAIN_TABLES", "Point", "SweepSpec", "check_gain_key", "parse_list",
+           "point_key"]
 
 KINDS = ("closed_loop", "open_loop")
+#: The scene key a sweep's gain sets by default: the strain controller's gain [N per unit strain].
+DEFAULT_GAIN_KEY = "controller.gain"
+#: Scene tables whose keys a sweep's gain may set (the controller it enables).
+GAIN_TABLES = ("controller", "top_drive_controller")
+
+
+def check_gain_key(key: str) -> str:
+    """``key`` if it names a key of a controller table (``"table.key"``), else ValueError."""
+    table, dot, name = key.partition(".")
+    if not dot or table not in GAIN_TABLES or not name.isidentifier():
+        raise ValueError(f"--gain-key {key!r}: must be TABLE.KEY with TABLE one of "
+                         f"{', '.join(GAIN_TABLES)} (e.g. {DEFAULT_GAIN_KEY}, "
+                         f"top_drive_controller.p_gain)")
+    return key
 
 
 def _number(text: str, what: str) -> float:
@@ -110,7 +125,8 @@ class Point:
     scene : str
         Scene name or path.
     gain : float
-        Controller gain [N per unit strain] (0 for open loop).
+        The value of ``gain_key`` (the strain controller's gain [N per unit strain] by default;
+        0 for open loop).
     delay : float
         Actuator delay [s].
     step : float
@@ -123,6 +139,8 @@ class Point:
         JSON of extra scene overrides (nested dict), "" for none.
     options : tuple of (str, float)
         Metric options for the measurement (see :class:`cosim.study.point.PointOptions`).
+    gain_key : str
+        The scene key the gain sets (``"table.key"``, default :data:`DEFAULT_GAIN_KEY`).
     """
 
     scene: str
@@ -134,12 +152,16 @@ class Point:
     kind: str = "closed_loop"
     overrides: str = ""
     options: tuple[tuple[str, float], ...] = ()
+    gain_key: str = DEFAULT_GAIN_KEY
 
     @property
     def key(self) -> str:
-        """See :func:`point_key`."""
+        """See :func:`point_key` (a gain key other than the default is part of the key)."""
+        extra = self.overrides
+        if self.gain_key != DEFAULT_GAIN_KEY:
+            extra = f"{extra}|gain_key={self.gain_key}" if extra else f"gain_key={self.gain_key}"
         return point_key(self.scene, self.engine, self.kind, self.gain, self.delay, self.step,
-                         self.stop_time, self.overrides)
+                         self.stop_time, extra)
 
     def kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :func:`cosim.study.point.measure_point`."""
@@ -147,7 +169,7 @@ class Point:
                 "stop_time": self.stop_time, "engine": self.engine,
                 "open_loop": self.kind == "open_loop",
                 "overrides": json.loads(self.overrides) if self.overrides else None,
-                **dict(self.options)}
+                "gain_key": self.gain_key, **dict(self.options)}
 
 
 @dataclass(frozen=True)
@@ -158,7 +180,7 @@ class SweepSpec:
     ----------
     scene : str
     gains : sequence of float
-        [N per unit strain], >= 0.
+        Values of ``gain_key`` (the strain gain [N per unit strain] by default), >= 0.
     delays : sequence of float
         Actuator delays [s], >= 0.
     steps : sequence of float
@@ -172,6 +194,9 @@ class SweepSpec:
         Also run one open-loop reference per step (needed for the control benefit).
     options : mapping of str -> float
         Metric options (:class:`cosim.study.point.PointOptions` fields).
+    gain_key : str
+        The scene key the gains set (default :data:`DEFAULT_GAIN_KEY`; e.g.
+        ``"top_drive_controller.p_gain"`` [N m s/rad] for the top-drive controller).
     """
 
     scene: str
@@ -183,6 +208,7 @@ class SweepSpec:
     overrides: Mapping[str, Any] = field(default_factory=dict)
     open_loop: bool = True
     options: Mapping[str, float] = field(default_factory=dict)
+    gain_key: str = DEFAULT_GAIN_KEY
 
     def points(self) -> list[Point]:
         """Open-loop references first (one per step), then gain x delay x step."""
@@ -197,8 +223,9 @@ class SweepSpec:
                                  "every step divides")
         over = json.dumps(dict(self.overrides), sort_keys=True) if self.overrides else ""
         opts = tuple(sorted((k, float(v)) for k, v in self.options.items()))
+        check_gain_key(self.gain_key)
         common = {"stop_time": float(self.stop_time), "engine": self.engine,
-                  "overrides": over, "options": opts}
+                  "overrides": over, "options": opts, "gain_key": self.gain_key}
         pts = []
         if self.open_loop:
             pts += [Point(self.scene, 0.0, 0.0, float(h), kind="open_loop", **common)

@@ -7,7 +7,10 @@ per communication step, with the linear prediction's boundary overlaid.
 * ``benefit_map.png``: the long span's control benefit ``1 - RMS/RMS_open`` (colour),
   unstable points crossed out, same boundary.
 
-The predicted boundary is cached in ``prediction.json`` next to the table.
+The predicted boundary is cached in ``prediction.json`` next to the table. A sweep of another
+gain than the strain controller's (``gain_key``, e.g. ``top_drive_controller.p_gain``) gets
+``stick_slip_map.png`` instead: the stick-slip severity (colour) over (actuator delay, gain),
+diverged points crossed out.
 """
 
 from __future__ import annotations
@@ -24,6 +27,11 @@ import numpy as np
 from drillcosim.cosim.master.files import atomic_write
 
 __all__ = ["plot_maps", "predicted_boundary"]
+
+#: Axis label of a sweep's gain, by gain key.
+GAIN_LABELS = {"controller.gain": "controller gain K [N per unit strain]",
+               "top_drive_controller.p_gain": "top-drive P gain [N m s/rad]",
+               "top_drive_controller.i_gain": "top-drive I gain [N m/rad]"}
 
 
 def predicted_boundary(scene: str, steps: Sequence[float], delays: Sequence[float],
@@ -108,6 +116,9 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
     meta: dict[str, Any] = {}
     if (folder / "sweep.json").exists():
         meta = json.loads((folder / "sweep.json").read_text()).get("spec", {})
+    gain_key = meta.get("gain_key", "controller.gain")
+    if gain_key != "controller.gain":
+        return [_stick_slip_map(folder, rows, gain_key)]
     steps = sorted({r["step"] for r in rows})
     delays = sorted({r["delay"] for r in rows})
     gains = sorted({r["gain"] for r in rows if r["gain"] > 0}) or [1.0]
@@ -178,7 +189,7 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
             ax.set_xlabel(xlabel)
             ax.set_title(title)
             ax.grid(True, which="major", alpha=0.3)
-        axes[0][0].set_ylabel("controller gain K [N per unit strain]")
+        axes[0][0].set_ylabel(GAIN_LABELS["controller.gain"])
         handles, labels = [], []
         for ax in axes[0]:
             for hd, lb in zip(*ax.get_legend_handles_labels()):
@@ -196,3 +207,42 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
         fig.suptitle(f"{title}\n{scene}, engine '{engine}', {stop:g} s runs", fontsize=11)
         paths.append(save_figure(fig, folder / f"{what}_map.png", dpi=110))
     return paths
+
+
+def _stick_slip_map(folder: Path, rows: list[dict[str, Any]], gain_key: str) -> Path:
+    """``stick_slip_map.png``: severity over (delay, gain), one panel per step."""
+    import matplotlib.pyplot as plt
+
+    from drillcosim.cosim.scenario.plots import save_figure
+
+    steps = sorted({r["step"] for r in rows})
+    fig, axes = plt.subplots(1, len(steps), figsize=(4.6 * len(steps) + 2.8, 4.8),
+                             squeeze=False, sharey=True, layout="constrained")
+    handle = None
+    top = max([r["stick_slip_severity"] for r in rows
+               if math.isfinite(r["stick_slip_severity"])] + [2.5])
+    for ax, h in zip(axes[0], steps):
+        sel = [r for r in rows if r["step"] == h]
+        d = np.array([r["delay"] for r in sel]) * 1e3
+        k = np.array([r["gain"] for r in sel])
+        sev = np.array([r["stick_slip_severity"] for r in sel], dtype=float)
+        ok = np.isfinite(sev)
+        handle = ax.scatter(d[ok], k[ok], c=sev[ok], cmap="viridis_r", vmin=0.0, vmax=top,
+                            s=140, marker="s", edgecolors="k", linewidths=0.5, zorder=3)
+        for x, y, v in zip(d[ok], k[ok], sev[ok]):
+            ax.annotate(f"{v:.2g}", (x, y), textcoords="offset points", xytext=(0, 9),
+                        ha="center", fontsize=7)
+        if (~ok).any():
+            ax.scatter(d[~ok], k[~ok], marker="x", c="tab:red", s=50, zorder=3,
+                       label="diverged / error")
+        ax.set_yscale("log")
+        ax.set_xlabel("actuator delay $\\tau$ [ms]")
+        ax.set_title(f"communication step H = {h * 1e3:g} ms")
+        ax.grid(True, which="major", alpha=0.3)
+    axes[0][0].set_ylabel(GAIN_LABELS.get(gain_key, gain_key))
+    if handle is not None:
+        fig.colorbar(handle, ax=axes[0].tolist(),
+                     label="stick-slip severity (max - min) / mean bit speed")
+    fig.suptitle(f"Stick-slip severity\n{rows[0]['scene']}, engine '{rows[0]['engine']}', "
+                 f"{rows[0]['stop_time']:g} s runs", fontsize=11)
+    return save_figure(fig, folder / "stick_slip_map.png", dpi=110)

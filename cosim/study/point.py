@@ -31,7 +31,17 @@ Metrics (:func:`metrics`), all from the recorded series (every ``output_interval
   contact body over the last ``rms_fraction`` of the run (a scene with one span
   fills the ``long`` columns); NaN when the run diverged;
 * ``peak_deflection_long/short`` [m], ``peak_force`` [N] (largest ``|F|`` of the
-  four actuators), ``peak_power`` [W] (largest ``|P|`` of the actuator pairs).
+  four actuators), ``peak_power`` [W] (largest ``|P|`` of the actuator pairs);
+* ``stick_slip_severity`` [1] ((max - min) / mean bit speed) and ``stick_fraction`` [1] (time
+  with the bit below :data:`cosim.scenario.summary.STICK_SPEED`) over the last
+  ``rms_fraction`` of the run (:func:`cosim.scenario.summary.stick_slip_metrics`; NaN when the
+  run diverged).
+
+The swept gain is the value of a scene key, ``gain_key``: the strain controller's ``gain``
+[N per unit strain] by default, or e.g. the top-drive controller's ``p_gain`` [N m s/rad]
+(:func:`default_gain_key`: the latter when the scene enables a top-drive controller and no
+strain controller). The point enables the controller of that table; its open-loop reference
+disables it.
 
 The recorded columns are named ``fmu.var`` (``plant.strain1_C``,
 ``controller.actuator1_force_C``, ...), as the master records them.
@@ -48,10 +58,12 @@ from typing import Any
 
 import numpy as np
 
-from drillcosim.cosim.scenario.scene_system import AXES, CONTROLLER, PLANT
+from drillcosim.cosim.scenario.scene_system import AXES, CONTROLLER, PLANT, scene_instances
 
-__all__ = ["ENGINES", "PointOptions", "error_row", "metrics", "point_scene", "measure_point",
-           "simulate_point"]
+from .grid import DEFAULT_GAIN_KEY, check_gain_key
+
+__all__ = ["ENGINES", "PointOptions", "default_gain_key", "error_row", "metrics", "point_scene",
+           "measure_point", "simulate_point"]
 
 SPANS = ("long", "short")
 #: Slave sets of the master: the FMUs, or the same models in process.
@@ -168,6 +180,14 @@ def metrics(data: np.ndarray, spans: Mapping[int, str], n_sites: int, opts: Poin
     out["peak_force"] = float(np.max(np.abs(np.vstack(forces)))) if forces and len(t) else 0.0
     out["peak_power"] = float(np.max(np.abs(np.vstack(powers)))) if powers and len(t) else 0.0
     t_rms = t[-1] - opts.rms_fraction * (t[-1] - t[0]) if len(t) else 0.0
+    out["stick_slip_severity"] = out["stick_fraction"] = math.nan
+    if f"{PLANT}.bit_rotary_speed" in names and len(t) and not diverged:
+        from drillcosim.cosim.scenario.summary import stick_slip_metrics
+
+        torsional = stick_slip_metrics(t, np.asarray(data[f"{PLANT}.bit_rotary_speed"], float),
+                                       t_rms)
+        out["stick_slip_severity"] = torsional["stick_slip_severity"]
+        out["stick_fraction"] = torsional["stick_fraction"]
     for span in SPANS:
         out[f"rms_{span}"] = math.nan
         out[f"peak_deflection_{span}"] = math.nan
@@ -183,20 +203,34 @@ def metrics(data: np.ndarray, spans: Mapping[int, str], n_sites: int, opts: Poin
     return out
 
 
-def point_scene(scene: str, gain: float, delay: float, step: float, stop_time: float,
-                open_loop: bool, overrides: Mapping[str, Any] | None):
-    """The scene of a point and its nested overrides (``(Scene, dict)``)."""
+def default_gain_key(scene: str, overrides: Mapping[str, Any] | None = None) -> str:
+    """The key a sweep of ``scene`` varies by default: ``top_drive_controller.p_gain`` when the
+    scene enables a top-drive controller and no strain controller, else ``controller.gain``."""
     from drillcosim.plant.scene import load_scene
 
+    instances = scene_instances(load_scene(scene, overrides=dict(overrides or {}) or None))
+    if "top_drive_controller" in instances and CONTROLLER not in instances:
+        return "top_drive_controller.p_gain"
+    return DEFAULT_GAIN_KEY
+
+
+def point_scene(scene: str, gain: float, delay: float, step: float, stop_time: float,
+                open_loop: bool, overrides: Mapping[str, Any] | None,
+                gain_key: str = DEFAULT_GAIN_KEY):
+    """The scene of a point and its nested overrides (``(Scene, dict)``): ``gain_key`` set to
+    ``gain`` and its controller enabled (disabled for the open-loop reference)."""
+    from drillcosim.plant.scene import load_scene
+
+    table, _dot, key = check_gain_key(gain_key).partition(".")
     over: dict[str, Any] = {k: dict(v) if isinstance(v, Mapping) else v
                             for k, v in (overrides or {}).items()}
     over.setdefault("cosim", {}).update({"step": step, "stop_time": stop_time,
                                          "actuator_delay": delay})
-    ctrl = over.setdefault("controller", {})
+    ctrl = over.setdefault(table, {})
     if open_loop:
         ctrl["enabled"] = False
     else:
-        ctrl.update({"enabled": True, "gain": gain})
+        ctrl.update({"enabled": True, key: gain})
     return load_scene(scene, overrides=over), over
 
 
@@ -264,7 +298,7 @@ def simulate_point(sc, over: Mapping[str, Any], opts: PointOptions, engine: str 
     # holds the overrides already) stand in for them
     in_process = engine == "python"
     plant_over = {} if in_process else {k: v for k, v in over.items()
-                                        if k not in ("cosim", "controller")}
+                                        if k not in ("cosim", "controller", "top_drive_controller")}
     ss = scene_system(sc, fmu_dir, plant_overrides=plant_over)
     slaves = None
     if in_process:
@@ -309,7 +343,7 @@ def error_row(exc: BaseException, wall_time: float = math.nan) -> dict[str, Any]
 def measure_point(scene: str, gain: float, delay: float, step: float, stop_time: float,
                   engine: str = "fmu", *, open_loop: bool = False,
                   overrides: Mapping[str, Any] | None = None, fmu_dir: str | None = None,
-                  **options: float) -> dict[str, Any]:
+                  gain_key: str = DEFAULT_GAIN_KEY, **options: float) -> dict[str, Any]:
     """Run one sweep point and measure it.
 
     Parameters
@@ -317,7 +351,8 @@ def measure_point(scene: str, gain: float, delay: float, step: float, stop_time:
     scene : str
         Scene name (``scenes/<name>.toml``) or path.
     gain : float
-        Controller gain [N per unit strain] (ignored for open loop).
+        Value of ``gain_key``: by default the strain controller's gain [N per unit strain]
+        (ignored for open loop).
     delay : float
         Actuator delay [s] (``[cosim] actuator_delay``).
     step : float
@@ -331,6 +366,8 @@ def measure_point(scene: str, gain: float, delay: float, step: float, stop_time:
         Extra nested scene overrides (e.g. ``{"cosim": {"algorithm": "jacobi"}}``).
     fmu_dir : str, optional
         FMU folder for the ``fmu`` engine (default ``build/fmus``).
+    gain_key : str
+        The scene key ``gain`` sets (default ``controller.gain``).
     **options
         :class:`PointOptions` fields.
 
@@ -354,7 +391,7 @@ def measure_point(scene: str, gain: float, delay: float, step: float, stop_time:
     opts = PointOptions.from_kwargs(options)
     if engine not in ENGINES:
         raise ValueError(f"engine = {engine!r}: 'fmu' or 'python'")
-    sc, over = point_scene(scene, gain, delay, step, stop_time, open_loop, overrides)
+    sc, over = point_scene(scene, gain, delay, step, stop_time, open_loop, overrides, gain_key)
     data, reason = simulate_point(sc, over, opts, engine, fmu_dir)
     t = data["time"]
     end = float(t[-1]) if len(t) else 0.0
@@ -364,7 +401,9 @@ def measure_point(scene: str, gain: float, delay: float, step: float, stop_time:
                            "divergence_time": end if diverged else math.nan,
                            "end_time": end, "reason": reason}
     row.update(metrics(data, spans, len(sc.plant.actuator_joints), opts, diverged))
-    row["min_stop_time"] = math.nan if open_loop else _min_stop_time(scene, overrides, opts)
+    strain_loop = gain_key.startswith(f"{CONTROLLER}.")
+    row["min_stop_time"] = (math.nan if open_loop or not strain_loop
+                            else _min_stop_time(scene, overrides, opts))
     row["wall_time"] = time.perf_counter() - wall0
     return row
 

@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from .grid import Point, SweepSpec, parse_list
+from .grid import DEFAULT_GAIN_KEY, Point, SweepSpec, parse_list
 from .point import error_row, measure_point
 from .table import ResultTable, verdict_counts
 
@@ -83,9 +83,7 @@ def point_row(point: Point, measure: Measure = measure_point) -> dict[str, Any]:
     workers.
     """
     wall0 = time.perf_counter()
-    base = {"key": point.key, "scene": point.scene, "engine": point.engine,
-            "kind": point.kind, "gain": point.gain, "delay": point.delay,
-            "step": point.step, "stop_time": point.stop_time}
+    base = _identity(point)
     try:
         row = dict(measure(**point.kwargs()))
     except Exception as exc:  # one bad point never stops the sweep
@@ -94,11 +92,16 @@ def point_row(point: Point, measure: Measure = measure_point) -> dict[str, Any]:
     return row
 
 
+def _identity(point: Point) -> dict[str, Any]:
+    """The columns that name a point."""
+    return {"key": point.key, "scene": point.scene, "engine": point.engine,
+            "kind": point.kind, "gain": point.gain, "delay": point.delay,
+            "step": point.step, "stop_time": point.stop_time}
+
+
 def _lost_row(point: Point, reason: str) -> dict[str, Any]:
     row = {"status": "error", "reason": reason}
-    row.update({"key": point.key, "scene": point.scene, "engine": point.engine,
-                "kind": point.kind, "gain": point.gain, "delay": point.delay,
-                "step": point.step, "stop_time": point.stop_time})
+    row.update(_identity(point))
     return row
 
 
@@ -158,6 +161,22 @@ def _inline(points: list[Point], measure: Measure) -> Iterator[dict[str, Any]]:
         yield point_row(p, measure)
 
 
+def _build_fmus(points: list[Point]) -> None:
+    """Build the project FMUs the points run (default folder), one of each kind of point."""
+    from drillcosim.cosim.scenario.scene_fmus import ensure_recipes
+    from drillcosim.cosim.scenario.scene_system import scene_recipes
+
+    from .point import point_scene
+
+    recipes = {}
+    for p in {p.kind: p for p in points}.values():
+        kw = p.kwargs()
+        sc, _over = point_scene(p.scene, p.gain, p.delay, p.step, p.stop_time, kw["open_loop"],
+                                kw["overrides"], p.gain_key)
+        recipes.update({r.name: r for r in scene_recipes(sc).values()})
+    ensure_recipes(list(recipes.values()))
+
+
 def execute_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int | None = None,
                   scheduler: Any = None, progress: bool | None = None,
                   measure: Measure = measure_point, retry_errors: bool = False) -> SweepOutcome:
@@ -197,6 +216,8 @@ def execute_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int |
                      for k, v in asdict(spec).items()}, "n_points": len(points)}
     (Path(out_dir) / "sweep.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
     n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
+    if todo and spec.engine == "fmu" and scheduler is None:
+        _build_fmus(todo)  # once here, not by every worker at the same time
     if scheduler is not None:
         rows = _dask(todo, measure, scheduler)
     elif n_workers == 0 or not todo:
@@ -220,11 +241,17 @@ def execute_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int |
 
 def sweep_from_args(scene: str, gain: str, delay: str, step: str, stop_time: float | None,
                     engine: str = "fmu", sets: Mapping[str, Any] | None = None,
-                    options: Mapping[str, float] | None = None) -> SweepSpec:
+                    options: Mapping[str, float] | None = None,
+                    gain_key: str | None = None) -> SweepSpec:
     """Build a :class:`SweepSpec` from command-line strings (LIST syntax, see
-    :mod:`cosim.study.grid`); the stop time defaults to the scene's ``[cosim]``."""
+    :mod:`cosim.study.grid`); the stop time defaults to the scene's ``[cosim]``, the gain key
+    to :func:`cosim.study.point.default_gain_key`. A sweep of the strain gain runs the open-loop
+    references (the control benefit); a sweep of another controller's gain has none (a
+    top-drive controller in torque mode is the drive: without it the string is not driven)."""
     from drillcosim.cosim.scenario.scene_system import cosim_settings
     from drillcosim.plant.scene import load_scene
+
+    from .point import default_gain_key
 
     gains = parse_list(gain, "--gain", minimum=0.0)
     delays = parse_list(delay, "--delay", minimum=0.0)
@@ -232,8 +259,9 @@ def sweep_from_args(scene: str, gain: str, delay: str, step: str, stop_time: flo
     if stop_time is None:
         stop_time = cosim_settings(load_scene(scene, overrides=dict(sets or {}) or None)
                                    ).stop_time
+    key = default_gain_key(scene, sets) if gain_key is None else gain_key
     spec = SweepSpec(scene, gains, delays, steps, float(stop_time), engine,
-                     dict(sets or {}), True, dict(options or {}))
+                     dict(sets or {}), key == DEFAULT_GAIN_KEY, dict(options or {}), key)
     spec.points()                   # bad combinations fail here, before anything runs
     return spec
 
@@ -251,6 +279,10 @@ def judging_note(spec: SweepSpec) -> str:
     from .point import PointOptions
     from .verdict import scene_judging_window
 
+    if spec.gain_key != DEFAULT_GAIN_KEY:
+        return (f"the verdicts judge the strain loop's growth; a sweep of {spec.gain_key} is "
+                "read from its stick_slip_severity / stick_fraction columns (--maps: "
+                "stick_slip_map.png); its points are 'undecided'")
     opts = PointOptions.from_kwargs(dict(spec.options))
     try:
         window = scene_judging_window(spec.scene, spec.overrides, opts.highpass,

@@ -39,14 +39,14 @@ from .verdict import VERDICTS, judge
 
 __all__ = ["COLUMNS", "DERIVED", "ResultTable", "derive", "read_table", "verdict_counts"]
 
-#: Column order of the table (units: gain N/strain, times s, deflections m, force N, power W,
-#: growth rates 1/s).
+#: Column order of the table (units: gain that of the sweep's gain key (N/strain for the strain
+#: gain), times s, deflections m, force N, power W, growth rates 1/s, stick-slip measures 1).
 COLUMNS: tuple[str, ...] = (
     "key", "scene", "engine", "kind", "gain", "delay", "step", "stop_time", "status",
     "verdict", "stable", "growth_rate", "growth_noise", "growth_excess", "divergence_time",
     "end_time", "min_stop_time", "rms_long", "rms_short", "benefit_long", "benefit_short",
-    "peak_deflection_long", "peak_deflection_short", "peak_force", "peak_power", "wall_time",
-    "reason",
+    "peak_deflection_long", "peak_deflection_short", "peak_force", "peak_power",
+    "stick_slip_severity", "stick_fraction", "wall_time", "reason",
 )
 #: Columns computed from the rows by :func:`derive` (``reason`` too, for completed runs).
 DERIVED: tuple[str, ...] = ("verdict", "stable", "growth_excess", "benefit_long",

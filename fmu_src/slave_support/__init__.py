@@ -33,7 +33,7 @@ import numpy as np
 from _dcs_pythonfmu_0_7_0 import Boolean, Fmi2Slave, Integer, Real, String
 from _dcs_pythonfmu_0_7_0.enums import Fmi2Causality, Fmi2Status
 
-__all__ = ["DcsSlave"]
+__all__ = ["DcsSlave", "LawSlave"]
 
 #: (variable class, conversion of a value, neutral value of a rejected get)
 _KINDS: dict[str, tuple[type, Callable[[Any], Any], Any]] = {
@@ -162,3 +162,121 @@ class DcsSlave(Fmi2Slave):
             return out if isinstance(out, dict) else {"__invalid_state__": repr(out)[:80]}
         except Exception as exc:  # noqa: BLE001 - bad bytes are the importer's error: fmi2Error
             return {"__invalid_state__": repr(exc)}
+
+
+class LawSlave(DcsSlave):
+    """A controller FMU: a law object stepped once per doStep, parameters checked at
+    initialization and, when tunable ones change, before the next step.
+
+    Subclasses set ``TUNABLE`` / ``FIXED`` (parameter names: attributes of the instance, or
+    entries of ``self.param_values`` for parameters registered with getter and setter on it)
+    and implement :meth:`_params_from_variables` (validated parameters from the
+    variables; ValueError naming the bad one), :meth:`_make_law` (a law of those parameters:
+    it has ``params`` (settable, keeps the state), ``get_state()`` / ``set_state(array)``) and
+    :meth:`_step_law` (one step: read ``self.inputs``, write ``self.outputs``; ValueError for bad
+    inputs). The rules (the status protocol of :class:`DcsSlave`):
+
+    * invalid parameters at ``fmi2ExitInitializationMode``: fmi2Error naming them, every doStep
+      refused until a reset or a new instance;
+    * a fixed parameter changed after initialization, an invalid tunable one, a bad input:
+      fmi2Error from that doStep, state unchanged;
+    * FMU state: the registered variables plus the law's state and the initialization flags.
+    """
+
+    TUNABLE: ClassVar[tuple[str, ...]] = ()
+    FIXED: ClassVar[tuple[str, ...]] = ()
+    _STATE_KEY = "__dcs_controller_state__"
+    _INIT_KEY = "__dcs_initialized__"
+    _INIT_ERROR_KEY = "__dcs_init_error__"
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self._initialized = False
+        self._init_error: str | None = None  # invalid parameters at initialization
+        self._fixed_values: tuple[Any, ...] = ()
+        self._tunable_values: tuple[Any, ...] | None = None
+        #: values of parameters that are not attributes (e.g. generated names), by name
+        self.param_values: dict[str, Any] = {}
+
+    # ------------------------------------------------------------ for subclasses
+    def _params_from_variables(self) -> Any:  # pragma: no cover - each adapter has its own
+        raise NotImplementedError
+
+    def _make_law(self, params: Any) -> Any:  # pragma: no cover
+        raise NotImplementedError
+
+    def _step_law(self, t: float, h: float) -> None:  # pragma: no cover
+        raise NotImplementedError
+
+    def _value(self, name: str) -> Any:
+        """The current value of parameter ``name`` (an entry of ``param_values``, else the
+        attribute)."""
+        values = self.param_values
+        return values[name] if name in values else getattr(self, name)
+
+    def _snapshot(self, names: tuple[str, ...]) -> tuple[Any, ...]:
+        return tuple(self._value(n) for n in names)
+
+    # ---------------------------------------------------------------- FMI calls
+    def exit_initialization_mode(self) -> None:
+        try:
+            params = self._params_from_variables()
+        except ValueError as exc:
+            self._init_error = f"invalid parameter: {exc}"
+            self._initialized = False
+            self._error(f"fmi2ExitInitializationMode: {self._init_error}; every doStep "
+                        f"will be rejected (reset or re-instantiate with valid parameters)")
+            return
+        self._init_error = None
+        self._law = self._make_law(params)
+        self._fixed_values = self._snapshot(self.FIXED)
+        self._tunable_values = self._snapshot(self.TUNABLE)
+        self._initialized = True
+
+    def do_step(self, current_time: float, step_size: float) -> None:
+        if self._init_error is not None:
+            return self._error(f"step rejected: {self._init_error}")
+        if not self._initialized:
+            return self._error("doStep called before initialization "
+                               "(fmi2ExitInitializationMode); step rejected")
+        if self._snapshot(self.FIXED) != self._fixed_values:
+            return self._error(f"fixed parameters {self.FIXED} changed after initialization; "
+                               f"step rejected")
+        tunable = self._snapshot(self.TUNABLE)
+        if tunable != self._tunable_values:
+            try:
+                self._law.params = self._params_from_variables()  # keeps the law's state
+            except ValueError as exc:
+                return self._error(f"invalid parameter: {exc}; step rejected")
+            self._tunable_values = tunable
+        try:
+            self._step_law(current_time, step_size)
+        except ValueError as exc:
+            return self._error(f"at t = {current_time!r}: {exc}; step rejected")
+        return None
+
+    # ------------------------------------------------------------- FMU state
+    def _get_fmu_state(self) -> dict[str, Any]:
+        state = super()._get_fmu_state()
+        state[self._STATE_KEY] = self._law.get_state().tolist()
+        state[self._INIT_KEY] = self._initialized
+        state[self._INIT_ERROR_KEY] = self._init_error
+        return state
+
+    def _set_fmu_state(self, state: dict[str, Any]) -> None:
+        try:
+            state = dict(state)  # the importer may set the same state again: do not mutate it
+            law_state = np.array(state.pop(self._STATE_KEY), dtype=float)
+            initialized = state.pop(self._INIT_KEY)
+            init_error = state.pop(self._INIT_ERROR_KEY)
+            super()._set_fmu_state(state)
+            self._law.set_state(law_state)
+        except Exception as exc:  # noqa: BLE001 - a foreign state is the importer's error
+            return self._error(f"fmi2SetFMUstate: not a state of this FMU ({exc!r})")
+        self._init_error = init_error
+        self._initialized = bool(initialized)
+        # the parameters came back with the registered variables: take the fixed ones
+        # as the reference and make the next doStep re-validate and apply all of them
+        self._fixed_values = self._snapshot(self.FIXED)
+        self._tunable_values = None
+        return None

@@ -1,0 +1,197 @@
+"""Top-drive speed controller on top-torque feedback (soft-torque style).
+
+The top drive in mode ``"torque"`` (``docs/physics.md`` section 1) is a rotor of inertia
+J_td [kg m^2] driven by the motor torque T_m [N m] and braked by the string's top torque
+T_s [N m]: ``J_td dOmega/dt = T_m - T_s``. This controller sets T_m from the measured drive
+speed Omega [rad/s] and top torque T_s:
+
+    e(t)  = Omega_ref(t) - Omega(t),      Omega_ref(t) = target_speed * min(t / ramp_time, 1)
+    x(t)  = integral_0^t e dt              [rad]
+    T_m   = P e + I x + k_T T_s
+
+a PI speed controller (P [N m s/rad], I [N m/rad]) with an optional top-torque feedback
+gain k_T [1].
+
+Why it damps stick-slip (Jansen & van den Steen 1995, "Active damping of self-excited
+torsional vibrations in oil well drillstrings", J. Sound Vib. 179(4): the top drive tuned to
+absorb the torsional waves coming up the string instead of reflecting them). Linearised about a
+steady speed, the drive offers the string the impedance
+
+    Z_d(i w) = -T_s / Omega = (i w J_td + P + I / (i w)) / (1 - k_T)      [N m s/rad]
+
+(k_T < 1). A stiff speed controller (large P, I) is a fixed end: a wave arriving at the top is
+reflected whole, and the string's lowest torsional mode, driven by the bit's falling friction,
+grows into stick-slip. Tuned with I = J_td w_s^2 (inertia and integral cancel at the
+stick-slip frequency w_s) the drive is a pure damper P / (1 - k_T) there; with that damping
+near the string's characteristic impedance zeta = J sqrt(G rho) (J the polar second moment of
+area) the reflection coefficient (zeta - Z_d) / (zeta + Z_d) is small and the energy the bit
+feeds into the mode leaves through the drive. The steady state (constant bit torque T_b, when
+the steady rotation is stable) is Omega = target_speed, T_m = T_s = T_b and
+x = (1 - k_T) T_b / I.
+
+Time discretisation
+-------------------
+``step(t, dt, speed, torque)`` holds the measured speed and torque over ``[t, t + dt]`` (as the
+co-simulation delivers them), integrates the held error exactly, ``x(t + dt) = x(t) + dt e(t)``,
+and returns the motor torque at ``t + dt``: ``P e(t) + I x(t + dt) + k_T T_s(t)``. The state is
+``(x, T_m)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .params import _check_real
+
+__all__ = ["TopDriveController", "TopDriveControllerParams"]
+
+
+@dataclass(frozen=True)
+class TopDriveControllerParams:
+    """Parameters of the top-drive speed controller (see the module docstring).
+
+    Parameters
+    ----------
+    target_speed : float
+        Target rotary speed of the drive [rad/s], ``|target_speed| <= 1e3``.
+    p_gain : float
+        Proportional gain P [N m s/rad], ``0 <= P < inf``.
+    i_gain : float
+        Integral gain I [N m/rad], ``0 <= I < inf``.
+    torque_feedback : float
+        Top-torque feedback gain k_T [1], ``-10 <= k_T < 1`` (0: a plain PI speed controller;
+        the drive's impedance is scaled by ``1 / (1 - k_T)``).
+    ramp_time : float
+        The speed reference ramps from 0 to ``target_speed`` over this time [s], ``>= 0``.
+    enabled : bool
+        ``False``: zero motor torque at all times.
+
+    Raises
+    ------
+    ValueError
+        For any invalid value; the message names the parameter and the allowed range.
+    """
+
+    target_speed: float = 2.0
+    p_gain: float = 300.0
+    i_gain: float = 1000.0
+    torque_feedback: float = 0.0
+    ramp_time: float = 1.0
+    enabled: bool = True
+
+    def __post_init__(self) -> None:
+        inf = math.inf
+        checked = {
+            "target_speed": _check_real("target_speed", self.target_speed, -1e3, 1e3),
+            "p_gain": _check_real("p_gain", self.p_gain, 0.0, inf, high_open=True),
+            "i_gain": _check_real("i_gain", self.i_gain, 0.0, inf, high_open=True),
+            "torque_feedback": _check_real("torque_feedback", self.torque_feedback, -10.0, 1.0,
+                                           high_open=True),
+            "ramp_time": _check_real("ramp_time", self.ramp_time, 0.0, inf, high_open=True),
+        }
+        if not isinstance(self.enabled, (bool, np.bool_)):
+            raise ValueError(f"enabled = {self.enabled!r} is not allowed; allowed: True or False")
+        checked["enabled"] = bool(self.enabled)
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
+
+    def reference(self, t: float) -> float:
+        """Speed reference Omega_ref(t) [rad/s]: the ramp to ``target_speed``."""
+        if self.ramp_time == 0.0 or t >= self.ramp_time:
+            return self.target_speed
+        return self.target_speed * max(t, 0.0) / self.ramp_time
+
+
+class TopDriveController:
+    """The sampled PI speed controller with top-torque feedback.
+
+    Parameters
+    ----------
+    params : TopDriveControllerParams, optional
+        Defaults to ``TopDriveControllerParams()``.
+
+    Notes
+    -----
+    The state is ``[x, T_m]``: the integral of the speed error [rad] and the motor torque of
+    the last step [N m] (:meth:`get_state` / :meth:`set_state`). A call that fails validation
+    raises ``ValueError`` and leaves the state unchanged.
+    """
+
+    def __init__(self, params: TopDriveControllerParams | None = None) -> None:
+        self._params = TopDriveControllerParams()
+        self.params = TopDriveControllerParams() if params is None else params
+        self._state = np.zeros(2)
+
+    @property
+    def params(self) -> TopDriveControllerParams:
+        """TopDriveControllerParams: current parameters; assigning keeps the state."""
+        return self._params
+
+    @params.setter
+    def params(self, params: TopDriveControllerParams) -> None:
+        if not isinstance(params, TopDriveControllerParams):
+            raise TypeError(f"params must be a TopDriveControllerParams, got "
+                            f"{type(params).__name__}")
+        self._params = params
+
+    def reset(self) -> None:
+        """Integral and motor torque back to zero."""
+        self._state[:] = 0.0
+
+    def get_state(self) -> np.ndarray:
+        """numpy.ndarray, shape (2,): a copy of ``[x [rad], T_m [N m]]``."""
+        return self._state.copy()
+
+    def set_state(self, state: np.ndarray) -> None:
+        """Restore a state of :meth:`get_state` (shape (2,), finite; else ValueError)."""
+        arr = np.asarray(state, dtype=float)
+        if arr.shape != (2,) or not np.all(np.isfinite(arr)):
+            raise ValueError(f"state must be 2 finite numbers [x, T_m], got {arr.tolist()}")
+        self._state[:] = arr
+
+    @property
+    def torque(self) -> float:
+        """Motor torque of the last step [N m]."""
+        return float(self._state[1])
+
+    def step(self, t: float, dt: float, speed: float, torque: float) -> float:
+        """Advance over ``[t, t + dt]`` with the measurements held; the motor torque at ``t + dt``.
+
+        Parameters
+        ----------
+        t : float
+            Start of the step [s] (when speed and torque were sampled).
+        dt : float
+            Step [s], finite, ``>= 0``.
+        speed : float
+            Drive speed Omega [rad/s], finite.
+        torque : float
+            Top torque T_s [N m], finite.
+
+        Returns
+        -------
+        float
+            Motor torque T_m [N m] at ``t + dt`` (0 when disabled).
+
+        Raises
+        ------
+        ValueError
+            Non-finite time, step, speed or torque, or ``dt < 0`` (state unchanged).
+        """
+        if not (math.isfinite(t) and math.isfinite(dt) and dt >= 0.0):
+            raise ValueError(f"need finite t and finite dt >= 0, got t = {t!r}, dt = {dt!r}")
+        if not (math.isfinite(speed) and math.isfinite(torque)):
+            raise ValueError(f"non-finite input: top_rotary_speed = {speed!r} rad/s, "
+                             f"top_torque = {torque!r} N m")
+        p = self._params
+        if not p.enabled:
+            self._state[1] = 0.0
+            return 0.0
+        error = p.reference(t) - speed
+        x = self._state[0] + dt * error
+        motor = p.p_gain * error + p.i_gain * x + p.torque_feedback * torque
+        self._state[:] = (x, motor)
+        return float(motor)
