@@ -49,6 +49,7 @@ from scipy import stats
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from drillcosim.cosim.study.ensemble import lateral_indices  # noqa: E402
 from drillcosim.plant.model import DrillstringModel  # noqa: E402
 from drillcosim.plant.scene import load_scene  # noqa: E402
 from drillcosim.plant.simulator import PlantSimulator  # noqa: E402
@@ -105,25 +106,12 @@ def internal_step(max_step: float) -> float:
 
 
 def perturbation(model: DrillstringModel, eps: float, seed: int, member: int) -> np.ndarray:
-    """Seeded Gaussian perturbation (std ``eps`` [m]) of the lateral positions X, Y of all bodies.
-
-    Parameters
-    ----------
-    model : DrillstringModel
-        Full 3D model; the X, Y entries are located by name.
-    eps : float
-        Standard deviation [m].
-    seed, member : int
-        The stream is ``default_rng([seed, member])``, so a member is reproducible on its own.
-
-    Returns
-    -------
-    numpy.ndarray, shape (model.n_state,)
-    """
+    """Seeded Gaussian perturbation (std ``eps`` [m]) of the lateral positions X, Y of all bodies
+    (stream ``default_rng([seed, member])``; :func:`cosim.study.ensemble.lateral_perturbation`,
+    which leaves member 0 unperturbed, so member 0 here is drawn with the same stream)."""
     if model.kind != "full3d":
         raise ValueError(f"the ensemble needs the full 3D model, got {model.kind!r}")
-    names = PlantSimulator(model)._state_names()
-    lat = np.array([i for i, s in enumerate(names) if s.endswith((".X", ".Y"))])
+    lat = lateral_indices(model)
     dy = np.zeros(model.n_state)
     dy[lat] = eps * np.random.default_rng([seed, member]).standard_normal(lat.size)
     return dy

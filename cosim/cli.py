@@ -3,7 +3,8 @@
 Sub-commands: ``modes`` (modal analysis next to the analytic values and the paper's Table 1),
 ``scenes`` (list the shipped scenes), ``build`` (write the FMUs), ``run`` (co-simulate a scene
 or an SSP file: results.csv, summary.json, plots), ``ssp`` (write a scene's system as an SSP
-file), ``sweep`` (gain x delay x step stability/benefit table).
+file), ``sweep`` (gain x delay x step stability/benefit table), ``calibrate`` (the paper's
+open quantities calibrated against its figures, and its experiments).
 Bad input ends with a one-line message on stderr and exit
 code 2, never a traceback (a plant/controller pair that does not fit: one line per problem);
 a run that diverges ends with a one-line report and exit code 1. Warnings of the project
@@ -200,6 +201,15 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from drillcosim.cosim.study.calibration_report import calibrate
+
+    print(calibrate(args.stage, args.out, members=args.members, workers=args.workers,
+                    scheduler=args.scheduler, progress=False if args.no_progress else None,
+                    figures=args.figures), end="")
+    return 0
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     import importlib.util
     from pathlib import Path
@@ -313,6 +323,25 @@ def _parser() -> argparse.ArgumentParser:
                    help="maps without the linear prediction overlay")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_sweep)
+    p = sub.add_parser("calibrate", help="calibrate the paper's open quantities against its "
+                       "Figs. 9-11, run its experiments (docs/paper_comparison.md)")
+    p.add_argument("stage", choices=("coarse", "refine", "confirm", "all", "experiments",
+                                     "report"),
+                   help="coarse grid, one-at-a-time refinement, confirmation ensembles (all: "
+                        "the three), the paper's experiments, or the report (tables + PNGs)")
+    p.add_argument("--out", default="out/calibration", metavar="DIR",
+                   help="study folder, one resumable table per stage (default out/calibration)")
+    p.add_argument("--members", type=int, metavar="K",
+                   help="ensemble members per set (default: coarse 2, refine 4, confirm 12, "
+                        "experiments 6)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="local worker processes (default: all cores; 0: in this process)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="submit to this dask.distributed scheduler instead")
+    p.add_argument("--figures", metavar="DIR",
+                   help="report: folder of the PNGs and CSVs (default OUT/report)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_calibrate)
     return ap
 
 

@@ -24,7 +24,7 @@ modelled: the analysis is for forces inside the limits). Characteristic equation
 
 The growth rate of the loop is the largest real part of the roots [1/s]; the critical gain and
 the critical delay are where it crosses 0. ``python -m drillcosim.cosim.study.continuous`` prints
-the numbers of ``docs/continuous_reference.md``.
+the numbers of ``docs/delay_study.md`` (section 5).
 """
 
 from __future__ import annotations
@@ -377,7 +377,7 @@ def envelope_growth_rate(t: np.ndarray, signal: np.ndarray, band: tuple[float, f
 
 
 def _report(scene: str = "paper_closed_loop") -> list[str]:
-    """The numbers of ``docs/continuous_reference.md``."""
+    """The numbers of ``docs/delay_study.md`` (section 5)."""
     from .stability import LoopModel
 
     lm = LoopModel.from_scene(scene)

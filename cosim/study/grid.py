@@ -163,6 +163,12 @@ class Point:
         return point_key(self.scene, self.engine, self.kind, self.gain, self.delay, self.step,
                          self.stop_time, extra)
 
+    def identity(self) -> dict[str, Any]:
+        """The identity columns of the point's table row."""
+        return {"key": self.key, "scene": self.scene, "engine": self.engine,
+                "kind": self.kind, "gain": self.gain, "delay": self.delay,
+                "step": self.step, "stop_time": self.stop_time}
+
     def kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :func:`cosim.study.point.measure_point`."""
         return {"scene": self.scene, "gain": self.gain, "delay": self.delay, "step": self.step,

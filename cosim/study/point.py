@@ -259,7 +259,8 @@ class _ForceCap:
 
 
 def simulate_point(sc, over: Mapping[str, Any], opts: PointOptions, engine: str = "fmu",
-                   fmu_dir: str | None = None) -> tuple[np.ndarray, str]:
+                   fmu_dir: str | None = None, initial_offset: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, str]:
     """Run a loaded scene through the master and record it.
 
     Parameters
@@ -273,6 +274,10 @@ def simulate_point(sc, over: Mapping[str, Any], opts: PointOptions, engine: str 
         FMU slaves, or the in-process ones.
     fmu_dir : str, optional
         FMU folder (``fmu`` engine; default ``build/fmus``).
+    initial_offset : numpy.ndarray, shape (n_state,), optional
+        Added to the plant's initial state (``python`` engine only: an FMU's state is not
+        an input), e.g. the perturbation of an ensemble member
+        (:func:`cosim.study.ensemble.lateral_perturbation`).
 
     Returns
     -------
@@ -294,6 +299,9 @@ def simulate_point(sc, over: Mapping[str, Any], opts: PointOptions, engine: str 
 
     if engine not in ENGINES:
         raise ValueError(f"engine = {engine!r}: 'fmu' or 'python'")
+    if initial_offset is not None and engine != "python":
+        raise ValueError("initial_offset: a perturbed initial state needs engine 'python' "
+                         "(the in-process plant)")
     # the FMU files describe the system; in process, slaves built from the scene object (which
     # holds the overrides already) stand in for them
     in_process = engine == "python"
@@ -305,6 +313,13 @@ def simulate_point(sc, over: Mapping[str, Any], opts: PointOptions, engine: str 
         from drillcosim.cosim.scenario.inprocess import inprocess_slaves
 
         slaves = inprocess_slaves(ss)
+        if initial_offset is not None:
+            sim = slaves[PLANT].sim
+            offset = np.asarray(initial_offset, dtype=float)
+            if offset.shape != sim.y.shape:
+                raise ValueError(f"initial_offset: shape {offset.shape}, the plant's state has "
+                                 f"{sim.y.shape}")
+            sim.y = sim.y + offset
     recorder = Recorder(ss.outputs, ss.settings.output_ticks)
     forces = [o for o in ss.outputs if o.startswith(f"{CONTROLLER}.actuator")]
     reason = ""

@@ -21,21 +21,38 @@ from __future__ import annotations
 import json
 import os
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from .grid import DEFAULT_GAIN_KEY, Point, SweepSpec, parse_list
 from .point import error_row, measure_point
 from .table import ResultTable, verdict_counts
 
-__all__ = ["SweepOutcome", "SweepSpec", "execute_sweep", "judging_note", "parse_list", "point_row"]
+__all__ = ["StudyPoint", "SweepOutcome", "SweepSpec", "execute_points", "execute_sweep",
+           "judging_note", "parse_list", "point_row"]
 
 #: A point measurement: ``measure(**point.kwargs()) -> dict`` (module-level, picklable).
 Measure = Callable[..., dict]
+
+
+class StudyPoint(Protocol):
+    """What the executors need of a point (:class:`cosim.study.grid.Point` is one).
+
+    A point is frozen and picklable; ``key`` identifies it in its results table (a resumed
+    study skips known keys), ``kwargs()`` are the measurement's arguments and ``identity()``
+    the row's identity columns (``key`` included), written whatever the measurement returns.
+    """
+
+    @property
+    def key(self) -> str: ...
+
+    def kwargs(self) -> dict[str, Any]: ...
+
+    def identity(self) -> dict[str, Any]: ...
 
 
 @dataclass(frozen=True)
@@ -76,42 +93,34 @@ class SweepOutcome:
                 f"{self.folder / 'results.csv'} and results.parquet")
 
 
-def point_row(point: Point, measure: Measure = measure_point) -> dict[str, Any]:
+def point_row(point: StudyPoint, measure: Measure = measure_point) -> dict[str, Any]:
     """Run a point and return its full table row; exceptions become an ``error`` row.
 
     Module-level and free of closures, so it pickles to process-pool and dask
-    workers.
+    workers. ``point`` is a :class:`cosim.study.grid.Point` or any :class:`StudyPoint`.
     """
     wall0 = time.perf_counter()
-    base = _identity(point)
     try:
         row = dict(measure(**point.kwargs()))
     except Exception as exc:  # one bad point never stops the sweep
         row = error_row(exc, time.perf_counter() - wall0)
-    row.update(base)
+    row.update(point.identity())
     return row
 
 
-def _identity(point: Point) -> dict[str, Any]:
-    """The columns that name a point."""
-    return {"key": point.key, "scene": point.scene, "engine": point.engine,
-            "kind": point.kind, "gain": point.gain, "delay": point.delay,
-            "step": point.step, "stop_time": point.stop_time}
-
-
-def _lost_row(point: Point, reason: str) -> dict[str, Any]:
+def _lost_row(point: StudyPoint, reason: str) -> dict[str, Any]:
     row = {"status": "error", "reason": reason}
-    row.update(_identity(point))
+    row.update(point.identity())
     return row
 
 
-def _local(points: list[Point], measure: Measure, workers: int
+def _local(points: Sequence[StudyPoint], measure: Measure, workers: int
            ) -> Iterator[dict[str, Any]]:
     """Process pool; a dead worker breaks the pool: restart it, retry each point once."""
     import multiprocessing
 
     attempts: dict[str, int] = {}
-    todo = list(points)
+    todo: list[StudyPoint] = list(points)
     while todo:
         pool = ProcessPoolExecutor(max_workers=min(workers, len(todo)),
                                    mp_context=multiprocessing.get_context("spawn"))
@@ -138,7 +147,7 @@ def _local(points: list[Point], measure: Measure, workers: int
             pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _dask(points: list[Point], measure: Measure, scheduler: Any
+def _dask(points: Sequence[StudyPoint], measure: Measure, scheduler: Any
           ) -> Iterator[dict[str, Any]]:
     from distributed import Client, as_completed
 
@@ -156,13 +165,72 @@ def _dask(points: list[Point], measure: Measure, scheduler: Any
             client.close()
 
 
-def _inline(points: list[Point], measure: Measure) -> Iterator[dict[str, Any]]:
+def _inline(points: Sequence[StudyPoint], measure: Measure) -> Iterator[dict[str, Any]]:
     for p in points:
         yield point_row(p, measure)
 
 
-def _build_fmus(points: list[Point]) -> None:
-    """Build the project FMUs the points run (default folder), one of each kind of point."""
+def execute_points(points: Sequence[StudyPoint], table: ResultTable, measure: Measure, *,
+                   workers: int | None = None, scheduler: Any = None,
+                   progress: bool | None = None, retry_errors: bool = False, desc: str = "sweep",
+                   meta: Mapping[str, Any] | None = None) -> int:
+    """Run the points not yet in ``table`` and append each row as it finishes.
+
+    Holds the table folder's lock (:meth:`ResultTable.lock`) while running; the table is
+    re-read and repaired under it first, so a killed study resumes where it stopped.
+
+    Parameters
+    ----------
+    points : sequence of StudyPoint
+    table : ResultTable
+        Any :class:`ResultTable` (sub)class; the rows' derived columns are its own.
+    measure : callable
+        The points' measurement (module-level, picklable): ``measure(**point.kwargs())``.
+    workers, scheduler, progress, retry_errors
+        As for :func:`execute_sweep`.
+    desc : str
+        Progress bar label.
+    meta : mapping, optional
+        ``{file name: JSON-ready content}`` written into the table's folder once the lock
+        is held (the study's description, e.g. ``sweep.json``).
+
+    Returns
+    -------
+    int
+        Points run (the others were in the table already).
+    """
+    from tqdm import tqdm
+
+    lock = table.lock()
+    try:
+        for name, content in (meta or {}).items():
+            (table.folder / name).write_text(json.dumps(content, indent=2, default=str) + "\n")
+        table.rows = table.load(repair=True)     # re-read and repaired under the lock
+        done = table.keys(include_errors=not retry_errors)
+        todo = [p for p in points if p.key not in done]
+        n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
+        if scheduler is not None:
+            rows = _dask(todo, measure, scheduler)
+        elif n_workers == 0 or not todo:
+            rows = _inline(todo, measure)
+        else:
+            rows = _local(todo, measure, n_workers)
+        bar = tqdm(total=len(points), initial=len(points) - len(todo), unit="point",
+                   desc=desc, disable=None if progress is None else not progress)
+        try:
+            for row in rows:
+                table.append(row)
+                bar.update(1)
+        finally:
+            bar.close()
+    finally:
+        lock.close()
+    return len(todo)
+
+
+def _build_fmus(points: Sequence[Point]) -> None:
+    """Build (or find cached) the project FMUs the points run (default folder), one point of
+    each kind, so workers do not all build them at the same time."""
     from drillcosim.cosim.scenario.scene_fmus import ensure_recipes
     from drillcosim.cosim.scenario.scene_system import scene_recipes
 
@@ -203,39 +271,19 @@ def execute_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int |
     -------
     SweepOutcome
     """
-    from tqdm import tqdm
-
     wall0 = time.perf_counter()
     points = spec.points()
     table = ResultTable(out_dir)
-    lock = table.lock()
-    table.rows = table.load(repair=True)     # re-read and repaired under the lock
-    done = table.keys(include_errors=not retry_errors)
-    todo = [p for p in points if p.key not in done]
     meta = {"spec": {k: (list(v) if isinstance(v, (list, tuple)) else v)
                      for k, v in asdict(spec).items()}, "n_points": len(points)}
-    (Path(out_dir) / "sweep.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
-    n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
-    if todo and spec.engine == "fmu" and scheduler is None:
-        _build_fmus(todo)  # once here, not by every worker at the same time
-    if scheduler is not None:
-        rows = _dask(todo, measure, scheduler)
-    elif n_workers == 0 or not todo:
-        rows = _inline(todo, measure)
-    else:
-        rows = _local(todo, measure, n_workers)
-    bar = tqdm(total=len(points), initial=len(points) - len(todo), unit="point",
-               desc="sweep", disable=None if progress is None else not progress)
-    try:
-        for row in rows:
-            table.append(row)
-            bar.update(1)
-    finally:
-        bar.close()
-        lock.close()
+    if spec.engine == "fmu" and scheduler is None and measure is measure_point:
+        _build_fmus(points)  # once here, not by every worker at the same time
+    n_run = execute_points(points, table, measure, workers=workers, scheduler=scheduler,
+                           progress=progress, retry_errors=retry_errors,
+                           meta={"sweep.json": meta})
     keys = {p.key for p in points}
     counts = verdict_counts(r for r in table.rows if r["key"] in keys)
-    return SweepOutcome(Path(out_dir), len(points), len(points) - len(todo), len(todo),
+    return SweepOutcome(Path(out_dir), len(points), len(points) - n_run, n_run,
                         time.perf_counter() - wall0, counts)
 
 

@@ -29,7 +29,7 @@ import csv
 import io
 import math
 import os
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -66,30 +66,28 @@ def _format(value: Any) -> str:
     return str(value)
 
 
-def _parse(col: str, text: str) -> Any:
-    if col in _TEXT:
+def _parse(col: str, text: str, text_columns: Collection[str] = _TEXT) -> Any:
+    if col in text_columns:
         return text
     if text == "":
         return math.nan
     return float(text)
 
 
-def _line(row: Mapping[str, Any]) -> str:
+def _line(row: Mapping[str, Any], columns: Sequence[str] = COLUMNS) -> str:
     buf = io.StringIO()
-    csv.writer(buf, lineterminator="\n").writerow([_format(row.get(c)) for c in COLUMNS])
+    csv.writer(buf, lineterminator="\n").writerow([_format(row.get(c)) for c in columns])
     return buf.getvalue()
 
 
-_HEADER = _line(dict(zip(COLUMNS, COLUMNS)))
+def _csv_text(rows: Iterable[Mapping[str, Any]], columns: Sequence[str] = COLUMNS) -> str:
+    return _line(dict(zip(columns, columns)), columns) + "".join(_line(r, columns) for r in rows)
 
 
-def _csv_text(rows: Iterable[Mapping[str, Any]]) -> str:
-    return _HEADER + "".join(_line(r) for r in rows)
-
-
-def full_row(row: Mapping[str, Any]) -> dict[str, Any]:
-    """``row`` with every column of :data:`COLUMNS` (missing numbers NaN, missing text '')."""
-    return {c: row.get(c, "" if c in _TEXT else math.nan) for c in COLUMNS}
+def full_row(row: Mapping[str, Any], columns: Sequence[str] = COLUMNS,
+             text_columns: Collection[str] = _TEXT) -> dict[str, Any]:
+    """``row`` with every column of ``columns`` (missing numbers NaN, missing text '')."""
+    return {c: row.get(c, "" if c in text_columns else math.nan) for c in columns}
 
 
 def reference_key(key: str) -> str:
@@ -138,9 +136,9 @@ def verdict_counts(rows: Iterable[Mapping[str, Any]]) -> dict[str, int]:
     return counts
 
 
-def _same(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
+def _same(a: Mapping[str, Any], b: Mapping[str, Any], columns: Sequence[str] = COLUMNS) -> bool:
     """Equal rows (NaN equal to NaN)."""
-    for c in COLUMNS:
+    for c in columns:
         x, y = a.get(c), b.get(c)
         if x != y and not (isinstance(x, float) and isinstance(y, float)
                            and math.isnan(x) and math.isnan(y)):
@@ -151,6 +149,10 @@ def _same(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
 class ResultTable:
     """The results table of a sweep folder.
 
+    The table's schema is three class attributes, so another study keeps its own columns
+    with the same files, lock, repair and order-independent derivation (a subclass sets
+    ``columns``, ``text_columns`` and ``derive``; a row's identity is its ``key`` column).
+
     Parameters
     ----------
     folder : path-like
@@ -160,7 +162,25 @@ class ResultTable:
     ----------
     rows : list of dict
         Every row, derived columns filled, in the order the points finished.
+    columns : tuple of str
+        Column order (class attribute; default :data:`COLUMNS`), ``key`` among them.
+    text_columns : frozenset of str
+        Columns stored as text; the others are floats (NaN when empty).
     """
+
+    columns: tuple[str, ...] = COLUMNS
+    text_columns: frozenset[str] = frozenset(_TEXT)
+
+    @staticmethod
+    def derive(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+        """The rows with their derived columns (a function of the set of rows: :func:`derive`)."""
+        return derive(rows)
+
+    def _full(self, row: Mapping[str, Any]) -> dict[str, Any]:
+        return full_row(row, self.columns, self.text_columns)
+
+    def _text(self, rows: Iterable[Mapping[str, Any]]) -> str:
+        return _csv_text(rows, self.columns)
 
     def __init__(self, folder: str | os.PathLike):
         self.folder = Path(folder)
@@ -187,27 +207,27 @@ class ResultTable:
         """
         if not self.csv_path.exists():
             if repair:
-                atomic_write(self.csv_path, _HEADER)
+                atomic_write(self.csv_path, self._text([]))
             return []
         text = self.csv_path.read_bytes().decode("utf-8", errors="replace")
         lines = text[: text.rfind("\n") + 1].splitlines(keepends=True)
-        if not lines or lines[0] != _HEADER:
-            raise ValueError(f"{self.csv_path}: not a sweep table of this version (header "
-                             "differs); use another --out folder")
+        if not lines or lines[0] != self._text([]):
+            raise ValueError(f"{self.csv_path}: not a {type(self).__name__} of this version "
+                             "(header differs); use another --out folder")
         parsed: dict[str, dict[str, Any]] = {}
         for line in lines[1:]:
             try:
                 fields = next(csv.reader([line]))
-                if len(fields) != len(COLUMNS):
+                if len(fields) != len(self.columns):
                     continue
-                row = {c: _parse(c, v) for c, v in zip(COLUMNS, fields)}
+                row = {c: _parse(c, v, self.text_columns) for c, v in zip(self.columns, fields)}
             except (csv.Error, StopIteration, ValueError):
                 continue
             parsed.pop(row["key"], None)      # a repeated key: the newest row, at its place
             parsed[row["key"]] = row
-        rows = derive(list(parsed.values()))
-        if repair and _csv_text(rows) != text:
-            atomic_write(self.csv_path, _csv_text(rows))
+        rows = self.derive(list(parsed.values()))
+        if repair and self._text(rows) != text:
+            atomic_write(self.csv_path, self._text(rows))
         if repair and rows and not self._parquet_holds(rows):
             self._write_parquet(rows)
         return rows
@@ -238,17 +258,17 @@ class ResultTable:
         A row whose key is already present replaces it (a retried error). Returns the new
         row as stored (derived columns filled).
         """
-        new = full_row(row)
+        new = self._full(row)
         old = [r for r in self.rows if r["key"] != new["key"]]
-        rows = derive([*old, new])
+        rows = self.derive([*old, new])
         if self.csv_path.exists() and len(old) == len(self.rows) and \
-                all(_same(a, b) for a, b in zip(self.rows, rows)):
+                all(_same(a, b, self.columns) for a, b in zip(self.rows, rows)):
             with open(self.csv_path, "a", encoding="utf-8") as fh:
-                fh.write(_line(rows[-1]))
+                fh.write(_line(rows[-1], self.columns))
                 fh.flush()
                 os.fsync(fh.fileno())
         else:   # a new file, a replaced row, or rows whose verdict depends on the new one
-            atomic_write(self.csv_path, _csv_text(rows))
+            atomic_write(self.csv_path, self._text(rows))
         self.rows = rows
         self._write_parquet(rows)
         return rows[-1]
@@ -257,8 +277,8 @@ class ResultTable:
         import pyarrow as pa
         import pyarrow.parquet as pq
 
-        cols = {c: pa.array([r[c] for r in rows], type=pa.string() if c in _TEXT
-                            else pa.float64()) for c in COLUMNS}
+        cols = {c: pa.array([r[c] for r in rows], type=pa.string() if c in self.text_columns
+                            else pa.float64()) for c in self.columns}
         buf = pa.BufferOutputStream()
         pq.write_table(pa.table(cols), buf)
         atomic_write(self.parquet_path, buf.getvalue().to_pybytes())
@@ -274,7 +294,8 @@ class ResultTable:
             saved = pq.read_table(self.parquet_path).to_pylist()
         except Exception:  # noqa: BLE001 - unreadable (e.g. cut by a kill): rewrite it
             return False
-        return len(saved) == len(rows) and all(_same(a, b) for a, b in zip(saved, rows))
+        return len(saved) == len(rows) and all(_same(a, b, self.columns)
+                                               for a, b in zip(saved, rows))
 
 
 def read_table(folder_or_file: str | os.PathLike) -> list[dict[str, Any]]:
