@@ -171,9 +171,11 @@ def metrics(data: np.ndarray, spans: Mapping[int, str], n_sites: int, opts: Poin
         if opts.highpass < 0.9 * nyq:
             sos = butter(4, opts.highpass / nyq, "highpass", output="sos")
             strains = [sosfilt(sos, s) for s in strains]
-    smax = np.max(np.abs(np.vstack(strains)), axis=0) if strains and len(t) else np.zeros(0)
-    out["growth_rate"], out["growth_noise"] = _envelope_growth(
-        t, smax, opts.envelope_window, opts.fit_fraction) if len(t) else (math.nan, math.nan)
+    out["growth_rate"] = out["growth_noise"] = math.nan  # no strains: no strain-loop growth
+    if strains and len(t):
+        smax = np.max(np.abs(np.vstack(strains)), axis=0)
+        out["growth_rate"], out["growth_noise"] = _envelope_growth(
+            t, smax, opts.envelope_window, opts.fit_fraction)
     forces = [data[n] for s in sites for a in AXES
               if (n := f"{CONTROLLER}.actuator{s}_force_{a}") in names]
     powers = [data[n] for s in sites if (n := f"{PLANT}.actuator{s}_power") in names]
