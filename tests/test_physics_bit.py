@@ -24,6 +24,7 @@ from scipy.signal import find_peaks
 from drillcosim.plant.model import DrillstringModel, series
 from drillcosim.plant.scene import SceneError, load_scene, scene_from_dict
 from drillcosim.plant.simulator import PlantSimulator, simulate
+from support.torsional import bit_torque as _bit_torque
 
 
 def _pendulum_parameters(plant) -> tuple[float, float, float]:
@@ -45,16 +46,6 @@ def _pendulum_parameters(plant) -> tuple[float, float, float]:
     beta = 2 * plant.damping.torsional_ratio / (math.pi * pipe.torsional_wave_speed
                                                  / (2 * pipe.length))
     return J, k, beta * k
-
-
-def _bit_torque(bit, w: float, weight: float) -> float:
-    """T(omega) [N m] at weight on bit ``weight`` [N] (docs/physics.md, section 4)."""
-    wf = min(weight, bit.wearflat_force)
-    wc = weight - wf
-    mu = bit.friction_coefficient * (1 + (bit.static_friction_ratio - 1)
-                                     * math.exp(-abs(w) / bit.weakening_speed))
-    return 0.5 * bit.radius * (wc / bit.cutting_force_ratio + mu * wf) \
-        * math.tanh(w / bit.slip_speed)
 
 
 def _steady_simulator(plant, kind: str, omega: float, torque: float) -> PlantSimulator:
