@@ -25,9 +25,13 @@ grows into stick-slip. Tuned with I = J_td w_s^2 (inertia and integral cancel at
 stick-slip frequency w_s) the drive is a pure damper P / (1 - k_T) there; with that damping
 near the string's characteristic impedance zeta = J sqrt(G rho) (J the polar second moment of
 area) the reflection coefficient (zeta - Z_d) / (zeta + Z_d) is small and the energy the bit
-feeds into the mode leaves through the drive. The steady state (constant bit torque T_b, when
-the steady rotation is stable) is Omega = target_speed, T_m = T_s = T_b and
-x = (1 - k_T) T_b / I.
+feeds into the mode leaves through the drive. That is the picture of a long string; a short
+one with a heavy bottom-hole assembly (scene ``stick_slip``: 1000 m, 400 kg m^2) has a
+pendulum-like lowest mode, and the damping it needs is that mode's: there P = zeta = 300
+N m s/rad still sticks and slips, P >= 600 does not (docs/physics.md section 6).
+
+The steady state (constant bit torque T_b, when the steady rotation is stable) is
+Omega = target_speed, T_m = T_s = T_b and x = (1 - k_T) T_b / I.
 
 Time discretisation
 -------------------
