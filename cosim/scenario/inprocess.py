@@ -21,6 +21,7 @@ variables, wiring; they are not loaded).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -183,7 +184,32 @@ class PlantSlave(_ArraySlave):
         self.sim.set_state(sim_state)
 
 
-class ControllerSlave(_ArraySlave):
+class _LawSlave(_ArraySlave):
+    """A controller law as a slave: ``law`` (``reset``, ``get_state``, ``set_state``) stepped
+    by :meth:`_advance`; a ``ValueError`` of the law is the step's error, state unchanged."""
+
+    law: Any
+
+    def _advance(self, t: float, h: float) -> None:  # pragma: no cover - each law its own
+        raise NotImplementedError
+
+    def do_step(self, t: float, h: float) -> int:
+        """The outputs at ``t + h`` from the inputs held over the step."""
+        try:
+            self._advance(t, h)
+        except ValueError as exc:
+            self._problem = f"at t = {t!r}: {exc}"
+            return FMI2_ERROR
+        return 0
+
+    def _save(self):
+        return self.law.get_state()
+
+    def _restore(self, state) -> None:
+        self.law.set_state(state)
+
+
+class ControllerSlave(_LawSlave):
     """:class:`controller.StrainController` as a slave (inputs: the strains, outputs: the
     actuator forces [N] of sites 1 .. n_sites, gauges C and E).
 
@@ -207,23 +233,11 @@ class ControllerSlave(_ArraySlave):
         self.law.reset()
         self.y[:] = self.law.forces
 
-    def do_step(self, t: float, h: float) -> int:
-        """The force at ``t + h`` from the strains held over the step."""
-        try:
-            self.y[:] = self.law.step(t, h, self.u)
-        except ValueError as exc:
-            self._problem = f"at t = {t!r}: {exc}"
-            return FMI2_ERROR
-        return 0
-
-    def _save(self):
-        return self.law.get_state()
-
-    def _restore(self, state) -> None:
-        self.law.set_state(state)
+    def _advance(self, t: float, h: float) -> None:
+        self.y[:] = self.law.step(t, h, self.u)
 
 
-class TopDriveSlave(_ArraySlave):
+class TopDriveSlave(_LawSlave):
     """:class:`controller.TopDriveController` as a slave (inputs: ``top_rotary_speed``
     [rad/s], ``top_torque`` [N m]; output: ``top_drive_torque`` [N m]).
 
@@ -243,20 +257,8 @@ class TopDriveSlave(_ArraySlave):
         self.law.reset()
         self.y[0] = self.law.torque
 
-    def do_step(self, t: float, h: float) -> int:
-        """The motor torque at ``t + h`` from the speed and torque held over the step."""
-        try:
-            self.y[0] = self.law.step(t, h, float(self.u[0]), float(self.u[1]))
-        except ValueError as exc:
-            self._problem = f"at t = {t!r}: {exc}"
-            return FMI2_ERROR
-        return 0
-
-    def _save(self):
-        return self.law.get_state()
-
-    def _restore(self, state) -> None:
-        self.law.set_state(state)
+    def _advance(self, t: float, h: float) -> None:
+        self.y[0] = self.law.step(t, h, float(self.u[0]), float(self.u[1]))
 
 
 def inprocess_slaves(ss: SceneSystem) -> dict[str, Slave]:
