@@ -302,4 +302,6 @@ def test_every_shipped_scene_runs_through_the_cli(scene, tmp_path, capsys) -> No
                  "--no-plots", "--no-progress"]) == 0
     built = {p.stem for p in fmus.glob("*.fmu")}
     assert {r.name for r in scene_recipes(load_scene(scene)).values()} == built
+    for path in fmus.glob("*.fmu"):
+        assert validate_fmu(str(path)) == [], path
     assert json.loads((res / "summary.json").read_text())["end_time_s"] == pytest.approx(0.05)

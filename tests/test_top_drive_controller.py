@@ -123,9 +123,11 @@ def test_fmu_equals_the_law(project_fmus) -> None:
     np.testing.assert_array_equal(res["top_drive_torque"], np.array(ref))
 
 
-def test_soft_torque_scene_fmus_equal_the_in_process_slaves() -> None:
+def test_soft_torque_scene_fmus_equal_the_in_process_slaves(project_fmus) -> None:
+    folder = str(project_fmus["TopDriveController"].parent)  # + the plant built for the scene
     rows = [measure_point("stick_slip_soft_torque", 1000.0, 0.02, 1e-3, 3.0, engine,
-                          gain_key=KEY, rms_fraction=1.0) for engine in ("fmu", "python")]
+                          gain_key=KEY, rms_fraction=1.0, fmu_dir=folder)
+            for engine in ("fmu", "python")]
     for key in ("stick_slip_severity", "stick_fraction", "end_time"):
         assert rows[0][key] == rows[1][key], key
     assert rows[0]["status"] == "ok"
