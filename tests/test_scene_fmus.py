@@ -305,3 +305,38 @@ def test_every_shipped_scene_runs_through_the_cli(scene, tmp_path, capsys) -> No
     for path in fmus.glob("*.fmu"):
         assert validate_fmu(str(path)) == [], path
     assert json.loads((res / "summary.json").read_text())["end_time_s"] == pytest.approx(0.05)
+
+
+def test_controller_variant_equals_the_law_and_tunes_the_matrix(four_sites_fmus, tmp_path) -> None:
+    """The MIMO controller FMU against the law, with ``gain_matrix_1_3`` retuned between steps
+    (tunable) and a force limit (saturation as the default controller's)."""
+    fmu = four_sites_fmus / "StrainController_four_sites_mimo.fmu"
+    md = read_model_description(str(fmu))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    ins = [f"strain{s}_{a}" for s in range(1, 5) for a in "CE"]
+    outs = [f"actuator{s}_force_{a}" for s in range(1, 5) for a in "CE"]
+    inst = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(fmu), str(tmp_path / "c")),
+                     modelIdentifier=md.coSimulation.modelIdentifier, instanceName="controller")
+    inst.instantiate()
+    inst.setupExperiment(startTime=0.0)
+    inst.enterInitializationMode()
+    inst.setReal([vr["gain"], vr["symmetric_force_limit"]], [1e8, 800.0])
+    inst.exitInitializationMode()
+    matrix = [row[:] for row in MATRIX]
+    law = StrainController(ControllerParams(gain=1e8, symmetric_force_limit=800.0,
+                                            gain_matrix=matrix), n_sites=4)
+    rng = np.random.default_rng(7)
+    for k in range(40):
+        if k == 20:
+            inst.setReal([vr["gain_matrix_1_3"]], [0.75])
+            matrix[0][2] = 0.75
+            law.params = ControllerParams(gain=1e8, symmetric_force_limit=800.0,
+                                          gain_matrix=matrix)
+        eps = rng.normal(size=8) * 5e-6
+        inst.setReal([vr[n] for n in ins], eps.tolist())
+        inst.doStep(k * DT, DT)
+        np.testing.assert_array_equal(inst.getReal([vr[n] for n in outs]),
+                                      law.step(k * DT, DT, eps))
+    assert np.abs(law.forces).max() == 800.0  # the limit was reached
+    inst.terminate()
+    inst.freeInstance()
