@@ -424,6 +424,7 @@ class DrillstringPlant(DcsSlave):
         self._out_index: np.ndarray = np.zeros(0, dtype=np.int64)
         self._in_index: np.ndarray = np.zeros(0, dtype=np.int64)
         self._u: np.ndarray = np.zeros(0)  # the model's input vector (undeclared entries 0)
+        self._all_inputs = True  # the declared inputs are the model's, in its order
         self._built_key: tuple[Any, ...] | None = None
         self._init_error: str | None = None  # invalid parameters: every doStep refused
         self._halted: str | None = None  # divergence, until a state is restored
@@ -546,6 +547,7 @@ class DrillstringPlant(DcsSlave):
         self._in_index = np.array([model.input_names.index(n) for n in declared],
                                   dtype=np.int64)
         self._u = np.zeros(model.n_inputs)
+        self._all_inputs = list(declared) == list(model.input_names)
         return sim
 
     def _build(self) -> None:
@@ -592,8 +594,11 @@ class DrillstringPlant(DcsSlave):
                                f"({self._halted}); restore an FMU state saved before "
                                f"(fmi2SetFMUstate) or reset", Fmi2Status.discard)
         sim = self._sim
-        self._u.put(self._in_index, self.inputs)
-        sim.set_inputs(self._u)
+        if self._all_inputs:  # the default build: no copy per step
+            sim.set_inputs(self.inputs)
+        else:
+            self._u.put(self._in_index, self.inputs)
+            sim.set_inputs(self._u)
         result = sim.do_step(t, h)
         if not result.ok:
             if not result.quantity:  # refused before integrating: state unchanged
