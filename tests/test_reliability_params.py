@@ -254,7 +254,8 @@ CONTROLLER_BAD = [("gain", v) for v in (math.nan, -1.0, math.inf, "1e9", True)] 
     [("symmetric_force_limit", v) for v in (math.nan, -1.0)] + \
     [("switch_on_time", v) for v in (math.nan, -1.0, math.inf)] + \
     [("lag_time_constant", v) for v in (math.nan, -1.0, math.inf)] + \
-    [("mode", v) for v in ("both", 1, None)] + [("enabled", v) for v in (1, "yes", None)]
+    [("mode", v) for v in ("both", 1, None)] + [("enabled", v) for v in (1, "yes", None)] + \
+    [("gain_matrix", v) for v in ("eye", 3.0, None)]
 
 
 def test_controller_table_covers_every_field() -> None:
