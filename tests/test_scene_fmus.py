@@ -26,7 +26,7 @@ from drillcosim.cosim.scenario.scene_system import scene_recipes
 from drillcosim.cosim.study.point import measure_point
 from drillcosim.fmu_src.build import build_one
 from drillcosim.plant.model import DrillstringModel
-from drillcosim.plant.scene import load_scene
+from drillcosim.plant.scene import list_scenes, load_scene
 from drillcosim.plant.simulator import PlantSimulator
 
 pytestmark = [pytest.mark.needs_cc]
@@ -293,8 +293,7 @@ def test_cli_build_scene_refuses_an_unknown_scene(capsys) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("scene", ["stick_slip", "stick_slip_soft_torque", "bit_bounce",
-                                   "backward_whirl", "forward_whirl", "four_sites"])
+@pytest.mark.parametrize("scene", list_scenes())
 def test_every_shipped_scene_runs_through_the_cli(scene, tmp_path, capsys) -> None:
     """``drillcosim run SCENE`` builds the FMUs the scene needs into the folder and runs."""
     fmus, res = tmp_path / "fmus", tmp_path / "run"
