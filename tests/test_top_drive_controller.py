@@ -21,10 +21,10 @@ from drillcosim.controller import TopDriveController, TopDriveControllerParams
 from drillcosim.cosim.study.grid import SweepSpec
 from drillcosim.cosim.study.maps import plot_maps
 from drillcosim.cosim.study.point import measure_point
-from drillcosim.cosim.study.sweep import execute_sweep
-from drillcosim.cosim.study.table import read_table
+from drillcosim.cosim.study.sweep import execute_points, execute_sweep
+from drillcosim.cosim.study.table import ResultTable, read_table
 from drillcosim.plant.scene import load_scene
-from support.torsional import bit_torque, two_dof
+from support.torsional import bit_torque, sampled_loop_growth, two_dof
 
 KEY = "top_drive_controller.p_gain"
 
@@ -219,3 +219,32 @@ def test_linearized_two_dof_loop_threshold_brackets_the_sweep() -> None:
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if growth(mid) > 0 else (lo, mid)
     assert hi == pytest.approx(212.4, abs=0.5)  # docs/physics.md section 5
+
+
+@pytest.mark.slow
+def test_actuator_delay_map_follows_the_sampled_linear_loop(tmp_path) -> None:
+    """Delay shrinks the damping window: at 0.4 s the sampled linearized two-DOF loop (motor
+    torque delayed, Jacobi step, ZOH) is stable only near P = 1000 and unstable for 600 and
+    1500; at 0.8 s unstable for every P. The co-simulation (sweep tool) sticks where the loop
+    is unstable, keeps turning where it is stable, and diverges at 0.8 s."""
+    sc = load_scene("stick_slip_soft_torque")
+    spec = SweepSpec("stick_slip_soft_torque", (600.0, 1000.0, 1500.0), (0.4, 0.8), (1e-3,),
+                     60.0, "python", open_loop=False, gain_key=KEY)
+    pts = [p for p in spec.points() if p.delay == 0.4 or p.gain == 1000.0]
+    execute_points(pts, ResultTable(tmp_path), measure_point, workers=0, progress=False)
+    rows = {(r["gain"], r["delay"]): r for r in read_table(tmp_path)}
+    for (p_gain, delay), row in sorted(rows.items()):
+        growth = sampled_loop_growth(sc.plant, sc.top_drive_controller, p_gain, delay, 1e-3)
+        print(f"P = {p_gain:g}, delay {delay:g} s: linear growth {growth:+.3f} 1/s, "
+              f"{row['status']}, severity {row['stick_slip_severity']:.3g}, "
+              f"stuck {row['stick_fraction']:.2f}")
+        if growth < 0:   # measured: P = 1000, 0.4 s: -0.074 1/s; severity 0.26, never stuck
+            assert row["status"] == "ok" and row["stick_fraction"] == 0.0
+            assert row["stick_slip_severity"] < 0.5
+        elif delay == 0.4:  # measured: +0.022 / +0.045 1/s; severity 2.3 / 2.2, stuck 23 / 3 %
+            assert row["status"] == "ok" and row["stick_fraction"] > 0.01
+            assert row["stick_slip_severity"] > 1.5
+        else:            # measured: +0.446 1/s; diverged at 24.9 s
+            assert row["status"] == "diverged"
+    assert sum(1 for (p, d) in rows if sampled_loop_growth(
+        sc.plant, sc.top_drive_controller, p, d, 1e-3) < 0) == 1

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["TwoDof", "bit_torque", "two_dof"]
+__all__ = ["TwoDof", "bit_torque", "sampled_loop_growth", "two_dof"]
 
 
 def bit_torque(bit, w: float, weight: float) -> float:
@@ -59,3 +59,45 @@ def two_dof(plant) -> TwoDof:
     beta = 2 * plant.damping.torsional_ratio / (math.pi * pipe.torsional_wave_speed
                                                  / (2 * pipe.length))
     return TwoDof(mass, k, beta * k)
+
+
+def sampled_loop_growth(plant, controller: dict, p_gain: float, delay: float, step: float
+                        ) -> float:
+    """Growth rate [1/s] of the linearized two-DOF loop about steady rotation at the target
+    speed, sampled as the co-simulation runs it.
+
+    The plant (states alpha, theta, Omega, omega; the bit torque replaced by its slope at the
+    target speed) is discretized exactly over ``step`` with the motor torque held (ZOH); the PI
+    law is the sampled one of ``controller/top_drive.py`` (``x += step e``,
+    ``T_m = P e + I x + k_T T_s``); the torque reaches the plant one step later (Jacobi) plus
+    ``delay / step`` steps (the actuator delay, a whole number of steps). The rigid rotation
+    (eigenvalue 1) is left out; ``ln(max |eigenvalue|) / step``.
+    """
+    import scipy.linalg
+
+    m = two_dof(plant)
+    minv = np.linalg.inv(m.mass)
+    om, d = controller["target_speed"], 1e-6
+    weight = plant.bit.weight_on_bit
+    slope = (bit_torque(plant.bit, om + d, weight) - bit_torque(plant.bit, om - d, weight)) / (2 * d)
+    ts = np.array([m.k, -m.k, m.c, -m.c])
+    a = np.vstack([[0, 0, 1, 0], [0, 0, 0, 1],
+                   minv @ np.vstack([-ts, ts - np.array([0, 0, 0, slope])])])
+    b = np.concatenate([[0, 0], minv @ np.array([1.0, 0.0])])
+    aug = np.zeros((5, 5))
+    aug[:4, :4], aug[:4, 4] = a * step, b * step
+    e = scipy.linalg.expm(aug)
+    nd = round(delay / step)
+    n = 6 + nd          # z (4), x, outputs q_0 (newest) .. q_nd (applied)
+    mat = np.zeros((n, n))
+    mat[:4, :4], mat[:4, 5 + nd] = e[:4, :4], e[:4, 4]
+    mat[4, 4], mat[4, 2] = 1.0, -step                       # x += step e, e = -Omega
+    i_gain = controller["i_gain"]
+    mat[5, 2] = -p_gain - i_gain * step
+    mat[5, 4] = i_gain
+    mat[5, :4] += controller["torque_feedback"] * ts
+    for j in range(1, nd + 1):
+        mat[5 + j, 4 + j] = 1.0
+    ev = np.linalg.eigvals(mat)
+    ev = ev[np.abs(ev - 1.0) > 1e-9]
+    return float(np.log(np.abs(ev).max()) / step)
