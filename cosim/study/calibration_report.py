@@ -116,6 +116,30 @@ def ranking_markdown(ranked: Sequence[Mapping[str, Any]], n: int = 10) -> str:
     return "\n".join(lines) + "\n"
 
 
+def oat_markdown(ranked: Sequence[Mapping[str, Any]], best: PlantChoice) -> str:
+    """One-at-a-time table around ``best``: per varied quantity, J mean +- se and the long
+    span's statistics."""
+    lines = ["| varied | value | J mean +- se | long peak [mm] | long mean [mm] | "
+             "long half-band [mm] | long contact [s] | short mean [mm] |",
+             "|---|---|---|---|---|---|---|---|"]
+    panels = [(k, lab, sc, _oat_sets(ranked, best, k)) for k, lab, sc, _ in _OAT]
+    panels.append(("gravity", "gravity [m/s^2]", 1.0, _oat_sets(ranked, best, "gravity")))
+    panels.append(("top_axial_stiffness", "top spring, hanging-string WOB [N/m]", 1.0,
+                   hanging_family(ranked, best)))
+    for knob, label, scale, sets in panels:
+        for a in sets:
+            mark = " (best)" if math.isclose(a[knob], getattr(best, knob)) and knob != \
+                "top_axial_stiffness" or a["group"] == best.label else ""
+            value = a[knob] * scale
+            extra = (f", WOB {a['weight_on_bit'] / 1e3:.3g} kN"
+                     if label.startswith("top spring, hanging") else "")
+            lines.append(f"| {label} | {value:.4g}{extra}{mark} | {_f(a['objective'])} +- "
+                         f"{_f(a['objective_se'], 2)} | {_f(a['long_peak_m'] * MM)} | "
+                         f"{_f(a['long_mean_m'] * MM)} | {_f(a['long_band_m'] * MM)} | "
+                         f"{_f(a['long_contact_time_s'])} | {_f(a['short_mean_m'] * MM)} |")
+    return "\n".join(lines) + "\n"
+
+
 def _csv(rows: Sequence[Mapping[str, Any]]) -> str:
     if not rows:
         return ""
@@ -341,14 +365,22 @@ def report(out_dir: str | Path, figures: str | Path | None = None,
         if (out / st / "results.csv").exists():
             ranked[st] = rank(CalibrationTable(out / st).rows)
             atomic_write(fig_dir / f"calibration_{st}.csv", _csv(ranked[st]))
-            text += [f"## Stage {st}: {len(ranked[st])} sets (best 10)", "",
-                     ranking_markdown(ranked[st], 10)]
+            consistent = [a for a in ranked[st] if a["paper_consistent"]]
+            text += [f"## Stage {st}: {len(ranked[st])} sets", "",
+                     f"Best 10 paper-consistent sets (top spring 1e9 N/m, gravity on), of "
+                     f"{len(consistent)}:", "", ranking_markdown(consistent, 10),
+                     "Best 5 of all sets:", "", ranking_markdown(ranked[st], 5)]
     if "coarse" in ranked:
-        text.append(f"![]({plot_grid(ranked['coarse'], fig_dir / 'calibration_grid.png')})")
+        grid_png = plot_grid(ranked["coarse"], fig_dir / "calibration_grid.png")
+        text.append(f"![]({grid_png})")
     if "refine" in ranked and "coarse" in ranked:
-        coarse_best = PlantChoice.from_row(ranked["coarse"][0])
-        text.append(f"![]({plot_sensitivity(ranked['refine'], coarse_best, fig_dir / 'calibration_sensitivity.png')})")  # noqa: E501
+        coarse_best = PlantChoice.from_row(
+            next(a for a in ranked["coarse"] if a["paper_consistent"]))
+        sens_png = plot_sensitivity(ranked["refine"], coarse_best,
+                                    fig_dir / "calibration_sensitivity.png")
+        text += ["", oat_markdown(ranked["refine"], coarse_best), f"![]({sens_png})"]
     final = ranked.get("confirm") or ranked.get("refine") or ranked.get("coarse")
+    final = [a for a in final or [] if a["paper_consistent"]]
     if final:
         best = PlantChoice.from_row(final[0])
         text += ["", f"Calibrated set: {best.label}", "",
