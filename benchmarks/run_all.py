@@ -298,7 +298,11 @@ def _fmu_and_master_sections(quick: bool) -> list[str]:
                                     "--divisors", "1,2", "--no-step-table"], 3600)
     ctl = _script(["benchmarks/bench_controller_fmus.py", "--steps", steps, "--stop-time",
                    "1" if quick else "2"], 900)
-    return [red, rms, fm, fb, "", "## Master overhead on tiny FMUs (benchmarks/bench_master_overhead.py)", "",
+    ext = _script(["benchmarks/bench_extensions.py", "--skip", "off", *(["--quick"] if quick
+                                                                        else [])], 1800)
+    ext = "\n## Physics extensions (benchmarks/bench_extensions.py)\n\n" + ext
+    return [red, rms, ext, fm, fb, "",
+            "## Master overhead on tiny FMUs (benchmarks/bench_master_overhead.py)", "",
             f"Command: `python benchmarks/bench_master_overhead.py --steps {steps}` (target: "
             "our master within 1.3x of a hand-written raw fmpy loop).", "", *table, "", ctl]
 

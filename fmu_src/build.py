@@ -251,9 +251,10 @@ REGISTRY: tuple[FmuRecipe, ...] = (
                   ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
         extra_files=("scenes",),
         requires=("numpy", "scipy", "numba"),
-        # the numpy reference rhs (tests, benchmarks) and the linear/modal analysis (study
-        # layer): the FMU never imports them (tested)
-        exclude=("plant/numpy_rhs.py", "plant/linearize.py", "plant/modal.py"),
+        # the numpy reference rhs (tests, benchmarks), the linear/modal analysis and the
+        # continuous-time closed loop (study layer): the FMU never imports them (tested)
+        exclude=("plant/numpy_rhs.py", "plant/linearize.py", "plant/modal.py",
+                 "plant/closed_loop.py"),
     ),
 )
 

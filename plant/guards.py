@@ -25,14 +25,17 @@ STRAIN = 5  # index: joint (below body index+1); value: bending strain [1]
 def check_state(full3d, n, y, max_lateral, max_tilt, max_speed, max_strain, strain_factor, wR):
     """First violation in ``y`` (see the module docstring); wR is (n+1, 3, 3) scratch.
 
-    ``strain_factor`` = gauge radius / dx turns a relative bending angle into strain.
+    ``strain_factor`` = gauge radius / dx turns a relative bending angle into strain. Every
+    state must be finite; the speed limit applies to the bodies' velocity block (the auxiliary
+    states after the ``12 n`` or ``4 n`` body states are checked for finiteness only).
     """
     N = y.size
     for i in range(N):
         if not math.isfinite(y[i]):
             return NOT_FINITE, i, y[i]
-    half = N // 2
-    for i in range(half, N):
+    nb = (12 if full3d else 4) * n
+    half = nb // 2
+    for i in range(half, nb):
         if abs(y[i]) > max_speed:
             return SPEED, i, y[i]
     if not full3d:

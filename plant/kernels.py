@@ -20,10 +20,16 @@ d x (-f) keeps it exactly conservative and angular-momentum preserving. Rotation
 stiffness is diag(k_bend, k_bend, k_tors) (g1 = k_tors, g3 = 2 k_bend - k_tors); this is exactly
 conservative at any angle, and needs no extra states. Dampers act on the relative velocities.
 
-``ip`` (int64): header [n, n_stab, n_contact, n_act, unbalance_body (0-based, -1 none), n_loads]
-followed by stabilizer bodies, contact bodies, actuator joints (0-based). ``fp`` (float64):
-stabilizer local z offsets [m], then the load table (``layout.NLD`` columns a row).
-``u`` (float64, 2 per actuator site): actuator forces [N] at C and E, > 0 opposing positive strain.
+``ip`` (int64): header [n, n_stab, n_contact, n_act, unbalance_body (0-based, -1 none), n_loads,
+top-drive mode, index of the top-drive angle in ``y`` (-1 none), bit mode, index of the bit's
+auxiliary state in ``y`` (-1 none), extended outputs (0/1)] followed by stabilizer bodies,
+contact bodies, actuator joints (0-based). ``fp`` (float64): stabilizer local z offsets [m], then
+the load table (``layout.NLD`` columns a row). ``u`` (float64): 2 per actuator site, the actuator
+forces [N] at C and E (> 0 opposing positive strain), then the top-drive input when
+``top_drive.mode`` is not "prescribed" (speed command [rad/s] or motor torque [N m]).
+
+Auxiliary states (extensions beyond the paper, off by default) follow the bodies' states in ``y``:
+the top-drive angle [rad] (modes "speed" and "torque") and speed [rad/s] (mode "torque").
 """
 
 from __future__ import annotations
@@ -36,10 +42,18 @@ from numba import njit
 from .layout import (
     ACT_ARM,
     ALPHA_LAT,
+    BIT_A,
     BIT_AMP,
     BIT_EPS,
+    BIT_EPSI,
+    BIT_JX,
     BIT_LOBES,
+    BIT_MU,
     BIT_TORQUE,
+    BIT_WEAK,
+    BIT_WF,
+    BIT_WSPD,
+    BIT_ZETA,
     C_AX,
     C_BE,
     C_CONT,
@@ -73,10 +87,14 @@ from .layout import (
     LD_T0,
     LD_T1,
     MASS,
+    MU_WALL,
     NLD,
     OMEGA0,
+    R_OUT,
     T_RAMP,
+    TD_INERTIA,
     UNB,
+    V_SLIP,
     ZBIT0,
 )
 
@@ -89,7 +107,19 @@ IP_NC = 2
 IP_NA = 3
 IP_UNB = 4
 IP_NL = 5
-IP_HDR = 6
+IP_TD = 6  # top-drive mode: TD_PRESCRIBED, TD_SPEED, TD_TORQUE
+IP_TDX = 7  # index of the top-drive angle in y (speed: + 1) or -1
+IP_BIT = 8  # bit mode (BIT_PRESCRIBED)
+IP_BITX = 9  # index of the bit's auxiliary state in y or -1
+IP_XOUT = 10  # 1: the outputs include the extensions' (observables.output_names(extended=True))
+IP_HDR = 11
+
+# top-drive modes (params.TOP_DRIVE_MODES order)
+TD_PRESCRIBED = 0
+TD_SPEED = 1
+TD_TORQUE = 2
+BIT_PRESCRIBED = 0
+BIT_CUTTING = 1
 
 _CACHE = True
 
@@ -106,13 +136,82 @@ def top_drive(t: float, omega0: float, t_ramp: float) -> tuple[float, float]:
     return omega0 * (t - 0.5 * t_ramp), omega0
 
 
+@njit(cache=_CACHE, inline="always")
+def drive_motion(t, y, p, ip, u):
+    """Top-drive angle [rad] and speed [rad/s] at time ``t`` for state ``y`` and inputs ``u``.
+
+    Mode "prescribed": the ramp of :func:`top_drive`; "speed": the angle is an auxiliary state
+    and the speed the input ``u[2 n_act]``; "torque": angle and speed are auxiliary states.
+    """
+    mode = ip[IP_TD]
+    if mode == TD_PRESCRIBED:
+        return top_drive(t, p[OMEGA0], p[T_RAMP])
+    x = ip[IP_TDX]
+    if mode == TD_SPEED:
+        return y[x], u[2 * ip[IP_NA]]
+    return y[x], y[x + 1]
+
+
+@njit(cache=_CACHE, inline="always")
+def drive_rates(y, dy, p, ip, u, torque_on_string):
+    """Derivatives of the top-drive auxiliary states (nothing in mode "prescribed").
+
+    ``torque_on_string`` [N m]: torque of the top joint on body 1 about the well axis; the drive
+    feels its reaction: ``J_td domega/dt = u_torque - torque_on_string``.
+    """
+    mode = ip[IP_TD]
+    if mode == TD_PRESCRIBED:
+        return
+    x = ip[IP_TDX]
+    if mode == TD_SPEED:
+        dy[x] = u[2 * ip[IP_NA]]
+    else:
+        dy[x] = y[x + 1]
+        dy[x + 1] = (u[2 * ip[IP_NA]] - torque_on_string) / p[TD_INERTIA]
+
+
 @njit(cache=_CACHE)
-def bit_rock(t: float, p: np.ndarray) -> tuple[float, float]:
-    """Prescribed rock position Z_bit [m] and its rate [m/s] at time t."""
-    ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
+def bit_rock(ang: float, om: float, p: np.ndarray) -> tuple[float, float]:
+    """Prescribed rock position Z_bit [m] and its rate [m/s] for top-drive angle/speed."""
     lob = p[BIT_LOBES]
     a = p[BIT_AMP]
     return p[ZBIT0] + a * math.sin(lob * ang), a * lob * om * math.cos(lob * ang)
+
+
+@njit(cache=_CACHE, inline="always")
+def cutting_bit(zb, vb, zh, th, om, p):
+    """Cutting + wear-flat bit on a unilateral contact (Detournay & Defourny 2008).
+
+    ``zb`` [m], ``vb`` [m/s]: depth and axial velocity of the bit end; ``zh`` [m]: hole bottom
+    (an auxiliary state); ``th`` [rad], ``om`` [rad/s]: bit angle and speed. The rock surface
+    under the bit is ``zh + A sin(lobes th)`` (a lobed bottom-hole profile, ``A`` =
+    ``bit.displacement_amplitude``). On bottom the contact spring-damper gives the weight on bit
+    ``W >= 0`` (off bottom: everything 0, the bit bounces); the wear flats carry
+    ``W_f = min(W, W_f*)``, the cutters ``W_c = W - W_f`` at the depth of cut per revolution
+    ``d = W_c / (a zeta eps)``. Torque ``T = a/2 (W_c / zeta + mu(om) W_f) tanh(om / slip)``,
+    ``mu(om) = mu gamma (1 + weak exp(-|om| / om_w))``; the hole deepens at
+    ``d max(om, 0) / (2 pi)``. Returns ``(W [N], T [N m], rate of penetration [m/s], d [m])``.
+    """
+    lob = p[BIT_LOBES]
+    amp = p[BIT_AMP]
+    zs = zh + amp * math.sin(lob * th)
+    pen = zb - zs
+    if pen <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    w = p[KB_AX] * pen + p[CB_AX] * (vb - amp * lob * om * math.cos(lob * th))
+    if w <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    wf = min(w, p[BIT_WF])
+    wc = w - wf
+    a = p[BIT_A]
+    zeta = p[BIT_ZETA]
+    d = wc / (a * zeta * p[BIT_EPSI])
+    mu = p[BIT_MU]
+    if p[BIT_WEAK] > 0.0:
+        mu *= 1.0 + p[BIT_WEAK] * math.exp(-abs(om) / p[BIT_WSPD])
+    tq = 0.5 * a * (wc / zeta + mu * wf) * math.tanh(om / p[BIT_EPS])
+    rop = d * om / (2.0 * math.pi) if om > 0.0 else 0.0
+    return w, tq, rop, d
 
 
 @njit(cache=_CACHE)
@@ -166,6 +265,19 @@ def relative_rotation(Ra: np.ndarray, Rb: np.ndarray, Rrel: np.ndarray) -> None:
             Rrel[i, j] = Ra[0, i] * Rb[0, j] + Ra[1, i] * Rb[1, j] + Ra[2, i] * Rb[2, j]
 
 
+@njit(cache=_CACHE, inline="always")
+def gauge_strains(Rrel, rg, dx):
+    """Bending strains (C, E) [1] of a gauge site from the rotation ``Rrel`` across its joint.
+
+    Eq. 18-20: strain = (r / dx) * relative bending angle; gauge C reads bending about body y
+    (negative sign, right-hand rule), gauge E about body x. ``rg`` gauge radius [m], ``dx``
+    segment length [m].
+    """
+    thx = 0.5 * (Rrel[2, 1] - Rrel[1, 2])
+    thy = 0.5 * (Rrel[0, 2] - Rrel[2, 0])
+    return -rg / dx * thy, rg / dx * thx
+
+
 @njit(cache=_CACHE)
 def set_load_modes(ip, fp, t):
     """Switch the step loads on or off for time ``t`` [s] (``start <= t < end``).
@@ -190,6 +302,37 @@ def set_load_modes(ip, fp, t):
 @njit(cache=_CACHE, inline="always")
 def _load_active(fp, row):
     return fp[row + LD_ON] != 0.0
+
+
+@njit(cache=_CACHE, inline="always")
+def wall_friction(k, nx, ny, fn, mu, p, y, oV, oW, R, wF, wM):
+    """Regularized Coulomb friction of the wall on contact body ``k`` (0-based).
+
+    The contact point P sits on the collar surface at ``r_c`` (outer radius) along the outward
+    normal ``n = (nx, ny, 0)``. Its slip velocity has a circumferential part
+    ``v_t = v_G . t + r_c omega_Z`` (``t = e_Z x n``) and an axial part
+    ``v_z = v_G,Z + r_c (omega_X n_y - omega_Y n_x)`` (``omega`` inertial). The friction force
+    ``-mu fn (v_t t + v_z e_Z) / sqrt(v_t^2 + v_z^2 + v_eps^2)`` acts at P: on the centre and as
+    the moment ``r_c n x F`` (about the axis: ``r_c F_t``), added to ``wF`` (inertial) and ``wM``
+    (body frame).
+    """
+    rc = p[R_OUT]
+    wx = y[oW + 3 * k]
+    wy = y[oW + 3 * k + 1]
+    wz = y[oW + 3 * k + 2]
+    ox, oy, oz = _mv(R, wx, wy, wz)
+    vt = -ny * y[oV + 3 * k] + nx * y[oV + 3 * k + 1] + rc * oz
+    vz = y[oV + 3 * k + 2] + rc * (ox * ny - oy * nx)
+    g = mu * fn / math.sqrt(vt * vt + vz * vz + p[V_SLIP] * p[V_SLIP])
+    ft = -g * vt
+    fz = -g * vz
+    wF[k, 0] -= ft * ny
+    wF[k, 1] += ft * nx
+    wF[k, 2] += fz
+    m0, m1, m2 = _mtv(R, rc * ny * fz, -rc * nx * fz, rc * ft)
+    wM[k, 0] += m0
+    wM[k, 1] += m1
+    wM[k, 2] += m2
 
 
 @njit(cache=_CACHE)
@@ -324,7 +467,7 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
     wx0 = y[oW]
     wy0 = y[oW + 1]
     wz0 = y[oW + 2]
-    ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
+    ang, om = drive_motion(t, y, p, ip, u)
     A0 = y[0] - h * R0[0, 2]
     A1 = y[1] - h * R0[1, 2]
     A2 = y[2] - h * R0[2, 2]
@@ -354,16 +497,32 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
             Rrel[0, j] = ca * R0[0, j] + sa * R0[1, j]
             Rrel[1, j] = -sa * R0[0, j] + ca * R0[1, j]
             Rrel[2, j] = R0[2, j]
-        wM[0, 0] += 0.5 * ktt * (Rrel[2, 1] + Rrel[1, 2])
-        wM[0, 1] += -0.5 * ktt * (Rrel[0, 2] + Rrel[2, 0])
-        wM[0, 2] += -0.5 * ktt * (Rrel[1, 0] - Rrel[0, 1]) - p[CT_TO] * (wz0 - om * R0[2, 2])
+        m0 = 0.5 * ktt * (Rrel[2, 1] + Rrel[1, 2])
+        m1 = -0.5 * ktt * (Rrel[0, 2] + Rrel[2, 0])
+        m2 = -0.5 * ktt * (Rrel[1, 0] - Rrel[0, 1]) - p[CT_TO] * (wz0 - om * R0[2, 2])
+        wM[0, 0] += m0
+        wM[0, 1] += m1
+        wM[0, 2] += m2
+        if ip[IP_TD] != TD_PRESCRIBED:
+            drive_rates(y, dy, p, ip, u, R0[2, 0] * m0 + R0[2, 1] * m1 + R0[2, 2] * m2)
 
-    # bit: axial spring to the prescribed rock position, resisting torque
+    # bit: axial spring to the prescribed rock position (or the cutting law), resisting torque
     e = n - 1
     Re = wR[e]
     kb = p[KB_AX]
-    if kb > 0.0:
-        zr, vr = bit_rock(t, p)
+    if ip[IP_BIT] == BIT_CUTTING:
+        x = ip[IP_BITX]
+        vB = _mv(Re, h * y[oW + 3 * e + 1], -h * y[oW + 3 * e], 0.0)
+        wb, tqb, rop, dcut = cutting_bit(y[3 * e + 2] + h * Re[2, 2], y[oV + 3 * e + 2] + vB[2],
+                                         y[x], y[oA + 3 * e], y[oW + 3 * e + 2], p)
+        dy[x] = rop
+        wM[e, 2] -= tqb
+        wF[e, 2] -= wb
+        fb0, fb1, fb2 = _mtv(Re, 0.0, 0.0, -wb)
+        wM[e, 0] += -h * fb1
+        wM[e, 1] += h * fb0
+    elif kb > 0.0:
+        zr, vr = bit_rock(ang, om, p)
         vB = _mv(Re, h * y[oW + 3 * e + 1], -h * y[oW + 3 * e], 0.0)
         Bz = y[3 * e + 2] + h * Re[2, 2]
         Fz = -kb * (Bz - zr) - p[CB_AX] * (y[oV + 3 * e + 2] + vB[2] - vr)
@@ -392,10 +551,11 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
         wM[k, 0] += -zl * fb1
         wM[k, 1] += zl * fb0
 
-    # wellbore contact (eq. 14-17), frictionless; normal force never pulls
+    # wellbore contact (eq. 14-17); normal force never pulls; optional Coulomb friction
     kc = p[K_CONT]
     cc = p[C_CONT]
     clr = p[CLEAR]
+    mu = p[MU_WALL]
     if kc == 0.0 and cc == 0.0:
         nc = 0  # contact off: no cost
     for s in range(nc):
@@ -411,6 +571,8 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
             if fn > 0.0:
                 wF[k, 0] -= fn * nx
                 wF[k, 1] -= fn * ny
+                if mu > 0.0:
+                    wall_friction(k, nx, ny, fn, mu, p, y, oV, oW, wR[k], wF, wM)
 
     # mass unbalance: centrifugal force along body x
     if unb >= 0:
@@ -443,6 +605,15 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
         dy[oW + 3 * k] = (wM[k, 0] - (jp - jt) * wy * wz) / jt
         dy[oW + 3 * k + 1] = (wM[k, 1] - (jt - jp) * wz * wx) / jt
         dy[oW + 3 * k + 2] = wM[k, 2] / jp
+    if p[BIT_JX] > 0.0:  # bit and bottom-hole assembly: more polar inertia on the bit body
+        k = n - 1
+        jpe = jp + p[BIT_JX]
+        wx = y[oW + 3 * k]
+        wy = y[oW + 3 * k + 1]
+        wz = y[oW + 3 * k + 2]
+        dy[oW + 3 * k] = (wM[k, 0] - (jpe - jt) * wy * wz) / jt
+        dy[oW + 3 * k + 1] = (wM[k, 1] - (jt - jpe) * wz * wx) / jt
+        dy[oW + 3 * k + 2] = wM[k, 2] / jpe
 
 
 @njit(cache=_CACHE, inline="always")
@@ -508,12 +679,21 @@ def rhs_at(t, y, dy, p, ip, fp, u, wR, wF, wM):
     dy[n + e] = y[oW + e]
     dy[oV + e] = mg + f_up
     dy[oW + e] = tq_up
-    ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
+    ang, om = drive_motion(t, y, p, ip, u)
     dy[oV] += -(p[KT_AX] * (y[0] - h) + p[CT_AX] * y[oV])
     if p[KT_TO] > 0.0:
-        dy[oW] += -(p[KT_TO] * sin_small(y[n] - ang) + p[CT_TO] * (y[oW] - om))
-    if p[KB_AX] > 0.0:
-        zr, vr = bit_rock(t, p)
+        tq_top = -(p[KT_TO] * sin_small(y[n] - ang) + p[CT_TO] * (y[oW] - om))
+        dy[oW] += tq_top
+        if ip[IP_TD] != TD_PRESCRIBED:
+            drive_rates(y, dy, p, ip, u, tq_top)
+    if ip[IP_BIT] == BIT_CUTTING:
+        x = ip[IP_BITX]
+        wb, tqb, rop, dcut = cutting_bit(y[e] + h, y[oV + e], y[x], y[n + e], y[oW + e], p)
+        dy[oV + e] -= wb
+        dy[oW + e] -= tqb
+        dy[x] = rop
+    elif p[KB_AX] > 0.0:
+        zr, vr = bit_rock(ang, om, p)
         dy[oV + e] += -p[KB_AX] * (y[e] + h - zr) - p[CB_AX] * (y[oV + e] - vr)
     if p[BIT_TORQUE] > 0.0:
         dy[oW + e] -= p[BIT_TORQUE] * math.tanh(y[oW + e] / p[BIT_EPS])
@@ -530,6 +710,8 @@ def rhs_at(t, y, dy, p, ip, fp, u, wR, wF, wM):
     for k in range(n):
         dy[oV + k] *= im
         dy[oW + k] *= ij
+    if p[BIT_JX] > 0.0:  # bit and bottom-hole assembly: more polar inertia on the bit body
+        dy[oW + e] *= jp / (jp + p[BIT_JX])
 
 
 @njit(cache=_CACHE, inline="always")

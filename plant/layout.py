@@ -49,7 +49,22 @@ UNB = 36  # m e [kg m]
 ALPHA_LAT = 37  # lateral drag rate [1/s] (force = -alpha m v_lateral)
 ACT_ARM = 38  # moment arm of an actuator pair: 2 r [m]
 GAUGE_R = 39  # strain gauge radius [m]
-NP = 40
+# extensions beyond the paper (each off by default, see docs/physics.md)
+TD_INERTIA = 40  # top-drive rotor inertia [kg m^2] (top_drive.mode = 'torque')
+MU_WALL = 41  # Coulomb friction coefficient at the wellbore [1] (0 = off)
+V_SLIP = 42  # slip speed of the regularized friction [m/s]
+R_OUT = 43  # outer (collar) radius: contact point of the wall [m]
+# cutting bit (bit.model = 'cutting', Detournay & Defourny 2008)
+BIT_A = 44  # bit radius a [m]
+BIT_EPSI = 45  # intrinsic specific energy epsilon [Pa]
+BIT_ZETA = 46  # normal / tangential cutting force ratio [1]
+BIT_WF = 47  # wear-flat force capacity W_f* [N]
+BIT_MU = 48  # wear-flat friction coefficient mu gamma [1]
+BIT_WEAK = 49  # static / dynamic friction - 1 [1]
+BIT_WSPD = 50  # weakening speed [rad/s]
+BIT_JX = 51  # polar inertia added to the bit body [kg m^2]
+BIT_ZH0 = 52  # initial hole-bottom depth [m] (drilled depth = z_h - BIT_ZH0)
+NP = 53
 
 # columns of the load table (one row a load)
 LD_KIND = 0  # 0 force (inertial axis), 1 torque (body axis)

@@ -58,11 +58,15 @@ def operating_params(params: PlantParams) -> PlantParams:
     """The parameters with forcing removed: no bit displacement, no unbalance, no loads.
 
     Forcing terms do not enter a linearization; removing them makes the straight spinning string
-    a steady motion.
+    a steady motion. A top drive driven by an input (``top_drive.mode`` "speed" or "torque") is
+    replaced by the prescribed steady speed ``top_drive.rotary_speed``, and a cutting bit by the
+    spring to a fixed rock (``bit.model`` "prescribed"; a drilling bit has no equilibrium): the
+    linearization is about a rigidly driven string on a fixed bottom.
     """
     return replace(
         params,
-        bit=replace(params.bit, displacement_amplitude=0.0),
+        top_drive=replace(params.top_drive, mode="prescribed", inertia=0.0),
+        bit=replace(params.bit, displacement_amplitude=0.0, model="prescribed"),
         unbalance=replace(params.unbalance, enabled=False),
         loads=(),
     )

@@ -65,6 +65,9 @@ def static_equilibrium(model: DrillstringModel, y0: np.ndarray | None = None, t:
     RuntimeError
         If Newton does not converge (e.g. a mechanism: a string with no support).
     """
+    if model.n_state != model.n_body_state:
+        raise ValueError(f"static_equilibrium: the model has the auxiliary states "
+                         f"{model.aux_names}; use top_drive.mode = 'prescribed'")
     y = model.initial_state() if y0 is None else y0.copy()
     nq = model.n_state // 2
     size = max(1.0, float(np.max(np.abs(y[:nq]))))

@@ -42,9 +42,10 @@ from .integrators import (
     stable_step,
 )
 from .observables import output_names, outputs3d, outputs_at
-from .params import PlantParams
+from .params import BIT_MODELS, TOP_DRIVE_MODES, PlantParams
 
-__all__ = ["DrillstringModel", "FIXED_STEP_METHODS", "ModelKind", "needs_lateral", "series"]
+__all__ = ["DrillstringModel", "FIXED_STEP_METHODS", "ModelKind", "extensions", "needs_lateral",
+           "series"]
 
 ModelKind = str  # "full3d" | "axial_torsional"
 # exponential-integrator matrices kept per step size (each costs one expm, ~10 ms at n = 30)
@@ -66,6 +67,21 @@ def series(k_boundary: float, k_half: float) -> float:
     if math.isinf(k_boundary):
         return k_half
     return 1.0 / (1.0 / k_boundary + 1.0 / k_half)
+
+
+def extensions(params: PlantParams) -> list[str]:
+    """The extensions beyond the paper a parameter set uses (``docs/physics.md``); [] for the
+    paper's model."""
+    out = []
+    if params.top_drive.mode != "prescribed":
+        out.append(f"top_drive.mode = {params.top_drive.mode!r}")
+    if params.contact.enabled and params.contact.friction_coefficient > 0.0:
+        out.append("wellbore friction")
+    if params.contact.whirl_outputs:
+        out.append("whirl outputs")
+    if params.bit.model != "prescribed":
+        out.append(f"bit.model = {params.bit.model!r}")
+    return out
 
 
 def needs_lateral(params: PlantParams) -> list[str]:
@@ -171,9 +187,14 @@ class DrillstringModel:
     kind : {"full3d", "axial_torsional"}
         Which model to build. ``axial_torsional`` is refused when the parameters need lateral
         DOFs (see :func:`needs_lateral`).
+    extended_outputs : bool, optional
+        List the outputs of the extensions beyond the paper (whirl speed and direction per
+        contact body, ...; :func:`plant.observables.output_names`). Default: when one of them
+        is active (:func:`extensions`), so that the paper's scenes keep the paper's interface.
     """
 
-    def __init__(self, params: PlantParams, kind: ModelKind = "full3d") -> None:
+    def __init__(self, params: PlantParams, kind: ModelKind = "full3d",
+                 extended_outputs: bool | None = None) -> None:
         if kind not in MODEL_KINDS:
             raise ValueError(f"model = {kind!r} is not allowed: one of {', '.join(MODEL_KINDS)}")
         if kind == "axial_torsional":
@@ -185,10 +206,17 @@ class DrillstringModel:
                 )
         self.params = params
         self.kind = kind
+        self.extended_outputs = (bool(extensions(params)) if extended_outputs is None
+                                 else bool(extended_outputs))
         self.model_id = kern.MODEL_FULL3D if kind == "full3d" else kern.MODEL_AXIAL_TORSIONAL
         self.derived = derive(params)
         self.n = params.pipe.n_segments
-        self.n_state = (12 if kind == "full3d" else 4) * self.n
+        #: length of the bodies' block of the state (12 n or 4 n); auxiliary states follow it
+        self.n_body_state = (12 if kind == "full3d" else 4) * self.n
+        self.aux_names, aux_units = self._aux_layout()
+        #: unit of every auxiliary state, by name
+        self.aux_units = dict(zip(self.aux_names, aux_units))
+        self.n_state = self.n_body_state + len(self.aux_names)
         self._build_arrays()
         n = self.n
         self.wR = np.zeros((n + 1, 3, 3))
@@ -196,7 +224,11 @@ class DrillstringModel:
         self.wM = np.zeros((n, 3))
         self._scratch = [np.zeros(self.n_state) for _ in range(5)]
         self.verlet_lambda = 1.0  # velocity predictor of the Verlet damping forces (0.5 .. 1)
-        names = output_names(kind == "full3d", list(self.contact_bodies), self.n_sites)
+        names = output_names(kind == "full3d", list(self.contact_bodies), self.n_sites,
+                             extended=self.extended_outputs)
+        self.input_names, self.input_units, self.input_docs = self._input_layout()
+        self.n_inputs = len(self.input_names)
+        self.u = np.zeros(self.n_inputs)
         self.output_names = [r[0] for r in names]
         self.output_units = {r[0]: r[1] for r in names}
         self.output_docs = {r[0]: r[2] for r in names}
@@ -204,6 +236,49 @@ class DrillstringModel:
         self._zbit_ref = 0.0
         y0 = self.initial_state()
         self._zbit_ref = self._bit_end_z(y0)
+
+    # ------------------------------------------------------------------ layout of extensions
+    def _aux_layout(self) -> tuple[list[str], list[str]]:
+        """Names and units of the auxiliary states after the bodies' block (see kernels)."""
+        names, units = [], []
+        mode = self.params.top_drive.mode
+        if mode in ("speed", "torque"):
+            names.append("top_drive.angle")
+            units.append("rad")
+        if mode == "torque":
+            names.append("top_drive.speed")
+            units.append("rad/s")
+        if self.params.bit.model == "cutting":
+            names.append("bit.hole_bottom")
+            units.append("m")
+        return names, units
+
+    def _input_layout(self) -> tuple[list[str], dict[str, str], dict[str, str]]:
+        """Names, units and descriptions of the entries of the input vector ``u``.
+
+        Two actuator forces [N] per site (C, E), then the top-drive input of modes "speed"
+        (``top_drive_speed_command`` [rad/s]) and "torque" (``top_drive_torque`` [N m]).
+        """
+        names, units, docs = [], {}, {}
+        for s in range(1, self.n_sites + 1):
+            for a in "CE":
+                nm = f"actuator{s}_force_{a}"
+                names.append(nm)
+                units[nm] = "N"
+                docs[nm] = (f"actuator force at {a} of site {s}, > 0 opposing a positive strain "
+                            f"(a bending couple of arm {self.p[lay.ACT_ARM]:g} m)")
+        mode = self.params.top_drive.mode
+        if mode == "speed":
+            names.append("top_drive_speed_command")
+            units["top_drive_speed_command"] = "rad/s"
+            docs["top_drive_speed_command"] = ("rotary speed of the top drive (an ideal speed "
+                                               "source; replaces the prescribed ramp)")
+        elif mode == "torque":
+            names.append("top_drive_torque")
+            units["top_drive_torque"] = "N m"
+            docs["top_drive_torque"] = ("motor torque on the top-drive rotor (inertia "
+                                        f"{self.params.top_drive.inertia:g} kg m^2)")
+        return names, units, docs
 
     # ------------------------------------------------------------------ arrays for kernels
     def _build_arrays(self) -> None:
@@ -237,13 +312,22 @@ class DrillstringModel:
         p[lay.CT_TO] = d.beta_tors * p[lay.KT_TO]
         p[lay.OMEGA0] = td.rotary_speed
         p[lay.T_RAMP] = td.ramp_time
+        p[lay.TD_INERTIA] = td.inertia
         bit = prm.bit
         p[lay.KB_AX] = series(bit.axial_stiffness, 2.0 * d.k_axial)
         p[lay.CB_AX] = d.beta_axial * p[lay.KB_AX]
         p[lay.BIT_AMP] = bit.displacement_amplitude if bit.axial_stiffness > 0.0 else 0.0
         p[lay.BIT_LOBES] = bit.lobes
         p[lay.BIT_TORQUE] = bit.torque
-        p[lay.BIT_EPS] = 0.1
+        p[lay.BIT_EPS] = bit.slip_speed
+        p[lay.BIT_A] = bit.radius
+        p[lay.BIT_EPSI] = bit.intrinsic_specific_energy
+        p[lay.BIT_ZETA] = bit.cutting_force_ratio
+        p[lay.BIT_WF] = bit.wearflat_force
+        p[lay.BIT_MU] = bit.friction_coefficient
+        p[lay.BIT_WEAK] = bit.static_friction_ratio - 1.0
+        p[lay.BIT_WSPD] = bit.weakening_speed
+        p[lay.BIT_JX] = bit.inertia
         st = prm.stabilizers
         p[lay.K_STAB] = st.stiffness
         p[lay.C_STAB] = d.beta_axial * st.stiffness if st.damping < 0.0 else st.damping
@@ -251,6 +335,9 @@ class DrillstringModel:
         p[lay.K_CONT] = ct.stiffness if ct.enabled else 0.0
         p[lay.C_CONT] = ct.damping if ct.enabled else 0.0
         p[lay.CLEAR] = ct.clearance
+        p[lay.MU_WALL] = ct.friction_coefficient if ct.enabled else 0.0
+        p[lay.V_SLIP] = ct.friction_velocity
+        p[lay.R_OUT] = 0.5 * pipe.outer_diameter
         ub = prm.unbalance
         p[lay.UNB] = ub.moment if ub.enabled else 0.0
         p[lay.ALPHA_LAT] = d.alpha_lateral
@@ -273,7 +360,12 @@ class DrillstringModel:
         self.sites = prm.actuator_joints
         self.n_sites = len(self.sites)
         unb = prm.unbalance_body - 1 if (ub.enabled and ub.moment > 0.0) else -1
-        ip = [n, len(stab_body), len(self.contact_bodies), self.n_sites, unb, len(prm.loads)]
+        aux = {name: self.n_body_state + i for i, name in enumerate(self.aux_names)}
+        ip = [n, len(stab_body), len(self.contact_bodies), self.n_sites, unb, len(prm.loads),
+              TOP_DRIVE_MODES.index(td.mode), aux.get("top_drive.angle", -1),
+              BIT_MODELS.index(prm.bit.model), aux.get("bit.hole_bottom", -1),
+              int(self.extended_outputs)]
+        assert len(ip) == kern.IP_HDR
         ip += stab_body + [b - 1 for b in self.contact_bodies] + [j - 1 for j in self.sites]
         self.ip = np.array(ip, dtype=np.int64)
         rows = []
@@ -287,11 +379,10 @@ class DrillstringModel:
         # times [s] where an input of the model jumps (loads) or kinks (end of the speed ramp):
         # integrators step exactly to them (see integrators.next_breakpoint)
         bps = [t for ld in prm.loads for t in (ld.start, ld.start + ld.duration)]
-        if td.rotary_speed != 0.0 and td.ramp_time > 0.0:
+        if td.mode == "prescribed" and td.rotary_speed != 0.0 and td.ramp_time > 0.0:
             bps.append(td.ramp_time)
         self.breakpoints = np.unique(np.array([t for t in bps if math.isfinite(t) and t > 0.0],
                                               dtype=float))
-        self.u = np.zeros(2 * self.n_sites)
 
     # ------------------------------------------------------------------ state layout
     def _bit_end_z(self, y: np.ndarray) -> float:
@@ -354,6 +445,9 @@ class DrillstringModel:
             zb = z[-1] + 0.5 * dx
             kb = self.p[lay.KB_AX]
             self.p[lay.ZBIT0] = zb - self.params.bit.weight_on_bit / kb
+            if self.params.bit.model == "cutting":  # the hole bottom under the pressed bit
+                self.p[lay.BIT_ZH0] = self.p[lay.ZBIT0]
+                y[self.aux_names.index("bit.hole_bottom") + self.n_body_state] = self.p[lay.ZBIT0]
         return y
 
     # ------------------------------------------------------------------ evaluation
@@ -365,8 +459,9 @@ class DrillstringModel:
         t : float
             Time [s].
         y : numpy.ndarray, shape (n_state,)
-        u : numpy.ndarray, shape (2 * n_sites,), optional
-            Actuator forces [N] (C, E per site); defaults to the model's held inputs.
+        u : numpy.ndarray, shape (n_inputs,), optional
+            Inputs in the order of :attr:`input_names` (actuator forces [N], C and E per site,
+            then the top-drive input if any); defaults to the model's held inputs.
         """
         dy = np.empty(self.n_state)
         kern.set_load_modes(self.ip, self.fp, float(t))
@@ -387,8 +482,12 @@ class DrillstringModel:
         return dict(zip(self.output_names, self.outputs(t, y).tolist()))
 
     def energy(self, t: float, y: np.ndarray) -> float:
-        """Total mechanical energy [J] (kinetic + elastic + gravity potential)."""
-        return float(self.outputs(t, y)[-1])
+        """Total mechanical energy [J] of the string (kinetic + elastic + gravity potential)."""
+        return float(self.outputs(t, y)[self._energy_index])
+
+    @cached_property
+    def _energy_index(self) -> int:
+        return self.output_names.index("total_energy")
 
     # ------------------------------------------------------------------ integration
     def jacobian(self, t: float, y: np.ndarray, rel_step: float = 1e-7) -> np.ndarray:
@@ -421,7 +520,11 @@ class DrillstringModel:
         Contact adds at most k_w/m to the squared frequency of one body; that margin is added so
         that the step stays stable when the pipe touches the wellbore.
         """
-        J = self.initial_jacobian
+        return self.spectral_radius_with_margins(self.initial_jacobian)
+
+    def spectral_radius_with_margins(self, J: np.ndarray) -> float:
+        """Spectral radius [1/s] of ``J`` (a Jacobian of this model, possibly augmented) plus
+        the margins of :attr:`max_eigenvalue` for effects the initial state does not show."""
         with threadpool_limits(1):  # 6x faster than multithreaded BLAS on a loaded machine
             lam = float(np.max(np.abs(np.linalg.eigvals(J))))
         kc = self.p[lay.K_CONT] if self.contact_bodies and self.kind == "full3d" else 0.0
@@ -451,6 +554,10 @@ class DrillstringModel:
         if method == "rk4":
             return int(advance_rk4(*a, *w, k1, k2, k3, k4, yt))
         if method == "verlet":
+            if self.n_state != self.n_body_state:
+                raise ValueError(f"method = 'verlet' needs a state of positions and velocities; "
+                                 f"this model has the first-order states {self.aux_names}: use "
+                                 "'rk4'")
             H = self.n_state // 2
             return int(advance_verlet(*a, self.verlet_lambda, *w, k1, k2, k3[:H], k4[:H]))
         if method in ("expeuler", "etd2"):
@@ -503,12 +610,14 @@ class DrillstringModel:
     def linear_time_invariant(self) -> bool:
         """Is the model linear time-invariant up to the small-twist ``sin`` and the loads?
 
-        True for the axial-torsional chain without top-drive rotation, prescribed bit motion
+        True for the axial-torsional chain without a prescribed top-drive rotation (a top drive
+        driven by its held input is fine: constant forcing over a step), prescribed bit motion
         and bit torque (the Table 1 modal tests): then exponential Euler about the equilibrium
-        Jacobian is exact for the piecewise-constant loads, whatever the step.
+        Jacobian is exact for the piecewise-constant loads and inputs, whatever the step.
         """
         p = self.p
-        return (self.kind == "axial_torsional" and p[lay.OMEGA0] == 0.0
+        ramp = self.params.top_drive.mode == "prescribed" and p[lay.OMEGA0] != 0.0
+        return (self.kind == "axial_torsional" and not ramp and self.params.bit.model != "cutting"
                 and (p[lay.BIT_AMP] == 0.0 or p[lay.KB_AX] == 0.0) and p[lay.BIT_TORQUE] == 0.0)
 
     @property

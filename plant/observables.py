@@ -12,22 +12,32 @@ import math
 from numba import njit
 
 from .kernels import (
+    BIT_CUTTING,
+    IP_BIT,
+    IP_BITX,
     IP_HDR,
     IP_N,
     IP_NA,
     IP_NC,
     IP_NS,
+    IP_XOUT,
     bit_rock,
     cardan,
+    cutting_bit,
+    drive_motion,
+    gauge_strains,
     one_minus_cos_small,
     relative_rotation,
     sin_small,
-    top_drive,
 )
 from .layout import (
     ACT_ARM,
+    BIT_AMP,
     BIT_EPS,
+    BIT_JX,
+    BIT_LOBES,
     BIT_TORQUE,
+    BIT_ZH0,
     C_CONT,
     CB_AX,
     CLEAR,
@@ -49,8 +59,6 @@ from .layout import (
     KT_LAT,
     KT_TO,
     MASS,
-    OMEGA0,
-    T_RAMP,
 )
 
 _CACHE = True
@@ -68,9 +76,19 @@ SCALAR_OUTPUTS = (
     ("total_energy", "J", "kinetic + elastic + gravity potential energy of the string"),
 )
 NSCAL = len(SCALAR_OUTPUTS)
+#: Scalars of the extensions (after :data:`SCALAR_OUTPUTS` when the outputs are extended).
+EXTENDED_SCALAR_OUTPUTS = (
+    ("rate_of_penetration", "m/s", "rate at which the hole bottom deepens (bit.model 'cutting')"),
+    ("drilled_depth", "m", "hole drilled since the start (bit.model 'cutting')"),
+    ("depth_of_cut", "m", "depth of cut per bit revolution d (bit.model 'cutting')"),
+    ("bit_on_bottom", "1", "1 while the bit presses on the rock, 0 off bottom (bit bounce)"),
+)
+#: Whirl below this radius [m] is not defined (the centre sits on the well axis): speed 0.
+WHIRL_MIN_RADIUS = 1e-6
 
 
-def output_names(full3d: bool, contact_bodies: list[int], n_sites: int) -> list[tuple[str, str, str]]:
+def output_names(full3d: bool, contact_bodies: list[int], n_sites: int,
+                 extended: bool = False) -> list[tuple[str, str, str]]:
     """(name, unit, description) of each output of a model, in kernel order.
 
     Parameters
@@ -81,6 +99,11 @@ def output_names(full3d: bool, contact_bodies: list[int], n_sites: int) -> list[
         1-based contact bodies.
     n_sites : int
         Number of actuator sites.
+    extended : bool
+        Include the outputs of the extensions beyond the paper (``docs/physics.md``: whirl speed
+        and direction per contact body). The kernels always fill the extended list
+        (:class:`DrillstringModel` uses it); ``False`` gives the paper's interface (the default
+        plant FMU's outputs), a subset of it.
     """
     rows: list[tuple[str, str, str]] = []
     if full3d:
@@ -91,6 +114,15 @@ def output_names(full3d: bool, contact_bodies: list[int], n_sites: int) -> list[
                 (f"body{b}_radial_deflection", "m", f"radial deflection of body {b}"),
                 (f"body{b}_contact_force", "N", f"wellbore contact force on body {b}"),
             ]
+            if extended:
+                rows += [
+                    (f"body{b}_whirl_speed", "rad/s",
+                     f"angular velocity of the mass centre of body {b} about the well axis "
+                     f"(> 0 in the top drive's positive sense; 0 within "
+                     f"{WHIRL_MIN_RADIUS:g} m of the axis)"),
+                    (f"body{b}_whirl_direction", "1",
+                     f"+1 forward whirl (with the spin of body {b}), -1 backward, 0 none"),
+                ]
         for s in range(1, n_sites + 1):
             rows += [
                 (f"strain{s}_C", "1", f"bending strain at gauge C of site {s}"),
@@ -98,12 +130,13 @@ def output_names(full3d: bool, contact_bodies: list[int], n_sites: int) -> list[
                 (f"actuator{s}_power", "W", f"power delivered by the actuators of site {s}"),
             ]
     rows += list(SCALAR_OUTPUTS)
+    if extended:
+        rows += list(EXTENDED_SCALAR_OUTPUTS)
     return rows
 
 
 @njit(cache=_CACHE)
-def _scalars_common(t, p, out, o, fb, tb, tt, hook, wbit, zdisp, twist, energy):
-    om = top_drive(t, p[OMEGA0], p[T_RAMP])[1]
+def _scalars_common(om, out, o, fb, tb, tt, hook, wbit, zdisp, twist, energy):
     out[o] = fb
     out[o + 1] = tb
     out[o + 2] = tt
@@ -113,6 +146,23 @@ def _scalars_common(t, p, out, o, fb, tb, tt, hook, wbit, zdisp, twist, energy):
     out[o + 6] = zdisp
     out[o + 7] = twist
     out[o + 8] = energy
+
+
+@njit(cache=_CACHE)
+def _bit_contact_energy(zb, zh, th, p):
+    """Elastic energy [J] of the cutting bit's contact spring (0 off bottom)."""
+    pen = zb - (zh + p[BIT_AMP] * math.sin(p[BIT_LOBES] * th))
+    return 0.5 * p[KB_AX] * pen * pen if pen > 0.0 else 0.0
+
+
+@njit(cache=_CACHE)
+def _scalars_extended(out, o, ip, y, p, fb, rop, dcut):
+    """The extensions' scalars (:data:`EXTENDED_SCALAR_OUTPUTS`) at ``out[o:]``."""
+    cutting = ip[IP_BIT] == BIT_CUTTING
+    out[o] = rop
+    out[o + 1] = y[ip[IP_BITX]] - p[BIT_ZH0] if cutting else 0.0
+    out[o + 2] = dcut
+    out[o + 3] = 1.0 if (cutting and fb > 0.0) else 0.0
 
 
 @njit(cache=_CACHE)
@@ -151,15 +201,30 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
         out[o + 1] = Y
         out[o + 2] = dl
         out[o + 3] = fc
-        o += 4
+        # whirl: angular velocity of the centre about the well axis, and its sense vs the spin
+        whirl = 0.0
+        sense = 0.0
+        if dl > WHIRL_MIN_RADIUS:
+            whirl = (X * y[oV + 3 * k + 1] - Y * y[oV + 3 * k]) / (dl * dl)
+            R = wR[k]
+            spin = R[2, 0] * y[oW + 3 * k] + R[2, 1] * y[oW + 3 * k + 1] + R[2, 2] * y[oW + 3 * k + 2]
+            if whirl * spin > 0.0:
+                sense = 1.0
+            elif whirl * spin < 0.0:
+                sense = -1.0
+        if ip[IP_XOUT] == 0:
+            o += 4
+            continue
+        out[o + 4] = whirl
+        out[o + 5] = sense
+        o += 6
     rg = p[GAUGE_R]
     arm = p[ACT_ARM]
     for s in range(na):
         a = ip[IP_HDR + ns + nc + s]
         b = a + 1
         relative_rotation(wR[a], wR[b], Rrel)
-        thx = 0.5 * (Rrel[2, 1] - Rrel[1, 2])
-        thy = 0.5 * (Rrel[0, 2] - Rrel[2, 0])
+        eps_c, eps_e = gauge_strains(Rrel, rg, dx)
         wxa = y[oW + 3 * a]
         wya = y[oW + 3 * a + 1]
         wza = y[oW + 3 * a + 2]
@@ -167,8 +232,8 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
         q1 = Rrel[0, 1] * wxa + Rrel[1, 1] * wya + Rrel[2, 1] * wza
         wrx = y[oW + 3 * b] - q0
         wry = y[oW + 3 * b + 1] - q1
-        out[o] = -rg / dx * thy
-        out[o + 1] = rg / dx * thx
+        out[o] = eps_c
+        out[o + 1] = eps_e
         out[o + 2] = -arm * u[2 * s + 1] * wrx + arm * u[2 * s] * wry
         o += 3
     # energies
@@ -219,7 +284,7 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
     r2 = R0[0, 2] * vA0 + R0[1, 2] * vA1 + R0[2, 2] * vA2
     c2 = y[oW] * e1 - y[oW + 1] * e0
     hook = p[KT_AX] * e2 + p[CT_AX] * (r2 - c2)
-    ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
+    ang, om = drive_motion(t, y, p, ip, u)
     ktt = p[KT_TO]
     tt = 0.0
     if ktt > 0.0:
@@ -236,14 +301,22 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
     Re = wR[e]
     fb = 0.0
     bz = y[3 * e + 2] + h * Re[2, 2]
-    if p[KB_AX] > 0.0:
-        zr, vr = bit_rock(t, p)
+    tb = 0.0
+    rop = 0.0
+    dcut = 0.0
+    if ip[IP_BIT] == BIT_CUTTING:
+        vbz = y[oV + 3 * e + 2] + h * (Re[2, 0] * y[oW + 3 * e + 1] - Re[2, 1] * y[oW + 3 * e])
+        fb, tb, rop, dcut = cutting_bit(bz, vbz, y[ip[IP_BITX]], y[oA + 3 * e],
+                                        y[oW + 3 * e + 2], p)
+        pe += _bit_contact_energy(bz, y[ip[IP_BITX]], y[oA + 3 * e], p)
+    elif p[KB_AX] > 0.0:
+        zr, vr = bit_rock(ang, om, p)
         vbz = y[oV + 3 * e + 2] + h * (Re[2, 0] * y[oW + 3 * e + 1] - Re[2, 1] * y[oW + 3 * e])
         fb = p[KB_AX] * (bz - zr) + p[CB_AX] * (vbz - vr)
         pe += 0.5 * p[KB_AX] * (bz - zr) ** 2
-    tb = 0.0
     if p[BIT_TORQUE] > 0.0:
-        tb = p[BIT_TORQUE] * math.tanh(y[oW + 3 * e + 2] / p[BIT_EPS])
+        tb += p[BIT_TORQUE] * math.tanh(y[oW + 3 * e + 2] / p[BIT_EPS])
+    ke += 0.5 * p[BIT_JX] * y[oW + 3 * e + 2] ** 2
     # stabilizers
     for s in range(ns):
         k = ip[IP_HDR + s]
@@ -252,8 +325,10 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
         P1 = y[3 * k + 1] + zl * wR[k][1, 2]
         pe += 0.5 * p[K_STAB] * (P0 * P0 + P1 * P1)
     pe += e_cont
-    _scalars_common(t, p, out, o, fb, tb, tt, hook, y[oW + 3 * e + 2], bz - zbit_ref,
+    _scalars_common(om, out, o, fb, tb, tt, hook, y[oW + 3 * e + 2], bz - zbit_ref,
                     y[oA + 3 * e] - ang, ke + pe)
+    if ip[IP_XOUT] != 0:
+        _scalars_extended(out, o + NSCAL, ip, y, p, fb, rop, dcut)
 
 
 @njit(cache=_CACHE)
@@ -275,7 +350,7 @@ def outputs_at(t, y, p, ip, fp, u, wR, zbit_ref, out):
         pe += 0.5 * p[K_AX] * d * d + p[G1] * one_minus_cos_small(y[n + a + 1] - y[n + a])
     pe += 0.5 * p[KT_AX] * (y[0] - h) ** 2
     hook = p[KT_AX] * (y[0] - h) + p[CT_AX] * y[2 * n]
-    ang, om = top_drive(t, p[OMEGA0], p[T_RAMP])
+    ang, om = drive_motion(t, y, p, ip, u)
     tt = 0.0
     if p[KT_TO] > 0.0:
         pe += p[KT_TO] * one_minus_cos_small(y[n] - ang)
@@ -283,13 +358,22 @@ def outputs_at(t, y, p, ip, fp, u, wR, zbit_ref, out):
     e = n - 1
     bz = y[e] + h
     fb = 0.0
-    if p[KB_AX] > 0.0:
-        zr, vr = bit_rock(t, p)
+    tb = 0.0
+    rop = 0.0
+    dcut = 0.0
+    if ip[IP_BIT] == BIT_CUTTING:
+        fb, tb, rop, dcut = cutting_bit(bz, y[2 * n + e], y[ip[IP_BITX]], y[n + e], y[3 * n + e],
+                                        p)
+        pe += _bit_contact_energy(bz, y[ip[IP_BITX]], y[n + e], p)
+    elif p[KB_AX] > 0.0:
+        zr, vr = bit_rock(ang, om, p)
         fb = p[KB_AX] * (bz - zr) + p[CB_AX] * (y[2 * n + e] - vr)
         pe += 0.5 * p[KB_AX] * (bz - zr) ** 2
-    tb = 0.0
     if p[BIT_TORQUE] > 0.0:
-        tb = p[BIT_TORQUE] * math.tanh(y[3 * n + e] / p[BIT_EPS])
-    _scalars_common(t, p, out, 0, fb, tb, tt, hook, y[3 * n + e], bz - zbit_ref,
+        tb += p[BIT_TORQUE] * math.tanh(y[3 * n + e] / p[BIT_EPS])
+    ke += 0.5 * p[BIT_JX] * y[3 * n + e] ** 2
+    _scalars_common(om, out, 0, fb, tb, tt, hook, y[3 * n + e], bz - zbit_ref,
                     y[n + e] - ang, ke + pe)
+    if ip[IP_XOUT] != 0:
+        _scalars_extended(out, NSCAL, ip, y, p, fb, rop, dcut)
 

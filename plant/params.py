@@ -15,6 +15,8 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 __all__ = [
+    "BIT_MODELS",
+    "TOP_DRIVE_MODES",
     "PipeParams",
     "DampingParams",
     "TopDriveParams",
@@ -27,6 +29,12 @@ __all__ = [
     "PlantParams",
     "describe",
 ]
+
+
+#: Top-drive boundary conditions (``top_drive.mode``), in the order of the kernels' integer code.
+TOP_DRIVE_MODES = ("prescribed", "speed", "torque")
+#: Bit-rock laws (``bit.model``), in the order of the kernels' integer code.
+BIT_MODELS = ("prescribed", "cutting")
 
 
 def _f(default: Any, unit: str, doc: str, **kw: Any) -> Any:
@@ -233,8 +241,17 @@ class TopDriveParams:
     torsional_stiffness: float = _f(
         math.inf, "N m/rad", "torsional spring to the top drive (inf = rigid drive)"
     )
-    rotary_speed: float = _f(20.0, "rad/s", "final rotary speed of the top drive")
-    ramp_time: float = _f(1.0, "s", "duration of the linear speed ramp from 0")
+    rotary_speed: float = _f(20.0, "rad/s", "final rotary speed of the top drive (mode 'prescribed')")
+    ramp_time: float = _f(1.0, "s", "duration of the linear speed ramp from 0 (mode 'prescribed')")
+    mode: str = _f(
+        "prescribed", "-",
+        "'prescribed': the speed ramp above; 'speed': an ideal speed source driven by the input "
+        "top_drive_speed_command [rad/s]; 'torque': a drive of rotor inertia `inertia` driven by "
+        "the input top_drive_torque [N m] (the motor torque)",
+    )
+    inertia: float = _f(
+        0.0, "kg m^2", "rotor inertia of the top drive (mode 'torque'; must then be > 0)"
+    )
 
     def __post_init__(self) -> None:
         _validate_types(self)
@@ -244,20 +261,75 @@ class TopDriveParams:
                          allow_inf=True)
         _check_range(o, "rotary_speed", self.rotary_speed, -1e3, 1e3, unit="rad/s")
         _check_range(o, "ramp_time", self.ramp_time, 0.0, 1e6, unit="s")
+        if self.mode not in TOP_DRIVE_MODES:
+            raise ValueError(f"{o}.mode = {self.mode!r} is not allowed: one of "
+                             + ", ".join(repr(m) for m in TOP_DRIVE_MODES))
+        _check_range(o, "inertia", self.inertia, 0.0, 1e6, unit="kg m^2")
+        if self.mode == "torque" and self.inertia <= 0.0:
+            raise ValueError(f"{o}.inertia = {self.inertia!r} is out of range for mode = "
+                             "'torque': allowed (0, 1e+06] kg m^2")
+        if self.mode != "prescribed" and self.torsional_stiffness == 0.0:
+            raise ValueError(f"{o}.torsional_stiffness = 0 is not allowed with mode = "
+                             f"{self.mode!r}: the drive must be connected to the string "
+                             "(allowed (0, inf] N m/rad)")
 
 
 @dataclass(frozen=True)
 class BitParams:
-    """Bit boundary: axial spring to a prescribed sinusoidal bit-rock displacement."""
+    """Bit boundary: a spring to a prescribed rock displacement (the paper's) or a cutting bit.
+
+    ``model = "prescribed"``: an axial spring to a rock surface moving as a sinusoid of the
+    top-drive angle. ``model = "cutting"``: the Detournay & Defourny (2008) drag-bit law on a
+    unilateral contact (the bit lifts off); see docs/physics.md.
+    """
 
     OWNER = "bit"
     axial_stiffness: float = _f(
         1e9, "N/m", "axial spring between the bit and the rock (0 = axially free bit)"
     )
-    displacement_amplitude: float = _f(0.003, "m", "amplitude of the sinusoidal bit displacement")
-    lobes: float = _f(1.0, "1", "bit displacement frequency / rotary speed")
+    displacement_amplitude: float = _f(
+        0.003, "m", "amplitude of the sinusoidal bit displacement ('cutting': of the bottom-hole "
+        "profile under the bit)"
+    )
+    lobes: float = _f(
+        1.0, "1", "bit displacement frequency / rotary speed ('cutting': profile lobes per bit "
+        "revolution)"
+    )
     weight_on_bit: float = _f(0.0, "N", "static compressive bit force (sets the rock position)")
-    torque: float = _f(0.0, "N m", "resisting bit torque (smoothed sign of the bit speed)")
+    torque: float = _f(0.0, "N m", "constant resisting bit torque (smoothed sign of the bit speed)")
+    model: str = _f(
+        "prescribed", "-",
+        "'prescribed': spring to the prescribed displacement; 'cutting': cutting + wear-flat "
+        "friction law on a unilateral contact, the hole bottom advancing as the bit cuts",
+    )
+    radius: float = _f(0.108, "m", "bit radius a ('cutting')")
+    intrinsic_specific_energy: float = _f(
+        60e6, "Pa", "intrinsic specific energy epsilon of the rock ('cutting')"
+    )
+    cutting_force_ratio: float = _f(
+        0.6, "1", "zeta: ratio of the normal to the tangential cutting force ('cutting')"
+    )
+    wearflat_force: float = _f(
+        20e3, "N", "W_f* = a l sigma: axial force carried by the wear flats at full contact "
+        "('cutting')"
+    )
+    friction_coefficient: float = _f(
+        0.6, "1", "mu gamma: wear-flat friction coefficient times the bit geometry factor "
+        "('cutting')"
+    )
+    static_friction_ratio: float = _f(
+        1.0, "1", "velocity weakening: friction at rest / friction at speed (1 = none)"
+    )
+    weakening_speed: float = _f(
+        1.0, "rad/s", "bit speed over which the wear-flat friction decays to its dynamic value"
+    )
+    slip_speed: float = _f(
+        0.1, "rad/s", "speed scale of the smoothed sign of the bit torque: tanh(omega/slip_speed)"
+    )
+    inertia: float = _f(
+        0.0, "kg m^2", "polar inertia added to the bit body (bit and bottom-hole assembly below "
+        "the modelled section)"
+    )
 
     def __post_init__(self) -> None:
         _validate_types(self)
@@ -267,6 +339,23 @@ class BitParams:
         _check_range(o, "lobes", self.lobes, 0.0, 100.0)
         _check_range(o, "weight_on_bit", self.weight_on_bit, -1e8, 1e8, unit="N")
         _check_range(o, "torque", self.torque, 0.0, 1e7, unit="N m")
+        if self.model not in BIT_MODELS:
+            raise ValueError(f"{o}.model = {self.model!r} is not allowed: one of "
+                             + ", ".join(repr(m) for m in BIT_MODELS))
+        _check_range(o, "radius", self.radius, 0.0, 2.0, lo_open=True, unit="m")
+        _check_range(o, "intrinsic_specific_energy", self.intrinsic_specific_energy, 0.0, 1e11,
+                     lo_open=True, unit="Pa")
+        _check_range(o, "cutting_force_ratio", self.cutting_force_ratio, 0.0, 10.0, lo_open=True)
+        _check_range(o, "wearflat_force", self.wearflat_force, 0.0, 1e8, unit="N")
+        _check_range(o, "friction_coefficient", self.friction_coefficient, 0.0, 5.0)
+        _check_range(o, "static_friction_ratio", self.static_friction_ratio, 1.0, 100.0)
+        _check_range(o, "weakening_speed", self.weakening_speed, 0.0, 1e3, lo_open=True,
+                     unit="rad/s")
+        _check_range(o, "slip_speed", self.slip_speed, 0.0, 100.0, lo_open=True, unit="rad/s")
+        _check_range(o, "inertia", self.inertia, 0.0, 1e7, unit="kg m^2")
+        if self.model == "cutting" and self.axial_stiffness == 0.0:
+            raise ValueError(f"{o}.axial_stiffness = 0 is not allowed with model = 'cutting': "
+                             "the bit-rock contact needs a stiffness (allowed (0, 1e+13] N/m)")
 
 
 @dataclass(frozen=True)
@@ -301,9 +390,21 @@ class ContactParams:
     bodies: tuple = _f(
         (), "1", "bodies (1 = top) checked for contact; [] = the body at each span's middle"
     )
-    clearance: float = _f(0.02, "m", "radial clearance between collar and wellbore")
+    clearance: float = _f(0.02, "m", "radial clearance between collar and wellbore (0: touching)")
     stiffness: float = _f(1e7, "N/m", "wellbore contact stiffness k_w")
     damping: float = _f(0.0, "N s/m", "contact damping (acts only while in contact)")
+    friction_coefficient: float = _f(
+        0.0, "1", "Coulomb friction coefficient mu at the wall (0 = frictionless, the paper's)"
+    )
+    friction_velocity: float = _f(
+        0.01, "m/s",
+        "slip speed of the regularized friction: F = mu N v / sqrt(v^2 + v_eps^2)",
+    )
+    whirl_outputs: bool = _f(
+        False, "-",
+        "add the outputs body<b>_whirl_speed [rad/s] and body<b>_whirl_direction per contact "
+        "body (always there when friction_coefficient > 0)",
+    )
 
     def __post_init__(self) -> None:
         _validate_types(self)
@@ -311,9 +412,12 @@ class ContactParams:
         for b in self.bodies:
             if isinstance(b, bool) or not isinstance(b, int):
                 raise ValueError(f"{o}.bodies: {b!r} is not allowed: must be integers >= 1")
-        _check_range(o, "clearance", self.clearance, 0.0, 10.0, lo_open=True, unit="m")
+        _check_range(o, "clearance", self.clearance, 0.0, 10.0, unit="m")
         _check_range(o, "stiffness", self.stiffness, 0.0, 1e13, unit="N/m")
         _check_range(o, "damping", self.damping, 0.0, 1e12, unit="N s/m")
+        _check_range(o, "friction_coefficient", self.friction_coefficient, 0.0, 2.0)
+        _check_range(o, "friction_velocity", self.friction_velocity, 0.0, 10.0, lo_open=True,
+                     unit="m/s")
 
 
 @dataclass(frozen=True)

@@ -87,10 +87,10 @@ class PlantSimulator:
             raise ValueError(f"max_step = {max_step!r} is not allowed: must be > 0 and finite (s)")
         self.time = 0.0
         self.y = model.initial_state()
-        self.u = np.zeros(2 * model.n_sites)
+        self.u = np.zeros(model.n_inputs)
         self._names = self._state_names()
-        self.input_names = [f"actuator{s}_force_{a}" for s in range(1, model.n_sites + 1)
-                            for a in "CE"]
+        #: names of the entries of the input vector (see ``DrillstringModel.input_names``)
+        self.input_names = list(model.input_names)
         self._strain_factor = 0.5 * model.params.pipe.outer_diameter / model.derived.dx
 
     def _state_names(self) -> list[str]:
@@ -99,11 +99,25 @@ class PlantSimulator:
         if m.kind == "full3d":
             blocks = (("X", "Y", "Z"), ("psi", "theta", "phi"), ("vX", "vY", "vZ"),
                       ("wx", "wy", "wz"))
-            return [f"body{k + 1}.{c}" for b in blocks for k in range(n) for c in b]
-        return [f"body{k + 1}.{c}" for c in ("Z", "psi", "vZ", "wz") for k in range(n)]
+            body = [f"body{k + 1}.{c}" for b in blocks for k in range(n) for c in b]
+        else:
+            body = [f"body{k + 1}.{c}" for c in ("Z", "psi", "vZ", "wz") for k in range(n)]
+        return body + list(m.aux_names)
 
     def set_inputs(self, u: np.ndarray) -> None:
-        """Actuator forces [N], shape (2 n_sites,): site 1 C, site 1 E, site 2 C, ..."""
+        """Inputs held over the next steps, shape (n_inputs,), in the order of
+        :attr:`input_names`: actuator forces [N] (site 1 C, site 1 E, site 2 C, ...), then the
+        top-drive speed command [rad/s] or motor torque [N m] if the scene's top drive takes one.
+
+        Raises
+        ------
+        ValueError
+            If ``u`` does not have one value per input (the message lists the inputs).
+        """
+        u = np.asarray(u, dtype=float)
+        if u.shape != self.u.shape:
+            raise ValueError(f"inputs: {u.size} values given, the plant takes {self.u.size} "
+                             f"({', '.join(self.input_names) or 'none'})")
         self.u[:] = u
 
     def check(self) -> StepResult:

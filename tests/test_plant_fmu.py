@@ -313,6 +313,8 @@ def test_self_contained_and_cold_start(fmu_path: Path, tmp_path: Path, make) -> 
            "PYTHONNOUSERSITE": "1", "HOME": str(tmp_path),
            "DRILLCOSIM_CACHE": str(cache_root()),  # the per-user numba cache
            "OPENBLAS_NUM_THREADS": "1"}  # see SUBPROCESS_ENV
+    if os.environ.get("NUMBA_CACHE_DIR"):  # numba's cache of the first use lives there (CI sets it)
+        env["NUMBA_CACHE_DIR"] = os.environ["NUMBA_CACHE_DIR"]
     proc = subprocess.run([sys.executable, "-S", "-s", str(script), str(fmu_path)],
                           cwd=work, env=env, capture_output=True, text=True, timeout=180)
     assert proc.returncode == 0, proc.stderr[-3000:]

@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
         (lambda: PipeParams(youngs_modulus=math.nan), ["pipe.youngs_modulus", "nan"]),
         (lambda: TopDriveParams(axial_stiffness=-1.0), ["top_drive.axial_stiffness", "-1"]),
         (lambda: ContactParams(stiffness=-5.0), ["contact.stiffness", "-5"]),
-        (lambda: ContactParams(clearance=0.0), ["contact.clearance", "0"]),
+        (lambda: ContactParams(clearance=-0.01), ["contact.clearance", "-0.01"]),
         (lambda: PlantParams(stabilizers=StabilizerParams(heights=(90.0,))),
          ["stabilizers.heights", "90", "beyond"]),
         (lambda: PlantParams(contact=ContactParams(bodies=(31,))), ["contact.bodies", "31"]),
