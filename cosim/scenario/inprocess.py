@@ -21,7 +21,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from drillcosim.controller import ControllerParams, StrainController
+from drillcosim.controller import N_CHANNELS, ControllerParams, StrainController
 from drillcosim.cosim.master.errors import FMI2_DISCARD, FMI2_ERROR, CosimError
 from drillcosim.cosim.master.slave import Slave
 from drillcosim.cosim.master.system import ParameterValue, _did_you_mean
@@ -30,7 +30,7 @@ from drillcosim.plant.simulator import PlantSimulator
 
 from .scene_system import AXES, CONTROLLER, CONTROLLER_SITES, PLANT, SceneSystem, scene_controller
 
-__all__ = ["ControllerSlave", "PlantSlave", "inprocess_slaves"]
+__all__ = ["ControllerSlave", "PlantSlave", "inprocess_slaves", "inprocess_system"]
 
 
 class _ArraySlave(Slave):
@@ -168,40 +168,56 @@ class PlantSlave(_ArraySlave):
 
 class ControllerSlave(_ArraySlave):
     """:class:`controller.StrainController` as a slave (inputs: the strains, outputs: the
-    actuator forces [N] of :data:`~.scene_system.CONTROLLER_SITES`, gauges C and E).
+    actuator forces [N] of ``sites``, gauges C and E).
 
     Parameters
     ----------
     name : str
         Instance name.
     params : ControllerParams
+    sites : sequence of int
+        Actuator sites served (default :data:`~.scene_system.CONTROLLER_SITES`, the two of
+        the controller FMU). The law acts channel by channel, so more sites are served by
+        one :class:`StrainController` (four channels) per pair of sites, the last one padded
+        with a zero strain.
     """
 
-    def __init__(self, name: str, params: ControllerParams):
-        sites = [(s, a) for s in CONTROLLER_SITES for a in AXES]
-        super().__init__(name, [f"strain{s}_{a}" for s, a in sites],
-                         [f"actuator{s}_force_{a}" for s, a in sites])
-        self.law = StrainController(params)
+    def __init__(self, name: str, params: ControllerParams,
+                 sites: Sequence[int] = CONTROLLER_SITES):
+        pairs = [(s, a) for s in sites for a in AXES]
+        super().__init__(name, [f"strain{s}_{a}" for s, a in pairs],
+                         [f"actuator{s}_force_{a}" for s, a in pairs])
+        n = len(pairs)
+        self.laws = [StrainController(params) for _ in range(0, n, N_CHANNELS)]
+        self._pad = np.zeros(len(self.laws) * N_CHANNELS)
+
+    def _forces(self, parts: Sequence[np.ndarray]) -> np.ndarray:
+        return np.concatenate(parts)[:len(self.outputs)]
 
     def instantiate(self, start_time: float, stop_time: float | None) -> None:
         """Zero force (the lag state) at the start."""
-        self.law.reset()
-        self.y[:] = self.law.forces
+        for law in self.laws:
+            law.reset()
+        self.y[:] = self._forces([law.forces for law in self.laws])
 
     def do_step(self, t: float, h: float) -> int:
         """The force at ``t + h`` from the strains held over the step."""
+        self._pad[:len(self.u)] = self.u
         try:
-            self.y[:] = self.law.step(t, h, self.u)
+            parts = [law.step(t, h, self._pad[i * N_CHANNELS:(i + 1) * N_CHANNELS])
+                     for i, law in enumerate(self.laws)]
         except ValueError as exc:
             self._problem = f"at t = {t!r}: {exc}"
             return FMI2_ERROR
+        self.y[:] = self._forces(parts)
         return 0
 
     def _save(self):
-        return self.law.get_state()
+        return [law.get_state() for law in self.laws]
 
     def _restore(self, state) -> None:
-        self.law.set_state(state)
+        for law, st in zip(self.laws, state):
+            law.set_state(st)
 
 
 def inprocess_slaves(ss: SceneSystem) -> dict[str, Slave]:
@@ -219,3 +235,68 @@ def inprocess_slaves(ss: SceneSystem) -> dict[str, Slave]:
     if CONTROLLER in {f.name for f in ss.system.fmus}:
         slaves[CONTROLLER] = ControllerSlave(CONTROLLER, scene_controller(scene))
     return slaves
+
+
+def inprocess_system(scene) -> tuple[SceneSystem, dict[str, Slave]]:
+    """A scene's system and its in-process slaves, for any number of actuator sites.
+
+    The FMU pair serves the two sites of :data:`~.scene_system.CONTROLLER_SITES`
+    (:func:`~.scene_system.scene_system` refuses other plants); in process the plant takes the
+    scene's sites (``[actuators] joints``) and :class:`ControllerSlave` serves all of them, so
+    the same master, with the same algorithm, order, delays and sampling as
+    :func:`~.scene_system.scene_system` builds from the scene's ``[cosim]``, runs e.g. 1, 2 or
+    3 sites per span. No FMU file is read; the instances' paths are placeholders.
+
+    Parameters
+    ----------
+    scene : plant.scene.Scene
+        A loaded scene (``model = 'full3d'`` when its controller is enabled).
+
+    Returns
+    -------
+    SceneSystem, dict
+        The system (recorded outputs: per contact body X, Y, radial deflection, contact
+        force; per site the strains C/E and the actuator power; the controller's forces) and
+        ``{"plant": PlantSlave, "controller": ControllerSlave}`` (no controller when the
+        scene's controller is disabled) for ``Execution(ss.system, slaves=...)``.
+    """
+    from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec
+
+    from .scene_system import cosim_settings
+
+    settings = cosim_settings(scene)
+    params = scene_controller(scene)
+    plant = PlantSlave(PLANT, PlantSimulator(DrillstringModel(scene.plant, scene.model)))
+    slaves: dict[str, Slave] = {PLANT: plant}
+    sites = range(1, len(scene.plant.actuator_joints) + 1)
+    outputs = [f"{PLANT}.body{b}_{q}" for b in scene.plant.contact_bodies
+               for q in ("X", "Y", "radial_deflection", "contact_force")]
+    outputs += [f"{PLANT}.{n}" for s in sites
+                for n in (*(f"strain{s}_{a}" for a in AXES), f"actuator{s}_power")]
+    missing = [o for o in outputs if o.split(".", 1)[1] not in plant.outputs]
+    if missing:
+        raise ValueError(f"{scene.source}: the plant has no output {', '.join(missing)}")
+    fmus = [FmuSpec(PLANT, "<in-process plant>")]
+    connections: list[Connection] = []
+    order: tuple[str, ...] = (PLANT,)
+    if params.enabled:
+        if scene.model != "full3d":
+            raise ValueError(f"{scene.source}: the controller needs model = 'full3d', "
+                             f"got '{scene.model}'")
+        ctrl = ControllerSlave(CONTROLLER, params, tuple(sites))
+        slaves[CONTROLLER] = ctrl
+        fmus.append(FmuSpec(CONTROLLER, "<in-process controller>", {},
+                            settings.controller_sample_ticks))
+        for s in sites:
+            for a in AXES:
+                connections.append(Connection(f"{PLANT}.strain{s}_{a}",
+                                              f"{CONTROLLER}.strain{s}_{a}",
+                                              settings.sensor_delay, settings.coupling))
+                connections.append(Connection(f"{CONTROLLER}.actuator{s}_force_{a}",
+                                              f"{PLANT}.actuator{s}_force_{a}",
+                                              settings.actuator_delay, settings.coupling))
+        outputs += [f"{CONTROLLER}.{n}" for n in ctrl.outputs]
+        order = settings.order
+    system = SystemSpec(fmus, connections, settings.step, settings.algorithm, order, 0.0,
+                        settings.stop_time)
+    return SceneSystem(scene, system, settings, tuple(outputs)), slaves

@@ -1,0 +1,119 @@
+"""The conclusion study's pieces: N actuator sites per span in process, the calibrated scenes.
+
+Checked against independent things: the scene layer's own two-site system (bit for bit), the
+controller law written out channel by channel, the span geometry, and the committed
+calibration table (the calibrated scenes carry its best paper-consistent set).
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from drillcosim.controller import ControllerParams
+from drillcosim.cosim.scenario.inprocess import ControllerSlave, inprocess_system
+from drillcosim.cosim.study.calibration import PlantChoice, best_set, objective
+from drillcosim.cosim.study.conclusion import site_joints, site_scene
+from drillcosim.cosim.study.point import PointOptions, point_scene, run_system, simulate_point
+from drillcosim.plant.scene import load_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+EXPERIMENTS = ("open_loop", "closed_loop", "restricted_actuator", "switch_on_25s", "severe")
+
+
+@pytest.mark.parametrize("per_span", [1, 2, 3])
+def test_site_joints_spread_over_each_span(per_span):
+    plant = load_scene("paper_calibrated_closed_loop").plant
+    joints = site_joints(plant, per_span)
+    assert len(joints) == 2 * per_span
+    assert list(joints) == sorted(set(joints))
+    dx = plant.pipe.segment_length
+    for k, (a, b) in enumerate(plant.spans()):
+        own = joints[k * per_span:(k + 1) * per_span]
+        # a joint below body j sits at j * dx from the top: inside its span, off the stabilizers
+        assert all(a < j * dx < b for j in own), (own, a, b)
+    if per_span == 1:  # the scenes' default: below each span's middle body (paper: 11, 26)
+        assert joints == plant.actuator_joints == (11, 26)
+    with pytest.raises(ValueError, match="per_span"):
+        site_joints(plant, 0)
+
+
+def test_controller_slave_serves_any_number_of_sites():
+    params = ControllerParams(gain=1e9, mode="compressive_only", force_limit=5000.0)
+    slave = ControllerSlave("controller", params, (1, 2, 3))   # 6 channels: one padded pair
+    assert slave.inputs == [f"strain{s}_{a}" for s in (1, 2, 3) for a in "CE"]
+    assert slave.outputs == [f"actuator{s}_force_{a}" for s in (1, 2, 3) for a in "CE"]
+    slave.instantiate(0.0, None)
+    strains = np.array([2e-6, -3e-6, 1e-5, -1e-5, 4e-6, 0.0])
+    slave.u[:] = strains
+    assert slave.do_step(0.0, 1e-3) == 0
+    lo, hi = params.lower_limit, params.upper_limit
+    expected = [min(max(1e9 * e, lo), hi) for e in strains]     # the law, channel by channel
+    np.testing.assert_array_equal(slave.y, expected)
+    state = slave.get_state(1e-3)
+    slave.u[:] = 0.0
+    slave.do_step(1e-3, 1e-3)
+    slave.set_state(state, 1e-3)
+    np.testing.assert_array_equal(slave.y, expected)
+    slave.u[2] = np.nan
+    assert slave.do_step(2e-3, 1e-3) != 0 and "strain" in slave.take_problem()
+
+
+def test_two_site_inprocess_system_is_the_scene_system_bit_for_bit(project_fmus):
+    """inprocess_system (built from the scene alone) and scene_system (wired from the FMU
+    files' interfaces), both with the in-process slaves: every recorded value is identical,
+    with an actuator delay on the connections."""
+    sc, over = point_scene("paper_calibrated_closed_loop", 1e9, 5e-4, 2.5e-4, 0.3, False, None)
+    ref, reason_ref = simulate_point(sc, over, PointOptions(), "python")
+    ss, slaves = inprocess_system(sc)
+    new, reason_new = run_system(ss, slaves, PointOptions())
+    assert reason_ref == reason_new == ""
+    common = [n for n in new.dtype.names if n in ref.dtype.names]
+    assert len(common) >= 1 + 4 * 2 + 3 * 2 + 4   # time, 2 bodies, 2 sites, 4 forces
+    for n in common:
+        np.testing.assert_array_equal(new[n], ref[n], err_msg=n)
+    assert np.max(np.abs(new["controller.actuator1_force_C"])) > 0
+
+
+def test_six_sites_run_and_each_site_gets_its_own_force():
+    base = site_scene("paper_calibrated_closed_loop", 3, 1e9, 0.0, 2.5e-4, 0.2)
+    sc = load_scene("paper_calibrated_closed_loop", overrides={
+        "actuators": {"joints": list(base.plant.actuator_joints)},
+        "cosim": {"stop_time": 0.2, "output_interval": 2.5e-4}})   # every step recorded
+    assert len(sc.plant.actuator_joints) == 6
+    ss, slaves = inprocess_system(sc)
+    data, reason = run_system(ss, slaves, PointOptions())
+    assert reason == ""
+    for s in range(1, 7):
+        f = data[f"controller.actuator{s}_force_C"]
+        e = data[f"plant.strain{s}_C"]
+        assert np.max(np.abs(f)) > 0
+        # Gauss-Seidel, controller first: the force at t_k is the gain times the strain the
+        # plant reported at t_k - H (the recorded strain of the previous point)
+        np.testing.assert_allclose(f[1:], 1e9 * e[:-1], rtol=1e-12, atol=1e-9)
+
+
+def test_calibrated_scenes_are_todays_with_the_confirmed_best_set():
+    with open(ROOT / "docs" / "paper_data" / "calibration_confirm.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    table = []
+    for r in rows:
+        d = {k: (float(v) if k not in ("key", "group", "scene", "engine", "overrides",
+                                        "status", "reason") and v != "" else v)
+             for k, v in r.items()}
+        d.update(objective(d))
+        table.append(d)
+    best = best_set(table)
+    p = load_scene("paper_calibrated_open_loop").plant
+    assert best == PlantChoice(p.bit.weight_on_bit, p.top_drive.axial_stiffness,
+                               p.damping.lateral_ratio, p.unbalance.body, p.gravity)
+    for name in EXPERIMENTS:
+        o = best.overrides()
+        if name == "severe":
+            o["top_drive"]["axial_stiffness"] = 2e7
+        a, b = load_scene(f"paper_calibrated_{name}"), load_scene(f"paper_{name}", overrides=o)
+        assert (a.plant, a.controller, a.cosim, a.model) == (b.plant, b.controller, b.cosim,
+                                                              b.model), name
