@@ -8,6 +8,7 @@ calibration table (the calibrated scenes carry its best paper-consistent set).
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 
 import numpy as np
@@ -117,3 +118,37 @@ def test_calibrated_scenes_are_todays_with_the_confirmed_best_set():
         a, b = load_scene(f"paper_calibrated_{name}"), load_scene(f"paper_{name}", overrides=o)
         assert (a.plant, a.controller, a.cosim, a.model) == (b.plant, b.controller, b.cosim,
                                                               b.model), name
+
+
+def _row(per_span, gain, delay, rms, status="ok", growth=0.0, noise=0.01, contact=0.0):
+    return {"key": f"{per_span}|{gain}|{delay}", "per_span": float(per_span), "gain": gain,
+            "delay": delay, "status": status, "reason": "", "end_time": 30.0,
+            "growth_rate": growth, "growth_noise": noise, "long_rms_m": rms,
+            "short_rms_m": rms, "long_contact_time_s": contact, "short_contact_time_s": 0.0,
+            "peak_force": 0.0, "peak_power": 0.0}
+
+
+def test_conclusion_answer_needs_stability_in_both_and_the_benefit_against_both_references():
+    from drillcosim.cosim.study.conclusion_report import answer, conclusion_rows
+
+    ref = _row(1, 0.0, 0.0, 0.010, contact=2.0)
+    rows = [ref,
+            _row(3, 1e8, 5e-4, 0.006),                   # 40 % cut, stable: the answer
+            _row(2, 1e8, 5e-4, 0.008),                   # 20 % cut only
+            _row(1, 2e8, 5e-4, 0.005),                   # predicted unstable
+            _row(2, 2e8, 5e-4, 0.005, growth=0.9),       # grows 0.9 1/s faster than open loop
+            _row(3, 2e8, 5e-4, math.nan, "diverged"),
+            _row(3, 1e8, 2.5e-4, 0.001)]                 # another delay
+    pred = [{"per_span": r["per_span"], "gain": r["gain"], "delay": r["delay"],
+             "predicted_growth_rate": 1.0 if (r["per_span"], r["gain"]) == (1.0, 2e8) else -0.1,
+             "critical_gain": 3e8} for r in rows[1:]]
+    out, reference = conclusion_rows(rows, pred, {"long_rms_m": 0.0075})
+    assert reference is ref and len(out) == len(rows) - 1
+    best = next(r for r in out if (r["per_span"], r["gain"], r["delay"]) == (3.0, 1e8, 5e-4))
+    assert best["benefit_long"] == pytest.approx(0.4)
+    assert best["benefit_long_ensemble"] == pytest.approx(0.2)     # 1 - 6 / 7.5
+    assert [(r["per_span"], r["gain"]) for r in answer(out)] == []  # 20 % vs the ensemble
+    out, _ = conclusion_rows(rows, pred, {"long_rms_m": 0.012})
+    assert [(r["per_span"], r["gain"]) for r in answer(out)] == [(3.0, 1e8)]
+    grows = next(r for r in out if r["growth_rate"] == 0.9)
+    assert grows["verdict"] == "unstable" and not grows["below_margin"]

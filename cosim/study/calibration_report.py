@@ -57,9 +57,11 @@ def calibrate(stage: str, out_dir: str | Path = "out/calibration", *,
 
     Parameters
     ----------
-    stage : {"coarse", "refine", "confirm", "all", "experiments", "report"}
+    stage : {"coarse", "refine", "confirm", "all", "experiments", "conclusion", "report"}
     out_dir : path-like
-        Study folder: ``coarse/``, ``refine/``, ``confirm/``, ``experiments/`` tables.
+        Study folder: ``coarse/``, ``refine/``, ``confirm/``, ``experiments/``,
+        ``conclusion/`` tables (``conclusion``: :mod:`cosim.study.conclusion`, the sites per
+        span x gain x delay study on the calibrated closed loop, and its maps).
     members : int, optional
         Ensemble members per set (default: the stage's).
     workers, scheduler, progress
@@ -80,10 +82,17 @@ def calibrate(stage: str, out_dir: str | Path = "out/calibration", *,
         rows = run_experiments(out / "experiments", 6 if members is None else members,
                                workers=workers, scheduler=scheduler, progress=progress)
         return markdown_table(comparison_rows(rows))
+    if stage == "conclusion":
+        from .conclusion import run_conclusion
+        from .conclusion_report import report as conclusion_report
+
+        run_conclusion(out / "conclusion", workers=workers, scheduler=scheduler,
+                       progress=progress)
+        return conclusion_report(out / "conclusion", figures)
     if stage == "report":
         return report(out, figures)
     raise ValueError(f"stage = {stage!r}: one of {', '.join((*STAGES, 'all', 'experiments'))}"
-                     ", report")
+                     ", conclusion, report")
 
 
 # -- tables ---------------------------------------------------------------------------------

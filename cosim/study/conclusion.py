@@ -30,15 +30,20 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from drillcosim.cosim.master.files import atomic_write
+
 from .table import ResultTable, full_row
 
 __all__ = ["DELAYS", "GAINS", "PER_SPAN", "SCENE", "ConclusionTable", "SitePoint",
-           "conclusion_points", "measure_sites", "predictions", "run_conclusion", "site_joints"]
+           "EXTRA", "conclusion_points", "measure_sites", "predictions", "run_conclusion", "site_joints"]
 
 SCENE = "paper_calibrated_closed_loop"
 PER_SPAN = (1, 2, 3)
 GAINS = (1e7, 1e8, 1e9)                             # N per unit strain
 DELAYS = tuple(k * 2.5e-4 for k in range(9))        # s: 0 .. 2 ms
+#: Extra (gain, delay) points: the question's 0.5 ms delay just below the predicted critical
+#: gain of every site count (2.7e8 .. 3.7e8 N/strain), between the grid's 1e8 and 1e9.
+EXTRA = ((2e8, 5e-4),)
 STEP = 2.5e-4                                       # s
 STOP_TIME = 30.0                                    # s: the calibration's runs
 STEADY_FRACTION = 1.0 / 3.0
@@ -175,9 +180,10 @@ def conclusion_points(per_span: Sequence[int] = PER_SPAN, gains: Sequence[float]
                       stop_time: float = STOP_TIME, scene: str = SCENE) -> list[SitePoint]:
     """The open-loop reference (gain 0: the same system, forces zero) and the grid, by delay
     then gain (the unstable corner last)."""
+    grid = [(g, d) for d in delays for g in gains] + [e for e in EXTRA if e[1] in delays]
     return [SitePoint(1, 0.0, 0.0, step, stop_time, scene)] + [
         SitePoint(n, float(g), float(d), step, stop_time, scene)
-        for d in delays for g in gains for n in per_span]
+        for g, d in grid for n in per_span]
 
 
 def predictions(per_span: Sequence[int] = PER_SPAN, gains: Sequence[float] = GAINS,
@@ -187,15 +193,16 @@ def predictions(per_span: Sequence[int] = PER_SPAN, gains: Sequence[float] = GAI
     (``ln(rho) / H``) and the critical gain [N/strain] at each delay."""
     from .stability import LoopModel
 
+    pairs = [(g, d) for d in delays for g in gains] + [e for e in EXTRA if e[1] in delays]
     out = []
     for n in per_span:
         lm = LoopModel.from_scene(site_scene(scene, n, 1.0, 0.0, step, STOP_TIME))
-        for d in delays:
-            kc = lm.critical_gain(step, float(d), gain_min=1e5, gain_max=1e11, per_decade=4)
-            for g in gains:
-                out.append({"per_span": float(n), "gain": float(g), "delay": float(d),
-                            "predicted_growth_rate": lm.growth_rate(float(g), float(d), step),
-                            "critical_gain": kc})
+        kc = {d: lm.critical_gain(step, float(d), gain_min=1e5, gain_max=1e11, per_decade=4)
+              for d in delays}
+        for g, d in pairs:
+            out.append({"per_span": float(n), "gain": float(g), "delay": float(d),
+                        "predicted_growth_rate": lm.growth_rate(float(g), float(d), step),
+                        "critical_gain": kc[d]})
     return out
 
 
@@ -214,7 +221,13 @@ def run_conclusion(out_dir: str | Path, *, workers: int | None = None, scheduler
     execute_points(pts, table, measure_sites, workers=workers, scheduler=scheduler,
                    progress=progress, desc="conclusion", meta={"conclusion.json": meta})
     pred = Path(out_dir) / "prediction.json"
-    if not pred.exists():
-        pred.write_text(json.dumps(predictions(), indent=1) + "\n")
+    need = {(float(p.per_span), p.gain, p.delay) for p in pts if p.gain > 0}
+    have = {(r["per_span"], r["gain"], r["delay"]) for r in json.loads(pred.read_text())} \
+        if pred.exists() else set()
+    if not need <= have:
+        spans = sorted({p.per_span for p in pts if p.gain > 0})
+        gains = sorted({p.gain for p in pts if p.gain > 0})
+        delays = sorted({p.delay for p in pts})
+        atomic_write(pred, json.dumps(predictions(spans, gains, delays), indent=1) + "\n")
     keys = {p.key for p in pts}
     return [r for r in table.rows if r["key"] in keys]
