@@ -137,7 +137,7 @@ def oat_markdown(ranked: Sequence[Mapping[str, Any]], best: PlantChoice) -> str:
                    hanging_family(ranked, best)))
     for knob, label, scale, sets in panels:
         for a in sets:
-            mark = " (best)" if math.isclose(a[knob], getattr(best, knob)) and knob != \
+            mark = " (centre)" if math.isclose(a[knob], getattr(best, knob)) and knob != \
                 "top_axial_stiffness" or a["group"] == best.label else ""
             value = a[knob] * scale
             extra = (f", WOB {a['weight_on_bit'] / 1e3:.3g} kN"
