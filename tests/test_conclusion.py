@@ -152,3 +152,22 @@ def test_conclusion_answer_needs_stability_in_both_and_the_benefit_against_both_
     assert [(r["per_span"], r["gain"]) for r in answer(out)] == [(3.0, 1e8)]
     grows = next(r for r in out if r["growth_rate"] == 0.9)
     assert grows["verdict"] == "unstable" and not grows["below_margin"]
+
+
+def test_run_conclusion_resumes_and_writes_the_prediction_of_its_points(tmp_path):
+    import json
+
+    from drillcosim.cosim.study.conclusion import SitePoint, run_conclusion
+
+    pts = [SitePoint(1, 0.0, 0.0, stop_time=0.2), SitePoint(1, 1e9, 5e-4, stop_time=0.2)]
+    rows = run_conclusion(tmp_path, workers=0, progress=False, points=pts)
+    assert sorted(r["gain"] for r in rows) == [0.0, 1e9]
+    assert all(r["status"] == "ok" and r["joints"] == "11 26" for r in rows)
+    pred = json.loads((tmp_path / "prediction.json").read_text())
+    (p,) = [p for p in pred if p["gain"] == 1e9 and p["delay"] == 5e-4]
+    # gain 1e9 with 0.5 ms of delay is beyond the critical gain (docs/paper_comparison.md)
+    assert p["predicted_growth_rate"] > 0 and p["critical_gain"] < 1e9
+    before = (tmp_path / "results.csv").read_text()
+    again = run_conclusion(tmp_path, workers=0, progress=False, points=pts)
+    assert [r["key"] for r in again] == [r["key"] for r in rows]
+    assert (tmp_path / "results.csv").read_text() == before

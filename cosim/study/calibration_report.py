@@ -45,7 +45,7 @@ from .calibration import (
 from .experiments import EXPERIMENTS, FAMILIES, comparison_rows, markdown_table, run_experiments
 from .scene_stats import SceneTable
 
-__all__ = ["calibrate", "report"]
+__all__ = ["calibrate", "report", "rows_csv"]
 
 MM = 1e3
 
@@ -149,7 +149,8 @@ def oat_markdown(ranked: Sequence[Mapping[str, Any]], best: PlantChoice) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _csv(rows: Sequence[Mapping[str, Any]]) -> str:
+def rows_csv(rows: Sequence[Mapping[str, Any]]) -> str:
+    """CSV text of dict rows (the first row's keys as columns; NaN empty, floats by repr)."""
     if not rows:
         return ""
     cols = list(rows[0])
@@ -373,7 +374,7 @@ def report(out_dir: str | Path, figures: str | Path | None = None,
     for st in STAGES:
         if (out / st / "results.csv").exists():
             ranked[st] = rank(CalibrationTable(out / st).rows)
-            atomic_write(fig_dir / f"calibration_{st}.csv", _csv(ranked[st]))
+            atomic_write(fig_dir / f"calibration_{st}.csv", rows_csv(ranked[st]))
             consistent = [a for a in ranked[st] if a["paper_consistent"]]
             text += [f"## Stage {st}: {len(ranked[st])} sets", "",
                      f"Best 10 paper-consistent sets (top spring 1e9 N/m, gravity on), of "
@@ -397,7 +398,7 @@ def report(out_dir: str | Path, figures: str | Path | None = None,
     if (out / "experiments" / "results.csv").exists():
         rows = SceneTable(out / "experiments").rows
         cmp = comparison_rows(rows)
-        atomic_write(fig_dir / "experiments.csv", _csv(rows_sorted(rows)))
+        atomic_write(fig_dir / "experiments.csv", rows_csv(rows_sorted(rows)))
         text += ["", "## Experiments", "", markdown_table(cmp),
                  f"![]({plot_experiments(fig_dir / 'experiments.png')})"]
     return "\n".join(text) + "\n"

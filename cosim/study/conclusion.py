@@ -13,8 +13,9 @@ the FMUs cannot run 4 or 6 sites yet), and measures per point
   (:class:`cosim.study.stability.LoopModel`, computed by :func:`predictions`);
 * benefit: the long and short span's RMS radial deflection [m] over the steady window (last
   third of the run: :func:`cosim.study.scene_stats.run_statistics`, RMS = sqrt(mean^2 +
-  std^2)) and contact time [s], against the open loop's 12-member ensemble of the
-  calibration's confirm stage.
+  std^2)) and contact time [s], against the gain-0 run of the same system (the first point)
+  and the open loop's 12-member ensemble of the calibration's confirm stage
+  (:mod:`cosim.study.conclusion_report`).
 
 Each point is one run (member 0, unperturbed); the open-loop ensemble gives the spread one
 run has.

@@ -10,8 +10,6 @@
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import math
 from collections.abc import Mapping, Sequence
@@ -218,22 +216,12 @@ def conclusion_markdown(rows: Sequence[Mapping[str, Any]], ref: Mapping[str, Any
     return "\n".join(lines) + "\n"
 
 
-def _csv(rows: Sequence[Mapping[str, Any]]) -> str:
-    if not rows:
-        return ""
-    cols = list(rows[0])
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, cols, extrasaction="ignore", lineterminator="\n")
-    w.writeheader()
-    w.writerows(rows)
-    return buf.getvalue()
-
-
 def report(out_dir: str | Path, figures: str | Path | None = None) -> str:
     """Write the CSV and the two maps into ``figures`` (default ``out_dir/report``); return
     the markdown (table and the answer). The open-loop ensemble is read from the sibling
     ``confirm`` table of the calibration, if there."""
     from .calibration import CalibrationTable
+    from .calibration_report import rows_csv
 
     out = Path(out_dir)
     fig_dir = Path(figures) if figures is not None else out / "report"
@@ -243,7 +231,7 @@ def report(out_dir: str | Path, figures: str | Path | None = None) -> str:
     ensemble = open_ensemble(CalibrationTable(confirm).rows) \
         if (confirm / "results.csv").exists() else {}
     rows, ref = conclusion_rows(ConclusionTable(out).rows, prediction, ensemble)
-    atomic_write(fig_dir / "conclusion.csv", _csv(rows))
+    atomic_write(fig_dir / "conclusion.csv", rows_csv(rows))
     s = plot_stability(rows, fig_dir / "conclusion_stability.png")
     b = plot_benefit(rows, fig_dir / "conclusion_benefit.png")
     yes = answer(rows)
