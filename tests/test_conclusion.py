@@ -171,3 +171,18 @@ def test_run_conclusion_resumes_and_writes_the_prediction_of_its_points(tmp_path
     again = run_conclusion(tmp_path, workers=0, progress=False, points=pts)
     assert [r["key"] for r in again] == [r["key"] for r in rows]
     assert (tmp_path / "results.csv").read_text() == before
+
+
+def test_member_ensembles_average_the_completed_members_against_the_open_loop_ones():
+    from drillcosim.cosim.study.conclusion_report import member_ensembles
+
+    rows = [dict(_row(1, 0.0, 0.0, v), member=float(k)) for k, v in enumerate((0.010, 0.014))]
+    rows += [dict(_row(3, 1e8, 5e-4, v), member=float(k)) for k, v in enumerate((0.003, 0.003))]
+    rows.append(dict(_row(3, 1e8, 5e-4, math.nan, "diverged", growth=5.0), member=2.0))
+    rows.append(_row(2, 1e8, 5e-4, 0.005))                     # one member: no ensemble
+    ens = member_ensembles(rows)
+    assert [(e["per_span"], e["gain"]) for e in ens] == [(1.0, 0.0), (3.0, 1e8)]
+    e = ens[1]
+    assert (e["members"], e["completed"]) == (3, 2)
+    assert e["long_rms_m"] == pytest.approx(0.003) and e["max_growth_rate"] == 5.0
+    assert e["benefit_long"] == pytest.approx(1 - 0.003 / 0.012)

@@ -35,8 +35,9 @@ from drillcosim.cosim.master.files import atomic_write
 
 from .table import ResultTable, full_row
 
-__all__ = ["DELAYS", "GAINS", "PER_SPAN", "SCENE", "ConclusionTable", "SitePoint",
-           "EXTRA", "conclusion_points", "measure_sites", "predictions", "run_conclusion", "site_joints"]
+__all__ = ["DELAYS", "ENSEMBLES", "EXTRA", "GAINS", "MEMBERS", "PER_SPAN", "SCENE",
+           "ConclusionTable", "SitePoint", "conclusion_points", "measure_sites", "predictions",
+           "run_conclusion", "site_joints"]
 
 SCENE = "paper_calibrated_closed_loop"
 PER_SPAN = (1, 2, 3)
@@ -45,6 +46,12 @@ DELAYS = tuple(k * 2.5e-4 for k in range(9))        # s: 0 .. 2 ms
 #: Extra (gain, delay) points: the question's 0.5 ms delay just below the predicted critical
 #: gain of every site count (2.7e8 .. 3.7e8 N/strain), between the grid's 1e8 and 1e9.
 EXTRA = ((2e8, 5e-4),)
+#: Configurations (sites per span, gain, delay) run as ensembles of :data:`MEMBERS` (member 0
+#: is the grid's run): the open-loop reference, the paper's layout at its gain without delay,
+#: and the candidates of the question (0.5 ms).
+ENSEMBLES = ((1, 0.0, 0.0), (1, 1e9, 0.0), (1, 2e8, 5e-4), (2, 1e8, 5e-4), (2, 2e8, 5e-4),
+             (3, 1e8, 5e-4), (3, 2e8, 5e-4))
+MEMBERS = 4
 STEP = 2.5e-4                                       # s
 STOP_TIME = 30.0                                    # s: the calibration's runs
 STEADY_FRACTION = 1.0 / 3.0
@@ -52,7 +59,9 @@ STEADY_FRACTION = 1.0 / 3.0
 RESULT_COLUMNS = ("status", "reason", "end_time", "wall_time", "joints", "growth_rate",
                   "growth_noise", "peak_force", "peak_power", "long_rms_m", "short_rms_m",
                   "long_peak_m", "long_contact_time_s", "short_contact_time_s")
-ID_COLUMNS = ("key", "scene", "per_span", "gain", "delay", "step", "stop_time")
+ID_COLUMNS = ("key", "scene", "per_span", "gain", "delay", "step", "stop_time", "member")
+EPS = 1e-6      # m: the calibration's ensemble perturbation
+SEED = 2024
 
 
 def site_joints(plant: Any, per_span: int) -> tuple[int, ...]:
@@ -88,7 +97,9 @@ def site_joints(plant: Any, per_span: int) -> tuple[int, ...]:
 
 @dataclass(frozen=True)
 class SitePoint:
-    """One point: sites per span, gain [N/strain], actuator delay [s], step [s]."""
+    """One point: sites per span, gain [N/strain], actuator delay [s], step [s], and the
+    ensemble member (0: unperturbed; else the initial lateral positions perturbed by
+    :func:`cosim.study.ensemble.lateral_perturbation` with :data:`EPS`, :data:`SEED`)."""
 
     per_span: int
     gain: float
@@ -96,23 +107,26 @@ class SitePoint:
     step: float = STEP
     stop_time: float = STOP_TIME
     scene: str = SCENE
+    member: int = 0
 
     @property
     def key(self) -> str:
         """Identity in the table."""
         return (f"{self.scene}|{self.per_span}|{self.gain:.6g}|{self.delay:.6g}|"
-                f"{self.step:.6g}|{self.stop_time:.6g}")
+                f"{self.step:.6g}|{self.stop_time:.6g}"
+                + (f"|m{self.member}" if self.member else ""))
 
     def kwargs(self) -> dict[str, Any]:
         """Arguments of :func:`measure_sites`."""
         return {"scene": self.scene, "per_span": self.per_span, "gain": self.gain,
-                "delay": self.delay, "step": self.step, "stop_time": self.stop_time}
+                "delay": self.delay, "step": self.step, "stop_time": self.stop_time,
+                "member": self.member}
 
     def identity(self) -> dict[str, Any]:
         """Identity columns of the row."""
         return {"key": self.key, "scene": self.scene, "per_span": float(self.per_span),
                 "gain": self.gain, "delay": self.delay, "step": self.step,
-                "stop_time": self.stop_time}
+                "stop_time": self.stop_time, "member": float(self.member)}
 
 
 class ConclusionTable(ResultTable):
@@ -141,7 +155,7 @@ def site_scene(scene: str, per_span: int, gain: float, delay: float, step: float
 
 
 def measure_sites(scene: str, per_span: int, gain: float, delay: float, step: float,
-                  stop_time: float) -> dict[str, Any]:
+                  stop_time: float, member: int = 0) -> dict[str, Any]:
     """Run one point in process (:func:`~cosim.scenario.inprocess.inprocess_system`) and
     measure it (module docstring; columns :data:`RESULT_COLUMNS`)."""
     from drillcosim.cosim.scenario.inprocess import inprocess_system
@@ -153,6 +167,11 @@ def measure_sites(scene: str, per_span: int, gain: float, delay: float, step: fl
     wall0 = time.perf_counter()
     sc = site_scene(scene, per_span, gain, delay, step, stop_time)
     ss, slaves = inprocess_system(sc)
+    if member:
+        from .ensemble import lateral_perturbation
+
+        sim = slaves["plant"].sim
+        sim.y = sim.y + lateral_perturbation(sim.model, EPS, SEED, member)
     opts = PointOptions(rms_fraction=STEADY_FRACTION)
     data, reason = run_system(ss, slaves, opts)
     t = data["time"]
@@ -178,13 +197,17 @@ def measure_sites(scene: str, per_span: int, gain: float, delay: float, step: fl
 
 def conclusion_points(per_span: Sequence[int] = PER_SPAN, gains: Sequence[float] = GAINS,
                       delays: Sequence[float] = DELAYS, *, step: float = STEP,
-                      stop_time: float = STOP_TIME, scene: str = SCENE) -> list[SitePoint]:
-    """The open-loop reference (gain 0: the same system, forces zero) and the grid, by delay
-    then gain (the unstable corner last)."""
+                      stop_time: float = STOP_TIME, scene: str = SCENE,
+                      members: int = MEMBERS) -> list[SitePoint]:
+    """The open-loop reference (gain 0: the same system, forces zero), the grid by delay then
+    gain (the unstable corner last), then members 1..members-1 of :data:`ENSEMBLES`."""
     grid = [(g, d) for d in delays for g in gains] + [e for e in EXTRA if e[1] in delays]
-    return [SitePoint(1, 0.0, 0.0, step, stop_time, scene)] + [
+    pts = [SitePoint(1, 0.0, 0.0, step, stop_time, scene)] + [
         SitePoint(n, float(g), float(d), step, stop_time, scene)
         for g, d in grid for n in per_span]
+    return pts + [SitePoint(n, float(g), float(d), step, stop_time, scene, k)
+                  for n, g, d in ENSEMBLES if n in per_span and d in delays
+                  for k in range(1, members)]
 
 
 def predictions(per_span: Sequence[int] = PER_SPAN, gains: Sequence[float] = GAINS,

@@ -21,8 +21,8 @@ from drillcosim.cosim.master.files import atomic_write
 from .conclusion import DELAYS, GAINS, PER_SPAN, SCENE, ConclusionTable
 from .verdict import GROWTH_MARGIN, NOISE_FACTOR, judge
 
-__all__ = ["answer", "conclusion_rows", "conclusion_markdown", "open_ensemble", "plot_benefit",
-           "plot_stability", "report"]
+__all__ = ["answer", "conclusion_rows", "conclusion_markdown", "member_ensembles",
+           "open_ensemble", "plot_benefit", "plot_stability", "report"]
 
 #: The question's thresholds.
 ANSWER_DELAY = 5e-4      # s
@@ -61,7 +61,9 @@ def conclusion_rows(rows: Sequence[Mapping[str, Any]], prediction: Sequence[Mapp
     ``critical_gain``, ``predicted_stable``, ``benefit_long`` / ``benefit_short``
     (``1 - RMS / RMS_open`` against the gain-0 run), ``benefit_long_ensemble`` (against the
     open-loop ensemble's mean RMS, :func:`open_ensemble`) and ``contact_ratio_long``, sorted by
-    (sites per span, gain, delay); and the reference row."""
+    (sites per span, gain, delay); and the reference row. Member 0 of each point only (the
+    other members: :func:`member_ensembles`)."""
+    rows = [r for r in rows if not r.get("member")]         # 0, or NaN in a table without it
     ref = next((r for r in rows if r["gain"] == 0.0), None)
     pred = {(p["per_span"], p["gain"], p["delay"]): p for p in prediction}
     out = []
@@ -92,6 +94,36 @@ def conclusion_rows(rows: Sequence[Mapping[str, Any]], prediction: Sequence[Mapp
         out.append(d)
     out.sort(key=lambda d: (d["per_span"], d["gain"], d["delay"]))
     return out, ref
+
+
+def member_ensembles(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Per configuration run with more than one member: member count, completed members,
+    long-span RMS mean and sd [m] (over the completed), long contact time mean [s], the largest
+    growth rate [1/s], and ``benefit_long`` = 1 - mean RMS / the gain-0 ensemble's mean RMS."""
+    from .ensemble import ensemble_stat
+
+    groups: dict[tuple[float, float, float], list[Mapping[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault((r["per_span"], r["gain"], r["delay"]), []).append(r)
+    out = []
+    for (n, g, d), members in sorted(groups.items()):
+        if len(members) < 2:
+            continue
+        ok = [m for m in members if m["status"] == "ok"]
+        rms = ensemble_stat([m["long_rms_m"] for m in ok])
+        out.append({"per_span": n, "gain": g, "delay": d, "members": len(members),
+                    "completed": len(ok), "long_rms_m": rms.mean, "long_rms_sd_m": rms.sd,
+                    "long_rms_min_m": min((m["long_rms_m"] for m in ok), default=math.nan),
+                    "long_rms_max_m": max((m["long_rms_m"] for m in ok), default=math.nan),
+                    "long_contact_time_s": ensemble_stat(
+                        [m["long_contact_time_s"] for m in ok]).mean,
+                    "max_growth_rate": max((m["growth_rate"] for m in members
+                                            if math.isfinite(m["growth_rate"])),
+                                           default=math.nan)})
+    ref = next((e for e in out if e["gain"] == 0.0), None)
+    for e in out:
+        e["benefit_long"] = 1.0 - e["long_rms_m"] / ref["long_rms_m"] if ref else math.nan
+    return out
 
 
 def answer(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
@@ -235,9 +267,24 @@ def report(out_dir: str | Path, figures: str | Path | None = None) -> str:
     s = plot_stability(rows, fig_dir / "conclusion_stability.png")
     b = plot_benefit(rows, fig_dir / "conclusion_benefit.png")
     yes = answer(rows)
-    text = [conclusion_markdown(rows, ref, ensemble), f"![]({s})", f"![]({b})", "",
-            f"Stable at {ANSWER_DELAY * 1e3:g} ms (simulation and prediction) with a long-span "
-            f"RMS cut >= {ANSWER_BENEFIT:.0%}: "
-            + (", ".join(f"{r['per_span']:.0f} site(s)/span at gain {r['gain']:.0e} "
-                         f"({r['benefit_long']:.0%})" for r in yes) or "none")]
+    ens = member_ensembles(ConclusionTable(out).rows)
+    text = [conclusion_markdown(rows, ref, ensemble), f"![]({s})", f"![]({b})", ""]
+    if ens:
+        text += ["Ensembles (member 0 = the grid's run; members differ by a 1 um lateral "
+                 "perturbation):", "",
+                 "| sites/span | gain | delay [ms] | members (completed) | long RMS [mm] mean "
+                 "+- sd (min-max) | benefit vs gain-0 ensemble [%] | long contact [s] | "
+                 "max growth [1/s] |", "|" + "---|" * 8]
+        text += [f"| {e['per_span']:.0f} | {e['gain']:.0e} | {e['delay'] * 1e3:g} | "
+                 f"{e['members']} ({e['completed']}) | {_fmt(e['long_rms_m'] * 1e3, '.2f')} +- "
+                 f"{_fmt(e['long_rms_sd_m'] * 1e3, '.2f')} ({_fmt(e['long_rms_min_m'] * 1e3, '.2f')}"
+                 f"-{_fmt(e['long_rms_max_m'] * 1e3, '.2f')}) | "
+                 f"{_fmt(e['benefit_long'] * 100, '.0f')} | "
+                 f"{_fmt(e['long_contact_time_s'], '.2f')} | {_fmt(e['max_growth_rate'], '.3g')} |"
+                 for e in ens]
+        text.append("")
+    text.append(f"Stable at {ANSWER_DELAY * 1e3:g} ms (simulation and prediction) with a "
+                f"long-span RMS cut >= {ANSWER_BENEFIT:.0%} (member 0): "
+                + (", ".join(f"{r['per_span']:.0f} site(s)/span at gain {r['gain']:.0e} "
+                             f"({r['benefit_long']:.0%})" for r in yes) or "none"))
     return "\n".join(text) + "\n"
