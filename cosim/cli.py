@@ -326,9 +326,10 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("calibrate", help="calibrate the paper's open quantities against its "
                        "Figs. 9-11, run its experiments (docs/paper_comparison.md)")
     p.add_argument("stage", choices=("coarse", "refine", "confirm", "all", "experiments",
-                                     "report"),
+                                     "conclusion", "report"),
                    help="coarse grid, one-at-a-time refinement, confirmation ensembles (all: "
-                        "the three), the paper's experiments, or the report (tables + PNGs)")
+                        "the three), the paper's experiments, its conclusion (sites per span x "
+                        "gain x delay, maps), or the report (tables + PNGs)")
     p.add_argument("--out", default="out/calibration", metavar="DIR",
                    help="study folder, one resumable table per stage (default out/calibration)")
     p.add_argument("--members", type=int, metavar="K",

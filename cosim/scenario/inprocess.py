@@ -48,7 +48,8 @@ from .scene_system import (
     scene_top_drive_controller,
 )
 
-__all__ = ["ControllerSlave", "PlantSlave", "TopDriveSlave", "inprocess_slaves"]
+__all__ = ["ControllerSlave", "PlantSlave", "TopDriveSlave", "inprocess_slaves",
+           "inprocess_system"]
 
 
 class _ArraySlave(Slave):
@@ -218,15 +219,17 @@ class ControllerSlave(_LawSlave):
     name : str
         Instance name.
     params : ControllerParams
-    n_sites : int
-        Sites served (default 2, the default controller FMU's).
+    sites : sequence of int
+        Actuator site numbers served, in channel order (default (1, 2), the default controller
+        FMU's); one :class:`StrainController` of ``len(sites)`` sites (a ``gain_matrix`` of
+        ``params`` is ``len(sites)`` square).
     """
 
-    def __init__(self, name: str, params: ControllerParams, n_sites: int = 2):
-        sites = [(s, a) for s in range(1, n_sites + 1) for a in AXES]
-        super().__init__(name, [f"strain{s}_{a}" for s, a in sites],
-                         [f"actuator{s}_force_{a}" for s, a in sites])
-        self.law = StrainController(params, n_sites)
+    def __init__(self, name: str, params: ControllerParams, sites: Sequence[int] = (1, 2)):
+        pairs = [(s, a) for s in sites for a in AXES]
+        super().__init__(name, [f"strain{s}_{a}" for s, a in pairs],
+                         [f"actuator{s}_force_{a}" for s, a in pairs])
+        self.law = StrainController(params, len(sites))
 
     def instantiate(self, start_time: float, stop_time: float | None) -> None:
         """Zero force (the lag state) at the start."""
@@ -276,8 +279,74 @@ def inprocess_slaves(ss: SceneSystem) -> dict[str, Slave]:
         PLANT: PlantSlave(PLANT, PlantSimulator(DrillstringModel(scene.plant, kind)))}
     instances = {f.name for f in ss.system.fmus}
     if CONTROLLER in instances:
-        slaves[CONTROLLER] = ControllerSlave(CONTROLLER, scene_controller(scene),
-                                             len(scene.plant.actuator_joints))
+        slaves[CONTROLLER] = ControllerSlave(
+            CONTROLLER, scene_controller(scene),
+            tuple(range(1, len(scene.plant.actuator_joints) + 1)))
     if TOP_DRIVE in instances:
         slaves[TOP_DRIVE] = TopDriveSlave(TOP_DRIVE, scene_top_drive_controller(scene))
     return slaves
+
+
+def inprocess_system(scene) -> tuple[SceneSystem, dict[str, Slave]]:
+    """A scene's system and its in-process slaves, for any number of actuator sites.
+
+    No FMU file is needed (:func:`~.scene_system.scene_system` uses, and builds, FMUs for the
+    scene's layout): the plant takes the scene's sites (``[actuators] joints``) and
+    :class:`ControllerSlave` serves all of them, so the same master, with the same algorithm,
+    order, delays and sampling as :func:`~.scene_system.scene_system` builds from the scene's
+    ``[cosim]``, runs e.g. 1, 2 or 3 sites per span. No FMU file is read; the instances'
+    paths are placeholders.
+
+    Parameters
+    ----------
+    scene : plant.scene.Scene
+        A loaded scene (``model = 'full3d'`` when its controller is enabled).
+
+    Returns
+    -------
+    SceneSystem, dict
+        The system (recorded outputs: per contact body X, Y, radial deflection, contact
+        force; per site the strains C/E and the actuator power; the controller's forces) and
+        ``{"plant": PlantSlave, "controller": ControllerSlave}`` (no controller when the
+        scene's controller is disabled) for ``Execution(ss.system, slaves=...)``.
+    """
+    from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec
+
+    from .scene_system import cosim_settings
+
+    settings = cosim_settings(scene)
+    params = scene_controller(scene)
+    plant = PlantSlave(PLANT, PlantSimulator(DrillstringModel(scene.plant, scene.model)))
+    slaves: dict[str, Slave] = {PLANT: plant}
+    sites = range(1, len(scene.plant.actuator_joints) + 1)
+    outputs = [f"{PLANT}.body{b}_{q}" for b in scene.plant.contact_bodies
+               for q in ("X", "Y", "radial_deflection", "contact_force")]
+    outputs += [f"{PLANT}.{n}" for s in sites
+                for n in (*(f"strain{s}_{a}" for a in AXES), f"actuator{s}_power")]
+    missing = [o for o in outputs if o.split(".", 1)[1] not in plant.outputs]
+    if missing:
+        raise ValueError(f"{scene.source}: the plant has no output {', '.join(missing)}")
+    fmus = [FmuSpec(PLANT, "<in-process plant>")]
+    connections: list[Connection] = []
+    order: tuple[str, ...] = (PLANT,)
+    if params.enabled:
+        if scene.model != "full3d":
+            raise ValueError(f"{scene.source}: the controller needs model = 'full3d', "
+                             f"got '{scene.model}'")
+        ctrl = ControllerSlave(CONTROLLER, params, tuple(sites))
+        slaves[CONTROLLER] = ctrl
+        fmus.append(FmuSpec(CONTROLLER, "<in-process controller>", {},
+                            settings.controller_sample_ticks))
+        for s in sites:
+            for a in AXES:
+                connections.append(Connection(f"{PLANT}.strain{s}_{a}",
+                                              f"{CONTROLLER}.strain{s}_{a}",
+                                              settings.sensor_delay, settings.coupling))
+                connections.append(Connection(f"{CONTROLLER}.actuator{s}_force_{a}",
+                                              f"{PLANT}.actuator{s}_force_{a}",
+                                              settings.actuator_delay, settings.coupling))
+        outputs += [f"{CONTROLLER}.{n}" for n in ctrl.outputs]
+        order = settings.order
+    system = SystemSpec(fmus, connections, settings.step, settings.algorithm, order, 0.0,
+                        settings.stop_time)
+    return SceneSystem(scene, system, settings, tuple(outputs)), slaves

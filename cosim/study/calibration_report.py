@@ -45,7 +45,7 @@ from .calibration import (
 from .experiments import EXPERIMENTS, FAMILIES, comparison_rows, markdown_table, run_experiments
 from .scene_stats import SceneTable
 
-__all__ = ["calibrate", "report"]
+__all__ = ["calibrate", "report", "rows_csv"]
 
 MM = 1e3
 
@@ -57,9 +57,11 @@ def calibrate(stage: str, out_dir: str | Path = "out/calibration", *,
 
     Parameters
     ----------
-    stage : {"coarse", "refine", "confirm", "all", "experiments", "report"}
+    stage : {"coarse", "refine", "confirm", "all", "experiments", "conclusion", "report"}
     out_dir : path-like
-        Study folder: ``coarse/``, ``refine/``, ``confirm/``, ``experiments/`` tables.
+        Study folder: ``coarse/``, ``refine/``, ``confirm/``, ``experiments/``,
+        ``conclusion/`` tables (``conclusion``: :mod:`cosim.study.conclusion`, the sites per
+        span x gain x delay study on the calibrated closed loop, and its maps).
     members : int, optional
         Ensemble members per set (default: the stage's).
     workers, scheduler, progress
@@ -80,10 +82,17 @@ def calibrate(stage: str, out_dir: str | Path = "out/calibration", *,
         rows = run_experiments(out / "experiments", 6 if members is None else members,
                                workers=workers, scheduler=scheduler, progress=progress)
         return markdown_table(comparison_rows(rows))
+    if stage == "conclusion":
+        from .conclusion import run_conclusion
+        from .conclusion_report import report as conclusion_report
+
+        run_conclusion(out / "conclusion", workers=workers, scheduler=scheduler,
+                       progress=progress)
+        return conclusion_report(out / "conclusion", figures)
     if stage == "report":
         return report(out, figures)
     raise ValueError(f"stage = {stage!r}: one of {', '.join((*STAGES, 'all', 'experiments'))}"
-                     ", report")
+                     ", conclusion, report")
 
 
 # -- tables ---------------------------------------------------------------------------------
@@ -116,7 +125,32 @@ def ranking_markdown(ranked: Sequence[Mapping[str, Any]], n: int = 10) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _csv(rows: Sequence[Mapping[str, Any]]) -> str:
+def oat_markdown(ranked: Sequence[Mapping[str, Any]], best: PlantChoice) -> str:
+    """One-at-a-time table around ``best``: per varied quantity, J mean +- se and the long
+    span's statistics."""
+    lines = ["| varied | value | J mean +- se | long peak [mm] | long mean [mm] | "
+             "long half-band [mm] | long contact [s] | short mean [mm] |",
+             "|---|---|---|---|---|---|---|---|"]
+    panels = [(k, lab, sc, _oat_sets(ranked, best, k)) for k, lab, sc, _ in _OAT]
+    panels.append(("gravity", "gravity [m/s^2]", 1.0, _oat_sets(ranked, best, "gravity")))
+    panels.append(("top_axial_stiffness", "top spring, hanging-string WOB [N/m]", 1.0,
+                   hanging_family(ranked, best)))
+    for knob, label, scale, sets in panels:
+        for a in sets:
+            mark = " (centre)" if math.isclose(a[knob], getattr(best, knob)) and knob != \
+                "top_axial_stiffness" or a["group"] == best.label else ""
+            value = a[knob] * scale
+            extra = (f", WOB {a['weight_on_bit'] / 1e3:.3g} kN"
+                     if label.startswith("top spring, hanging") else "")
+            lines.append(f"| {label} | {value:.4g}{extra}{mark} | {_f(a['objective'])} +- "
+                         f"{_f(a['objective_se'], 2)} | {_f(a['long_peak_m'] * MM)} | "
+                         f"{_f(a['long_mean_m'] * MM)} | {_f(a['long_band_m'] * MM)} | "
+                         f"{_f(a['long_contact_time_s'])} | {_f(a['short_mean_m'] * MM)} |")
+    return "\n".join(lines) + "\n"
+
+
+def rows_csv(rows: Sequence[Mapping[str, Any]]) -> str:
+    """CSV text of dict rows (the first row's keys as columns; NaN empty, floats by repr)."""
     if not rows:
         return ""
     cols = list(rows[0])
@@ -340,15 +374,23 @@ def report(out_dir: str | Path, figures: str | Path | None = None,
     for st in STAGES:
         if (out / st / "results.csv").exists():
             ranked[st] = rank(CalibrationTable(out / st).rows)
-            atomic_write(fig_dir / f"calibration_{st}.csv", _csv(ranked[st]))
-            text += [f"## Stage {st}: {len(ranked[st])} sets (best 10)", "",
-                     ranking_markdown(ranked[st], 10)]
+            atomic_write(fig_dir / f"calibration_{st}.csv", rows_csv(ranked[st]))
+            consistent = [a for a in ranked[st] if a["paper_consistent"]]
+            text += [f"## Stage {st}: {len(ranked[st])} sets", "",
+                     f"Best 10 paper-consistent sets (top spring 1e9 N/m, gravity on), of "
+                     f"{len(consistent)}:", "", ranking_markdown(consistent, 10),
+                     "Best 5 of all sets:", "", ranking_markdown(ranked[st], 5)]
     if "coarse" in ranked:
-        text.append(f"![]({plot_grid(ranked['coarse'], fig_dir / 'calibration_grid.png')})")
+        grid_png = plot_grid(ranked["coarse"], fig_dir / "calibration_grid.png")
+        text.append(f"![]({grid_png})")
     if "refine" in ranked and "coarse" in ranked:
-        coarse_best = PlantChoice.from_row(ranked["coarse"][0])
-        text.append(f"![]({plot_sensitivity(ranked['refine'], coarse_best, fig_dir / 'calibration_sensitivity.png')})")  # noqa: E501
+        coarse_best = PlantChoice.from_row(
+            next(a for a in ranked["coarse"] if a["paper_consistent"]))
+        sens_png = plot_sensitivity(ranked["refine"], coarse_best,
+                                    fig_dir / "calibration_sensitivity.png")
+        text += ["", oat_markdown(ranked["refine"], coarse_best), f"![]({sens_png})"]
     final = ranked.get("confirm") or ranked.get("refine") or ranked.get("coarse")
+    final = [a for a in final or [] if a["paper_consistent"]]
     if final:
         best = PlantChoice.from_row(final[0])
         text += ["", f"Calibrated set: {best.label}", "",
@@ -356,7 +398,7 @@ def report(out_dir: str | Path, figures: str | Path | None = None,
     if (out / "experiments" / "results.csv").exists():
         rows = SceneTable(out / "experiments").rows
         cmp = comparison_rows(rows)
-        atomic_write(fig_dir / "experiments.csv", _csv(rows_sorted(rows)))
+        atomic_write(fig_dir / "experiments.csv", rows_csv(rows_sorted(rows)))
         text += ["", "## Experiments", "", markdown_table(cmp),
                  f"![]({plot_experiments(fig_dir / 'experiments.png')})"]
     return "\n".join(text) + "\n"

@@ -63,7 +63,7 @@ from drillcosim.cosim.scenario.scene_system import AXES, CONTROLLER, PLANT, scen
 from .grid import DEFAULT_GAIN_KEY, check_gain_key
 
 __all__ = ["ENGINES", "PointOptions", "default_gain_key", "error_row", "metrics", "point_scene",
-           "measure_point", "simulate_point"]
+           "measure_point", "run_system", "simulate_point"]
 
 SPANS = ("long", "short")
 #: Slave sets of the master: the FMUs, or the same models in process.
@@ -294,9 +294,6 @@ def simulate_point(sc, over: Mapping[str, Any], opts: PointOptions, engine: str 
         A failure before the run started (bad parameters, a missing FMU); a failure while
         stepping ends the run as diverged (its reason names the slave's own message).
     """
-    from drillcosim.cosim.master.errors import CosimError, DivergenceError
-    from drillcosim.cosim.master.execution import Execution
-    from drillcosim.cosim.master.recorder import Recorder
     from drillcosim.cosim.scenario.scene_system import scene_system
 
     if engine not in ENGINES:
@@ -322,6 +319,17 @@ def simulate_point(sc, over: Mapping[str, Any], opts: PointOptions, engine: str 
                 raise ValueError(f"initial_offset: shape {offset.shape}, the plant's state has "
                                  f"{sim.y.shape}")
             sim.y = sim.y + offset
+    return run_system(ss, slaves, opts)
+
+
+def run_system(ss, slaves: Mapping[str, Any] | None, opts: PointOptions
+               ) -> tuple[np.ndarray, str]:
+    """Run a scene's system through the master, recording its outputs (see
+    :func:`simulate_point`; ``slaves`` as for :class:`~cosim.master.execution.Execution`)."""
+    from drillcosim.cosim.master.errors import CosimError, DivergenceError
+    from drillcosim.cosim.master.execution import Execution
+    from drillcosim.cosim.master.recorder import Recorder
+
     recorder = Recorder(ss.outputs, ss.settings.output_ticks)
     forces = [o for o in ss.outputs if o.startswith(f"{CONTROLLER}.actuator")]
     reason = ""
