@@ -144,3 +144,9 @@ def test_prediction_agrees_with_monolithic_simulation(drill, gain, delay, step):
         assert _monolithic_force_growth(gain, delay, step, 2.0) == pytest.approx(pred, rel=0.3)
     else:          # 4 s: the slow decay (-0.25 1/s) needs a longer window than the beats
         assert _monolithic_force_growth(gain, delay, step, 4.0) < 0.5
+
+
+def test_a_scene_without_a_strain_loop_is_refused_in_one_line():
+    """The axial-torsional chain has no strain gauges or bending actuators to linearize."""
+    with pytest.raises(ValueError, match=r"stick_slip.*'axial_torsional'.*allowed: a full3d"):
+        LoopModel.from_scene("stick_slip")

@@ -415,6 +415,10 @@ class LoopModel:
 
         sc = load_scene(scene, overrides=dict(overrides) if overrides else None) \
             if isinstance(scene, (str, bytes)) or hasattr(scene, "__fspath__") else scene
+        if sc.model != "full3d":
+            raise ValueError(f"scene {sc.name!r}: the stability prediction linearizes the lateral "
+                             f"strain loop (strain gauges -> bending actuators), which model "
+                             f"{sc.model!r} does not have; allowed: a full3d scene")
         st = cosim_settings(sc)
         if st.controller_sample_ticks != 1:
             raise ValueError("LoopModel: only controller_sample_period = step is modelled")
@@ -568,4 +572,8 @@ def _boundary_report(scene: str = "paper_closed_loop") -> list[str]:
 if __name__ == "__main__":  # pragma: no cover
     import sys
 
-    print("\n".join(_boundary_report(*sys.argv[1:2])))
+    try:
+        print("\n".join(_boundary_report(*sys.argv[1:2])))
+    except ValueError as exc:
+        print(f"stability: error: {exc}", file=sys.stderr)
+        sys.exit(2)
