@@ -25,6 +25,7 @@ from drillcosim.plant.model import DrillstringModel, series
 from drillcosim.plant.scene import SceneError, load_scene, scene_from_dict
 from drillcosim.plant.simulator import PlantSimulator, simulate
 from support.torsional import bit_torque as _bit_torque
+from support.torsional import two_dof
 
 
 def _pendulum_parameters(plant) -> tuple[float, float, float]:
@@ -35,17 +36,8 @@ def _pendulum_parameters(plant) -> tuple[float, float, float]:
     segment to body 1); the stiffness-proportional joint damping c = beta k,
     beta = 2 zeta_t / w_t with w_t the first fixed-free rod frequency.
     """
-    pipe = plant.pipe
-    n, dx = pipe.n_segments, pipe.segment_length
-    gj = pipe.shear_modulus * pipe.polar_moment
-    ro, ri = pipe.outer_diameter / 2, pipe.inner_diameter / 2
-    j_seg = 0.5 * pipe.density * pipe.area * dx * (ro**2 + ri**2)
-    phi = (np.arange(n) + 0.5) / (n - 0.5)
-    J = j_seg * float(np.sum(phi**2)) + plant.bit.inertia
-    k = gj / ((n - 0.5) * dx)
-    beta = 2 * plant.damping.torsional_ratio / (math.pi * pipe.torsional_wave_speed
-                                                 / (2 * pipe.length))
-    return J, k, beta * k
+    two = two_dof(plant)  # the same Rayleigh-Ritz shape; a rigid drive keeps only the bit row
+    return float(two.mass[1, 1]), two.k, two.c
 
 
 def _steady_simulator(plant, kind: str, omega: float, torque: float) -> PlantSimulator:

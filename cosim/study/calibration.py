@@ -249,12 +249,15 @@ def refine_sets(best: PlantChoice) -> list[PlantChoice]:
     for kt in (1e7, 2e7, 5e7, 1e8, 1e9):
         sets.append(PlantChoice(_clip("weight_on_bit", hanging_weight_on_bit(kt)), kt,
                                 best.lateral_ratio, best.unbalance_body, 9.81))
-    out, seen = [], set()
+    return _unique(sets)
+
+
+def _unique(sets: Sequence[PlantChoice]) -> list[PlantChoice]:
+    """``sets`` without repeats (same :attr:`PlantChoice.label`), first occurrence kept."""
+    first: dict[str, PlantChoice] = {}
     for s in sets:
-        if s.label not in seen:
-            seen.add(s.label)
-            out.append(s)
-    return out
+        first.setdefault(s.label, s)
+    return list(first.values())
 
 
 def calibration_points(sets: Sequence[PlantChoice], members: int, *,
@@ -359,12 +362,7 @@ def stage_sets(stage: str, out_dir: str | Path) -> list[PlantChoice]:
         refine = _rows(out / "refine", "refine")
         sets = [PlantChoice.from_row(a) for a in [*rank(refine, True)[:3], *rank(coarse, True)[:3]]]
         sets += [best_set(coarse, False), best_set(refine, False), TODAY]
-        out_sets, seen = [], set()
-        for s in sets:
-            if s.label not in seen:
-                seen.add(s.label)
-                out_sets.append(s)
-        return out_sets
+        return _unique(sets)
     raise ValueError(f"stage = {stage!r}: one of {', '.join(STAGES)}")
 
 
