@@ -764,3 +764,29 @@ def test_calling_sequence_is_the_state_mask_table(native_dir: Path) -> None:
     assert "seq: fmi2CancelStep is not allowed in state StepComplete; not supported by this " \
            "FMU" in texts
     assert len(texts) == len(refused)  # one message per refused call
+
+
+@pytest.mark.needs_cc
+def test_the_wrapper_sources_are_named_and_a_stray_c_file_is_not_linked(tmp_path) -> None:
+    """The list of wrapper sources is the folder's C files and headers (nothing forgotten), and a
+    copy of the wrapper package with a stray C file in it (an installed copy: setuptools reuses a
+    checkout's stale ``build/lib``, where a file deleted from the sources stays; seen as
+    'multiple definition of fmi2GetStringStatus' after a `pip install .`) still compiles."""
+    import importlib.util
+    import shutil
+
+    from drillcosim.fmu_src import wrapper
+
+    here = wrapper.HERE
+    assert sorted(wrapper.SOURCES) == sorted(here.glob("*.c"))
+    assert sorted(wrapper.HEADERS) == sorted([*here.glob("*.h"), *here.glob("fmi2/*.h")])
+    copy = tmp_path / "wrapper"
+    shutil.copytree(here, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    (copy / "stray_old_wrapper.c").write_text(
+        '#include "fmi2/fmi2Functions.h"\n'
+        'const char* fmi2GetVersion(void) { return "stray"; }\n')
+    spec = importlib.util.spec_from_file_location("_dcs_test_wrapper_copy", copy / "__init__.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)   # a separate module object: sys.modules is left alone
+    assert module.HERE == copy.resolve()
+    assert module.compile_wrapper(tmp_path / "w.so").stat().st_size > 0

@@ -87,10 +87,16 @@ from pathlib import Path
 __all__ = ["HEADERS", "SOURCES", "compile_shared", "compile_wrapper", "install_native_wrapper", "sources"]
 
 HERE = Path(__file__).resolve().parent
-#: The C sources of the wrapper, compiled together.
-SOURCES: tuple[Path, ...] = tuple(sorted(HERE.glob("*.c")))
+#: The C sources of the wrapper, compiled together. Named, not globbed: an installed copy can
+#: carry stray files (setuptools reuses a checkout's ``build/lib``, where a file deleted from
+#: the sources stays), and a stray ``.c`` would be linked in.
+SOURCES: tuple[Path, ...] = tuple(HERE / n for n in (
+    "dcs_discover.c", "dcs_instance.c", "dcs_python.c", "dcs_slave.c", "dcs_state.c",
+    "fmi2_functions.c"))
 #: The official FMI 2.0.5 headers and our internal ones.
-HEADERS: tuple[Path, ...] = tuple(sorted([*HERE.glob("*.h"), *HERE.glob("fmi2/*.h")]))
+HEADERS: tuple[Path, ...] = tuple(HERE / n for n in (
+    "dcs_discover.h", "dcs_python.h", "dcs_wrapper.h", "fmi2/fmi2FunctionTypes.h",
+    "fmi2/fmi2Functions.h", "fmi2/fmi2TypesPlatform.h"))
 CFLAGS = ("-std=c99", "-O2", "-DNDEBUG", "-Wall", "-Wextra", "-Werror", "-shared", "-fPIC",
           "-fvisibility=hidden")
 
