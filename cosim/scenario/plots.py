@@ -5,7 +5,9 @@
 * :func:`plot_deflection_contact` - radial deflection and contact force vs time
   at every contact body (Figs. 10, 12, 14, 16);
 * :func:`plot_actuators` - actuator forces and powers vs time (Figs. 11, 13, 14);
-* :func:`plot_run` - all of the above for one run.
+* :func:`plot_axial_torsional` - rotary speeds, torques and the bit's axial force vs time (the
+  axial-torsional scenes: stick-slip, bit bounce);
+* :func:`plot_run` - all of the above that the recorded outputs allow, for one run.
 
 Inputs are the structured arrays of :class:`cosim.master.Result` or
 :func:`cosim.scenario.summary.load_results` (columns ``plant.<output>`` /
@@ -29,7 +31,8 @@ from drillcosim.cosim.master.files import AtomicFile  # noqa: E402
 from .scene_system import CONTROLLER, PLANT  # noqa: E402
 from .summary import column, contact_bodies  # noqa: E402
 
-__all__ = ["plot_actuators", "plot_deflection_contact", "plot_orbit", "plot_run", "save_figure"]
+__all__ = ["plot_actuators", "plot_axial_torsional", "plot_deflection_contact", "plot_orbit",
+           "plot_run", "save_figure"]
 
 MM = 1e3  # m -> mm
 KN = 1e-3  # N -> kN
@@ -174,17 +177,62 @@ def plot_actuators(data: np.ndarray, path: str | Path, n_sites: int = 2,
     return save_figure(fig, path)
 
 
+#: Panels of :func:`plot_axial_torsional`: (ylabel, scale, [(fmu, output, label), ...]).
+_AXIAL_TORSIONAL = (
+    ("rotary speed [rad/s]", 1.0, [(PLANT, "top_rotary_speed", "top"),
+                                   (PLANT, "bit_rotary_speed", "bit")]),
+    ("torque [kN m]", KN, [(PLANT, "top_torque", "top (string on the drive)"),
+                           (PLANT, "bit_torque", "bit (rock on the bit)"),
+                           ("top_drive_controller", "top_drive_torque", "motor (controller)")]),
+    ("bit axial force [kN]", KN, [(PLANT, "bit_axial_force", "on the bit")]),
+)
+
+
+def plot_axial_torsional(data: np.ndarray, path: str | Path, title: str = "") -> Path | None:
+    """Top and bit rotary speed [rad/s], top / bit / motor torque [kN m] and the bit's axial
+    force [kN] vs time, each panel drawn if one of its outputs was recorded; times the bit is
+    off the bottom (``plant.bit_on_bottom`` = 0) are shaded."""
+    t = data["time"]
+    panels = [(label, scale, [(column(data, f, n), lab) for f, n, lab in curves])
+              for label, scale, curves in _AXIAL_TORSIONAL]
+    panels = [(label, scale, [(y, lab) for y, lab in curves if y is not None])
+              for label, scale, curves in panels]
+    panels = [p for p in panels if p[2]]
+    if not panels:
+        return None
+    fig, axes = plt.subplots(len(panels), 1, figsize=(8, 2.4 * len(panels) + 0.6), sharex=True,
+                             squeeze=False, layout="constrained")
+    off = column(data, PLANT, "bit_on_bottom")
+    for ax, (label, scale, curves) in zip(axes[:, 0], panels):
+        for y, lab in curves:
+            ax.plot(t, y * scale, lw=0.8, label=lab)
+        if off is not None and (off < 0.5).any():
+            ax.fill_between(t, 0, 1, where=off < 0.5, color="0.85", step="mid",
+                            transform=ax.get_xaxis_transform(), label="bit off bottom")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right", fontsize=8)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(f"{title}: rotary speed, torque and bit force" if title else
+                 "rotary speed, torque and bit force")
+    return save_figure(fig, path)
+
+
 def plot_run(data: np.ndarray, out_dir: str | Path, clearance: float,
              spans: Mapping[int, Mapping] | None = None, n_sites: int = 2,
              title: str = "", switch_on_time: float | None = None) -> list[Path]:
     """Write ``orbit.png``, ``orbit_steady.png`` (last third), ``deflection_contact.png``
-    and ``actuators.png``; return their paths (a plot without data is skipped)."""
+    and ``actuators.png`` (a scene without contact bodies, i.e. the axial-torsional chain:
+    ``axial_torsional.png`` instead); return their paths (a plot without data is skipped)."""
     out = Path(out_dir)
     t = data["time"]
     t_from = float(t[0] + 2.0 / 3.0 * (t[-1] - t[0])) if len(t) > 1 else None
     site_spans = None
     if spans:
         site_spans = [info.get("span", "") for _, info in sorted(spans.items())]
+    if not contact_bodies(data):  # the axial-torsional chain: no lateral motion to show
+        path = plot_axial_torsional(data, out / "axial_torsional.png", title)
+        return [path] if path is not None else []
     paths = [plot_orbit(data, out / "orbit.png", clearance, spans, title),
              plot_orbit(data, out / "orbit_steady.png", clearance, spans, title, t_from),
              plot_deflection_contact(data, out / "deflection_contact.png", clearance, spans,
