@@ -39,3 +39,17 @@ def test_a_3d_run_keeps_the_lateral_figures(tmp_path) -> None:
                     "plant.body11_contact_force", "plant.bit_rotary_speed"])
     names = sorted(p.name for p in plot_run(data, tmp_path, clearance=0.02))
     assert names == ["deflection_contact.png", "orbit.png", "orbit_steady.png"]
+
+
+def test_a_chain_run_summary_has_no_bending_actuators(tmp_path) -> None:
+    """stick_slip keeps the default [actuators] joints, but its chain has no bending actuators:
+    the summary must not list two sites with zero force."""
+    import json
+
+    from drillcosim.cosim.scenario.run import simulate_scene
+
+    out = simulate_scene("stick_slip", stop_time=0.5, out_dir=tmp_path, plots=False,
+                         progress=False)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert out.exit_code == 0 and summary["actuators"] == {}
+    assert summary["torsional"]["bit_speed_max_rad_s"] > 0.0
