@@ -65,3 +65,25 @@ def test_unrepresentable_features_are_refused_or_listed(scene_sys, tmp_path: Pat
     assert len(exp.omitted) == 3 and exp.path.is_file()
     with pytest.raises(ValueError, match=r"must end in '.ssp'"):
         export_ssp(system, tmp_path / "sys.zip")
+
+
+@pytest.mark.needs_cc
+def test_a_user_scene_ssp_names_no_path_of_this_machine(tmp_path: Path) -> None:
+    """A plant FMU built for a user's scene file carries that file; the system and its SSP must
+    name the scene as the FMU does, not by this machine's absolute path: the SSP then runs with
+    the scene file gone (as on another machine)."""
+    from drillcosim.cosim.scenario.ssp_run import simulate_ssp
+
+    scene_file = tmp_path / "user_sites.toml"
+    scene_file.write_text('extends = "four_sites"\n\n[controller]\ngain = 5e7\n\n'
+                          '[cosim]\nalgorithm = "jacobi"\nstep = 1e-4\nstop_time = 0.005\n')
+    ss = scene_system(load_scene(scene_file), tmp_path / "fmus")
+    plant = next(f for f in ss.system.fmus if f.name == "plant")
+    assert plant.parameters["scene"] == "user_sites"
+    ssp = tmp_path / "user.ssp"
+    export_ssp(ss.system, ssp, name="user_sites")
+    with zipfile.ZipFile(ssp) as zf:
+        assert str(tmp_path) not in zf.read("SystemStructure.ssd").decode()
+    scene_file.unlink()
+    out = simulate_ssp(ssp, out_dir=tmp_path / "run", progress=False)
+    assert out.exit_code == 0, out.message

@@ -118,6 +118,12 @@ def _scene_files(scene: Scene) -> tuple[str, tuple[tuple[str, str], ...]]:
     return src.stem, tuple(copies)
 
 
+def embedded_scene_name(scene: Scene) -> str:
+    """The name under which a plant FMU built for ``scene`` carries it (``resources/scenes/``):
+    the value of that FMU's ``scene`` parameter, valid on any machine."""
+    return _scene_files(scene)[0]
+
+
 def plant_layout(scene: Scene) -> PlantLayout | None:
     """The interface of the plant FMU for ``scene``; None when the default FMU serves it.
 

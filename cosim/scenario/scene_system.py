@@ -113,6 +113,7 @@ from .scene_fmus import (
     TOP_DRIVE_CONTROLLER,
     controller_recipe,
     default_fmu_dir,
+    embedded_scene_name,
     ensure_recipes,
     plant_recipe,
     recipe_named,
@@ -589,7 +590,11 @@ def scene_system(scene: Scene, fmu_dir: str | Path | None = None, *,
     plant_face = read_interface(PLANT, path[PLANT])
     plant_params: dict[str, float | int | bool | str] = {}
     if "scene" in plant_face.ports:
-        plant_params["scene"] = scene_reference(scene)
+        # a plant FMU built for this scene carries the scene file: name it as the FMU does, so
+        # the system (and an SSP written from it) holds no path of this machine
+        built_for_scene = files[PLANT] is None and bool(recipes[PLANT].base)
+        plant_params["scene"] = (embedded_scene_name(scene) if built_for_scene
+                                 else scene_reference(scene))
     else:
         warnings.warn(InterfaceWarning(
             f"{plant_face.label} has no 'scene' parameter: the plant tables of "
