@@ -41,10 +41,16 @@ from drillcosim.cosim.master.errors import CosimError
 from drillcosim.cosim.master.master import Master, Result
 
 __all__ = ["EXIT_DIVERGED", "EXIT_OK", "SceneOutcome", "parse_set", "scene_system_from_options",
+           "seconds_text",
            "simulate_into", "simulate_scene", "simulate_system"]
 
 EXIT_OK = 0
 EXIT_DIVERGED = 1
+
+
+def seconds_text(seconds: float) -> str:
+    """A wall time [s] for a one-line message: 3 significant digits, whole seconds from 1000 s."""
+    return f"{seconds:.3g}" if seconds < 1000 else f"{seconds:.0f}"
 
 
 @dataclass(frozen=True)
@@ -226,7 +232,7 @@ def simulate_system(ss, out_dir: str | Path, stop_time: float | None = None,
         return SceneOutcome(EXIT_DIVERGED, msg, out, summary, tuple(files))
     pngs = [Path(f).name for f in files if str(f).endswith(".png")]
     where = f"results.csv, summary.json{' and plots ' + ', '.join(pngs) if pngs else ''} in {out}"
-    msg = (f"{scene.name}: {result.end_time:g} s simulated in {result.wall_time:.1f} s "
+    msg = (f"{scene.name}: {result.end_time:g} s simulated in {seconds_text(result.wall_time)} s "
            f"(real-time factor {result.real_time_factor:.3g}); {where}")
     return SceneOutcome(EXIT_OK, msg, out, summary, tuple(files))
 

@@ -28,7 +28,14 @@ from drillcosim.cosim.master.ssp import SspExport, export_ssp, unsupported_featu
 from drillcosim.cosim.master.ssp_import import read_ssp
 from drillcosim.cosim.master.system import integer_multiple
 
-from .run import EXIT_DIVERGED, EXIT_OK, SceneOutcome, scene_system_from_options, simulate_into
+from .run import (
+    EXIT_DIVERGED,
+    EXIT_OK,
+    SceneOutcome,
+    scene_system_from_options,
+    seconds_text,
+    simulate_into,
+)
 
 __all__ = ["SspWarning", "WrittenSsp", "simulate_ssp", "write_scene_ssp"]
 
@@ -113,7 +120,7 @@ def simulate_ssp(path: str | Path, *, stop_time: float | None = None, step: floa
                             f"{stop:g} s: {failure['message']}; partial results in {out}",
                             out, summary, files)
     return SceneOutcome(EXIT_OK, f"{imp.name}: {result.end_time:g} s simulated in "
-                        f"{result.wall_time:.1f} s (real-time factor "
+                        f"{seconds_text(result.wall_time)} s (real-time factor "
                         f"{result.real_time_factor:.3g}); results.csv, summary.json in {out}",
                         out, summary, files)
 
