@@ -1,4 +1,5 @@
-"""Reliability: FMI API misuse against both FMUs, fuzzed with hypothesis in child processes.
+"""Reliability: FMI API misuse against the project's FMUs (the plant, the Python and C strain
+controllers, the top-drive controller), fuzzed with hypothesis in child processes.
 
 Every campaign (``tests/support/fuzz_fmi.py``) runs in its own Python process, so a crash
 (segfault, abort) is a failing test (negative exit code) and a hang is caught by a
@@ -36,7 +37,8 @@ import pytest
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 FUZZER = HERE / "support" / "fuzz_fmi.py"
-DEFAULT_EXAMPLES = {"StrainController": 150, "DrillstringPlant": 40}
+DEFAULT_EXAMPLES = {"StrainController": 150, "DrillstringPlant": 40, "TopDriveController": 150,
+                    "StrainControllerC": 150}
 TIMEOUT = float(os.environ.get("DRILLCOSIM_FUZZ_TIMEOUT", "600"))
 
 
@@ -66,13 +68,16 @@ def _run_child(args: list[str], timeout: float, cwd: Path) -> subprocess.Complet
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["StrainController", "DrillstringPlant"])
+@pytest.mark.parametrize("name", ["StrainController", "DrillstringPlant", "TopDriveController",
+                                  "StrainControllerC"])
 def test_fuzzed_fmi_call_sequences_never_crash_hang_or_go_fatal(
-        fmu_paths: dict[str, Path], tmp_path: Path, name: str) -> None:
+        fmu_paths: dict[str, Path], tmp_path: Path, name: str, request) -> None:
     examples = int(os.environ.get("DRILLCOSIM_FUZZ_EXAMPLES", DEFAULT_EXAMPLES[name]))
     seed = int(os.environ.get("DRILLCOSIM_FUZZ_SEED", "0"))
     report = tmp_path / "report.json"
-    proc = _run_child([str(FUZZER), str(fmu_paths[name]), "--examples", str(examples),
+    path = (request.getfixturevalue("c_controller_fmu") if name == "StrainControllerC"
+            else fmu_paths[name])
+    proc = _run_child([str(FUZZER), str(path), "--examples", str(examples),
                        "--seed", str(seed), "--report", str(report)], TIMEOUT, tmp_path)
     assert proc.returncode == 0, f"{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}"
     out = json.loads(report.read_text())

@@ -131,12 +131,13 @@ class Harness:
             s.setupExperiment(startTime=0.0)
             s.enterInitializationMode()
             self.fast_parameters(s)
-            if not self.is_plant:  # controller: a visible lag and gain
-                s.setReal([self.by_name["lag_time_constant"].valueReference,
-                           self.by_name["gain"].valueReference], [0.01, 2e9])
+            if {"lag_time_constant", "gain"} <= self.by_name.keys():  # strain controller:
+                s.setReal([self.by_name["lag_time_constant"].valueReference,   # a visible lag
+                           self.by_name["gain"].valueReference], [0.01, 2e9])  # and gain
             s.exitInitializationMode()
             rows = [s.getReal(self.outputs)]
-            scale = 1e3 if self.is_plant else 1e-6
+            # input scale: forces [N] (plant), strains (strain controller), rad/s and N m
+            scale = 1e3 if self.is_plant else 1e-6 if "gain" in self.by_name else 1.0
             for k in range(steps):
                 u = [scale * math.sin(0.3 * k + i) for i in range(len(self.inputs))]
                 s.setReal(self.inputs, u)
