@@ -206,8 +206,7 @@ def simulate_system(ss, out_dir: str | Path, stop_time: float | None = None,
                                          out, progress)
     scene = ss.scene
     spans = span_info(scene)
-    # the axial-torsional chain has no bending actuators, whatever [actuators] says
-    n_sites = len(scene.plant.actuator_joints) if scene.model == "full3d" else 0
+    n_sites = len(scene.plant.actuator_joints)
     ctrl = scene_controller(scene)
     switch = ctrl.switch_on_time if ctrl.enabled else None
     summary = summarize(result.data, scene=scene.name, scene_file=scene.source, spans=spans,

@@ -162,7 +162,7 @@ def summarize(data: np.ndarray, *, scene: str = "", scene_file: str = "",
         ``{body: {"span": ..., "span_length": [m]}}`` (see
         :func:`cosim.scenario.scene_system.span_info`); default: bodies found in ``data``.
     n_sites : int
-        Number of actuator sites.
+        Number of actuator sites; a site none of whose columns was recorded is left out.
     stop_time, step : float
         Requested stop time and base step [s].
     output_interval : float, optional
@@ -215,13 +215,15 @@ def summarize(data: np.ndarray, *, scene: str = "", scene_file: str = "",
         out_spans[f"body{body}"] = entry
     actuators: dict[str, Any] = {}
     for s in range(1, n_sites + 1):
-        fc = _peak(column(data, CONTROLLER, f"actuator{s}_force_C"))
-        fe = _peak(column(data, CONTROLLER, f"actuator{s}_force_E"))
+        forces = [column(data, CONTROLLER, f"actuator{s}_force_{a}") for a in ("C", "E")]
         p = column(data, PLANT, f"actuator{s}_power")
-        sel = t >= w0
         strains = [x for x in (column(data, PLANT, f"strain{s}_C"),
                                         column(data, PLANT, f"strain{s}_E"))
                     if x is not None]
+        if p is None and not strains and all(f is None for f in forces):
+            continue  # nothing of this site was recorded (e.g. the axial-torsional chain)
+        fc, fe = (_peak(f) for f in forces)
+        sel = t >= w0
         extra: dict[str, float] = {}
         if strains:
             eps = np.stack(strains)
