@@ -28,7 +28,7 @@ import numpy as np  # noqa: E402
 
 from drillcosim.cosim.master.files import AtomicFile  # noqa: E402
 
-from .scene_system import CONTROLLER, PLANT  # noqa: E402
+from .scene_system import CONTROLLER, PLANT, TOP_DRIVE  # noqa: E402
 from .summary import column, contact_bodies  # noqa: E402
 
 __all__ = ["plot_actuators", "plot_axial_torsional", "plot_deflection_contact", "plot_orbit",
@@ -183,7 +183,7 @@ _AXIAL_TORSIONAL = (
                                    (PLANT, "bit_rotary_speed", "bit")]),
     ("torque [kN m]", KN, [(PLANT, "top_torque", "top (string on the drive)"),
                            (PLANT, "bit_torque", "bit (rock on the bit)"),
-                           ("top_drive_controller", "top_drive_torque", "motor (controller)")]),
+                           (TOP_DRIVE, "top_drive_torque", "motor (controller)")]),
     ("bit axial force [kN]", KN, [(PLANT, "bit_axial_force", "on the bit")]),
 )
 
@@ -193,11 +193,11 @@ def plot_axial_torsional(data: np.ndarray, path: str | Path, title: str = "") ->
     force [kN] vs time, each panel drawn if one of its outputs was recorded; times the bit is
     off the bottom (``plant.bit_on_bottom`` = 0) are shaded."""
     t = data["time"]
-    panels = [(label, scale, [(column(data, f, n), lab) for f, n, lab in curves])
-              for label, scale, curves in _AXIAL_TORSIONAL]
-    panels = [(label, scale, [(y, lab) for y, lab in curves if y is not None])
-              for label, scale, curves in panels]
-    panels = [p for p in panels if p[2]]
+    panels = []
+    for label, scale, curves in _AXIAL_TORSIONAL:
+        found = [(y, lab) for f, n, lab in curves if (y := column(data, f, n)) is not None]
+        if found:
+            panels.append((label, scale, found))
     if not panels:
         return None
     fig, axes = plt.subplots(len(panels), 1, figsize=(8, 2.4 * len(panels) + 0.6), sharex=True,
