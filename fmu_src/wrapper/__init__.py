@@ -51,7 +51,22 @@ outputs)``: two float64 numpy arrays (C-contiguous, writable, one value per valu
 that hold those Real variables for the slave's lifetime. The wrapper keeps a buffer view of
 each; in step mode ``fmi2GetReal`` of those value references reads them and ``fmi2SetReal`` of
 the inputs (also in initialization mode) writes them, without Python, and ``fmi2DoStep`` is
-one Python call. Any other access goes through ``get_real``/``set_real``.
+one Python call (none with a compiled step, below). Any other access goes through ``get_real``/``set_real``.
+
+Compiled step (the accelerator a slave may carry)
+-------------------------------------------------
+A slave that defines ``_fmi2_compiled_step()`` is asked for it after construction and at the
+end of every call that enters Python and may change it (all but the getters and the FMU-state
+reads). It returns ``None`` (``fmi2DoStep`` calls ``do_step`` in Python) or ``(function,
+context)``: the address of a C function ``int step(void *context, double t, double h)`` (a
+numba ``@cfunc("int32(voidptr, float64, float64)")``) and the pointer it is given. The slave
+keeps what the context points at alive and in place until its next Python call. In step mode
+``fmi2DoStep`` calls ``step`` without the GIL and without entering Python; it reads the input
+buffer and writes the output buffer itself. ``0`` is fmi2OK; any other code ``c`` makes the
+wrapper take the GIL and call ``slave._fmi2_compiled_step_failed(c, t, h)``, whose outcome is
+the step's status by the protocol above (the slave logs the message its ``do_step`` would
+have), and the compiled step is taken anew. ``do_step`` in Python stays the fallback and the
+reference (``tests/test_wrapper_compiled_step.py``).
 
 Other behaviour
 ---------------

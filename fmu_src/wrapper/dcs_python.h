@@ -49,6 +49,7 @@
     X(PyObject *, PyLong_FromUnsignedLong, (unsigned long)) \
     X(PyObject *, PyLong_FromLong, (long)) \
     X(long, PyLong_AsLong, (PyObject *)) \
+    X(void *, PyLong_AsVoidPtr, (PyObject *)) \
     X(PyObject *, PyFloat_FromDouble, (double)) \
     X(double, PyFloat_AsDouble, (PyObject *)) \
     X(PyObject *, PyBool_FromLong, (long)) \
@@ -75,7 +76,8 @@ typedef struct {
     PyObject *setup_experiment, *enter_initialization_mode, *exit_initialization_mode,
         *do_step, *terminate, *reset, *get_real, *get_integer, *get_boolean, *get_string,
         *set_real, *set_integer, *set_boolean, *set_string, *get_fmu_state, *set_fmu_state,
-        *to_bytes, *from_bytes, *fmi2_status, *real_buffers, *get_log_queue, *status,
+        *to_bytes, *from_bytes, *fmi2_status, *real_buffers, *compiled_step,
+        *compiled_step_failed, *get_log_queue, *status,
         *category, *msg, *format_exception;
     PyObject *none, *true_, *false_, *empty, *traceback;
 } DcsNames;
@@ -87,6 +89,9 @@ PyObject *dcs_slave_object(DcsInstance *in);
 fmi2Status dcs_slave_exception(DcsInstance *in, const char *fn);
 fmi2Status dcs_slave_status(DcsInstance *in, PyObject *result, const char *fn);
 void dcs_slave_drain(DcsInstance *in);
+/* End of a Python call that may change the slave: take its compiled step anew (see
+ * dcs_slave.c) and drain its log; returns status, raised if the compiled step is unusable. */
+fmi2Status dcs_slave_leave(DcsInstance *in, fmi2Status status, const char *fn);
 
 static inline void dcs_decref(PyObject *o)
 {

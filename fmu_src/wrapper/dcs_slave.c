@@ -19,7 +19,24 @@
  * memory lives as long as it is used) and then, in step mode, answers fmi2GetReal of those
  * value references and takes fmi2SetReal of the inputs (also in initialization mode) straight
  * from/into that memory, without Python; any other call, or a call mixing other value
- * references, goes to the slave's get_real/set_real. fmi2DoStep is one Python call.
+ * references, goes to the slave's get_real/set_real.
+ *
+ * Compiled step (the accelerator a slave may carry; fmu_src/wrapper/__init__.py):
+ *  1. A slave that defines _fmi2_compiled_step() is asked for its step after construction and
+ *     at the end of every call that enters Python and may change it (every call but the
+ *     getters and the FMU-state reads): it returns None (fmi2DoStep calls do_step in Python)
+ *     or (function, context), two ints: the address of a C function
+ *         int step(void *context, double t, double h)      (numba: int32(voidptr, f8, f8))
+ *     and the pointer it gets. The slave keeps everything the context points at alive and
+ *     unchanged in place until its next Python call (the wrapper holds no reference).
+ *  2. fmi2DoStep then calls step(context, t, h) WITHOUT the GIL and without entering Python.
+ *     0: fmi2OK. Any other code c: the wrapper takes the GIL and calls
+ *     slave._fmi2_compiled_step_failed(c, t, h); its outcome is the step's status by the
+ *     status protocol above (the slave logs what happened, as its do_step would have), and the
+ *     compiled step is taken anew.
+ *  3. The step reads the inputs buffer and writes the outputs buffer itself; the wrapper moves
+ *     nothing else. An unusable answer of _fmi2_compiled_step (not None or two ints, a NULL
+ *     function) is fmi2Error of the call it ended, logged, and do_step runs in Python.
  */
 #include "dcs_python.h"
 
@@ -38,6 +55,9 @@ struct DcsSlave {
     double *in, *out;
     int *slot;            /* slot[vr]: k > 0 output k-1, k < 0 input -k-1, 0 neither */
     size_t n_slot;
+    int has_compiled;     /* the slave defines _fmi2_compiled_step */
+    DcsCompiledStep step; /* its current compiled step, NULL: do_step in Python */
+    void *step_context;
 };
 
 /* --------------------------------------------------------------- messages (GIL held) */
@@ -153,6 +173,58 @@ static fmi2Status status_of(DcsInstance *in, PyObject *res, int is_step, const c
         }
         dcs_decref(extra);
     }
+    return status;
+}
+
+/* Take the slave's compiled step anew (GIL held; see the top of this file); returns status,
+ * raised to fmi2Error (logged) if the answer is unusable. */
+static fmi2Status refresh_compiled(DcsInstance *in, fmi2Status status, const char *fn)
+{
+    DcsSlave *s = in->slave;
+    PyObject *self_only[1], *res, *seq = NULL;
+    void *fn_ptr = NULL, *ctx = NULL;
+    const char *why = NULL;
+    if (s == NULL || !s->has_compiled || status == fmi2Fatal)
+        return status;
+    s->step = NULL;
+    s->step_context = NULL;
+    self_only[0] = s->obj;
+    res = p_PyObject_VectorcallMethod(dcs_py.compiled_step, self_only,
+                                      1 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
+    if (res == NULL) {
+        fmi2Status st = log_exception(in, "_fmi2_compiled_step");
+        return st > status ? st : status;
+    }
+    if (res != dcs_py.none) {
+        seq = p_PySequence_Fast(res, "");
+        if (seq == NULL || PySequence_Fast_GET_SIZE(seq) != 2) {
+            why = "not None or a pair (function address, context address)";
+        } else {
+            fn_ptr = p_PyLong_AsVoidPtr(PySequence_Fast_GET_ITEM(seq, 0));
+            ctx = p_PyLong_AsVoidPtr(PySequence_Fast_GET_ITEM(seq, 1));
+            if (p_PyErr_Occurred() || fn_ptr == NULL)
+                why = "the function address is not a non-zero integer";
+        }
+        p_PyErr_Clear();
+    }
+    if (why != NULL) {
+        dcs_log(in, fmi2Error, "logStatusError", "%s: %s: the slave's _fmi2_compiled_step(): "
+                "%s; doStep runs in Python", in->name, fn, why);
+        status = status > fmi2Error ? status : fmi2Error;
+    } else if (fn_ptr != NULL) {
+        /* a data pointer turned into a function pointer: POSIX guarantees this (dlsym) */
+        memcpy(&s->step, &fn_ptr, sizeof s->step);
+        s->step_context = ctx;
+    }
+    dcs_decref(seq);
+    dcs_decref(res);
+    return status;
+}
+
+fmi2Status dcs_slave_leave(DcsInstance *in, fmi2Status status, const char *fn)
+{
+    status = refresh_compiled(in, status, fn);
+    drain_log(in);
     return status;
 }
 
@@ -365,12 +437,16 @@ static int construct(DcsInstance *in, DcsSlave *s)
         rc = bind_buffers(in, &fresh, obj) == 0 ? 0 : -2; /* -2: already logged */
     if (rc == 0) {
         fresh.has_status = p_PyObject_HasAttr(obj, dcs_py.fmi2_status);
+        fresh.has_compiled = p_PyObject_HasAttr(obj, dcs_py.compiled_step);
         release_buffers(s);
         dcs_decref(s->obj);
         dcs_decref(s->log_queue);
         s->obj = obj;
         s->log_queue = q;
         s->has_status = fresh.has_status;
+        s->has_compiled = fresh.has_compiled;
+        s->step = NULL;
+        s->step_context = NULL;
         s->in_view = fresh.in_view;
         s->out_view = fresh.out_view;
         s->has_buffers = fresh.has_buffers;
@@ -419,6 +495,8 @@ fmi2Status dcs_slave_create(DcsInstance *in)
         } else if ((rc = construct(in, s)) != 0) {
             status = rc == -2 ? fmi2Error
                               : log_exception(in, "fmi2Instantiate (creating the slave)");
+        } else {
+            status = refresh_compiled(in, status, "fmi2Instantiate");
         }
         drain_log(in);
         if (status > fmi2Warning) {
@@ -474,7 +552,7 @@ fmi2Status dcs_slave_setup_experiment(DcsInstance *in, int tolerance_defined, do
     dcs_decref(args[0]);
     dcs_decref(args[1]);
     dcs_decref(args[2]);
-    drain_log(in);
+    status = dcs_slave_leave(in, status, "fmi2SetupExperiment");
     p_PyGILState_Release(gil);
     return status;
 }
@@ -487,25 +565,40 @@ fmi2Status dcs_slave_call(DcsInstance *in, DcsCall call)
                                dcs_py.exit_initialization_mode, dcs_py.terminate};
     PyGILState_STATE gil = p_PyGILState_Ensure();
     fmi2Status status = call_method(in, names[call], NULL, 0, 0, fns[call]);
-    drain_log(in);
+    status = dcs_slave_leave(in, status, fns[call]);
     p_PyGILState_Release(gil);
     return status;
 }
 
 fmi2Status dcs_slave_do_step(DcsInstance *in, double t, double h)
 {
-    PyGILState_STATE gil = p_PyGILState_Ensure();
-    PyObject *args[2];
+    DcsSlave *s = in->slave;
+    int code = 0;
+    PyGILState_STATE gil;
+    PyObject *args[3] = {NULL, NULL, NULL};
     fmi2Status status;
+    if (s->step != NULL) {
+        code = s->step(s->step_context, t, h); /* no GIL, no Python */
+        if (code == 0)
+            return fmi2OK;
+    }
+    gil = p_PyGILState_Ensure();
     args[0] = p_PyFloat_FromDouble(t);
     args[1] = p_PyFloat_FromDouble(h);
-    if (args[0] == NULL || args[1] == NULL)
+    if (code != 0)
+        args[2] = p_PyLong_FromLong(code);
+    if (args[0] == NULL || args[1] == NULL || (code != 0 && args[2] == NULL)) {
         status = log_exception(in, "fmi2DoStep");
-    else
+    } else if (code != 0) {
+        PyObject *failed[3] = {args[2], args[0], args[1]};
+        status = call_method(in, dcs_py.compiled_step_failed, failed, 3, 1, "fmi2DoStep");
+    } else {
         status = call_method(in, dcs_py.do_step, args, 2, 1, "fmi2DoStep");
+    }
     dcs_decref(args[0]);
     dcs_decref(args[1]);
-    drain_log(in);
+    dcs_decref(args[2]);
+    status = dcs_slave_leave(in, status, "fmi2DoStep");
     p_PyGILState_Release(gil);
     return status;
 }
@@ -525,7 +618,7 @@ fmi2Status dcs_slave_reset(DcsInstance *in)
         else if (rc == -2)
             status = fmi2Error;
     }
-    drain_log(in);
+    status = dcs_slave_leave(in, status, "fmi2Reset");
     p_PyGILState_Release(gil);
     return status;
 }
@@ -727,7 +820,7 @@ static fmi2Status set_through_python(DcsInstance *in, const fmi2ValueReference v
     }
     dcs_decref(vrs);
     dcs_decref(vals);
-    drain_log(in);
+    status = dcs_slave_leave(in, status, fn);
     p_PyGILState_Release(gil);
     return status;
 }

@@ -90,7 +90,7 @@ fmi2Status dcs_state_set(DcsInstance *in, fmi2FMUstate state)
             in, p_PyObject_VectorcallMethod(dcs_py.set_fmu_state, args,
                                             2 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL),
             "fmi2SetFMUstate");
-        dcs_slave_drain(in);
+        status = dcs_slave_leave(in, status, "fmi2SetFMUstate");
         p_PyGILState_Release(gil);
     }
     return status;

@@ -36,6 +36,9 @@ typedef struct {
 
 typedef struct DcsSlave DcsSlave; /* Python side of an instance (dcs_slave.c) */
 
+/* A slave's compiled step (dcs_slave.c): 0 = step done, else a code for the slave. */
+typedef int (*DcsCompiledStep)(void *context, double t, double h);
+
 typedef struct {
     unsigned magic;
     DcsState state;

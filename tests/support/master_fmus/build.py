@@ -27,7 +27,7 @@ from drillcosim.fmu_src import build as project_build
 
 HERE = Path(__file__).resolve().parent
 SCRIPTS = {"mt_integrator": "MtIntegrator", "mt_gain": "MtGain", "mt_source": "MtSource",
-           "mt_mass": "MtMass"}
+           "mt_mass": "MtMass", "mt_compiled": "MtCompiled"}
 
 
 def cache_dir() -> Path:
