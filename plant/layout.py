@@ -1,7 +1,8 @@
 """Index constants of the flat float parameter vector ``p`` shared by the compiled kernels.
 
 The kernels take plain arrays (numba compiles them once); ``plant/model.py`` fills ``p`` from a
-:class:`~plant.params.PlantParams`. Units are SI throughout.
+:class:`~plant.params.PlantParams`: the scalar header (length ``NP``), then one record of ``NB``
+values per body. Units are SI throughout.
 """
 
 # geometry and inertia of one segment
@@ -64,7 +65,49 @@ BIT_WEAK = 49  # static / dynamic friction - 1 [1]
 BIT_WSPD = 50  # weakening speed [rad/s]
 BIT_JX = 51  # polar inertia added to the bit body [kg m^2]
 BIT_ZH0 = 52  # initial hole-bottom depth [m] (drilled depth = z_h - BIT_ZH0)
-NP = 53
+# field strings (sections, trajectory): the top drive's hoisting and frame
+HOIST = 53  # hoisting speed of the top drive along its axis [m/s] (> 0 lowers the string)
+TD_R = 54  # 9 values: frame of the top drive (body -> inertial, row-major) [1]
+NP = 63  # length of the scalar header; the body records follow it
+
+# Per-body records: p[NP + NB * k + field] for body k (0-based); the J_* fields describe the
+# joint below body k (between bodies k and k + 1; unused for the last body). For the uniform
+# pipe every record holds the scalars above, so that the kernels compute exactly the same.
+B_M = 0  # mass [kg] (axial and rotational motion)
+B_IM = 1  # 1 / mass [1/kg]
+B_ML = 2  # lateral mass: mass + added mass of the mud [kg]
+B_JT = 3  # transverse moment of inertia about G [kg m^2]
+B_JP = 4  # polar moment of inertia [kg m^2]
+B_IJP = 5  # 1 / polar moment of inertia [1/(kg m^2)]
+B_H = 6  # half length [m]
+B_W = 7  # weight along +Z (buoyed) [N]
+B_CLIN = 8  # linear lateral drag [N s/m]
+B_CQ = 9  # quadratic lateral drag [N s^2/m^2]
+B_K1 = 10  # curvature of the hole axis at the body, local x component [1/m]
+B_K2 = 11  # ... local y component [1/m]
+B_P = 12  # 3 values: reference point of the body's local frame (inertial) [m]
+B_R = 15  # 9 values: reference frame of the body (local -> inertial, row-major) [1]
+J_KAX = 24  # joint below: axial stiffness [N/m]
+J_KSH = 25  # shear stiffness [N/m]
+J_G1 = 26  # rotational potential G1 (= torsional stiffness) [N m]
+J_G3 = 27  # G3 = 2 k_bend - k_tors [N m]
+J_CAX = 28  # axial damping [N s/m]
+J_CSH = 29  # shear damping [N s/m]
+J_CBE = 30  # bending damping [N m s/rad]
+J_CTO = 31  # torsional damping [N m s/rad]
+J_LEN = 32  # distance between the two mass centres h_a + h_b [m]
+J_RG = 33  # strain gauge radius at the joint [m]
+J_ARM = 34  # moment arm of an actuator pair at the joint [m]
+B_CLR = 35  # radial clearance of the body's mass centre to the wall [m]
+B_RC = 36  # contact radius (outer radius touching the wall) [m]
+NB = 37
+
+# columns of the contact-point table in ``fp`` (after the load table; one row a point)
+CP_BODY = 0  # 0-based body index
+CP_Z = 1  # offset of the point from the mass centre along the body axis [m]
+CP_CLR = 2  # radial clearance to the wall [m]
+CP_RC = 3  # contact radius [m]
+NCP = 4
 
 # columns of the load table (one row a load)
 LD_KIND = 0  # 0 force (inertial axis), 1 torque (body axis)

@@ -91,7 +91,7 @@ class PlantSimulator:
         self._names = self._state_names()
         #: names of the entries of the input vector (see ``DrillstringModel.input_names``)
         self.input_names = list(model.input_names)
-        self._strain_factor = 0.5 * model.params.pipe.outer_diameter / model.derived.dx
+        self._strain_factor = model.strain_factor
 
     def _state_names(self) -> list[str]:
         m = self.model
