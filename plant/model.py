@@ -49,6 +49,7 @@ from .sections import (
     body_table,
     chain_first_frequency,
     joint_dampers,
+    local_frequencies,
     max_joint_frequency,
 )
 from .trajectory import StringLay, WellPath, lay_string
@@ -410,20 +411,23 @@ class DrillstringModel:
         p[lay.KT_AX] = series(td.axial_stiffness, 2.0 * k_ax0[0])
         p[lay.KT_LAT] = series(td.lateral_stiffness, 2.0 * k_sh0[0])
         p[lay.KT_TO] = series(td.torsional_stiffness, 2.0 * k_to0[0])
-        m0 = tab.mass[:1]
-        p[lay.CT_AX] = joint_dampers(beta_ax, np.array([p[lay.KT_AX]]), m0, m0, max_rate)[0]
-        p[lay.CT_LAT] = joint_dampers(beta_ax, np.array([p[lay.KT_LAT]]), m0, m0, max_rate)[0]
-        j0 = tab.j_polar[:1]
-        p[lay.CT_TO] = joint_dampers(beta_to, np.array([p[lay.KT_TO]]), j0, j0, max_rate)[0]
+        def end_damper(beta: float, k: float, inertia: float) -> float:
+            return float(joint_dampers(beta, np.array([k]), np.array([4.0 * k / inertia]),
+                                       max_rate)[0])
+
+        h0 = tab.half[0]
+        rot0 = max(1.0 / tab.mass[0], h0 * h0 / tab.j_transverse[0])
+        p[lay.CT_AX] = end_damper(beta_ax, p[lay.KT_AX], tab.mass[0])
+        p[lay.CT_LAT] = end_damper(beta_ax, p[lay.KT_LAT], 1.0 / rot0)
+        p[lay.CT_TO] = end_damper(beta_to, p[lay.KT_TO], tab.j_polar[0])
         p[lay.OMEGA0] = td.rotary_speed
         p[lay.T_RAMP] = td.ramp_time
         p[lay.TD_INERTIA] = td.inertia
         p[lay.HOIST] = td.hoisting_speed
         p[lay.TD_R: lay.TD_R + 9] = np.eye(3).ravel()
         bit = prm.bit
-        me = tab.mass[-1:]
         p[lay.KB_AX] = series(bit.axial_stiffness, 2.0 * k_ax0[-1])
-        p[lay.CB_AX] = joint_dampers(beta_ax, np.array([p[lay.KB_AX]]), me, me, max_rate)[0]
+        p[lay.CB_AX] = end_damper(beta_ax, p[lay.KB_AX], tab.mass[-1])
         p[lay.BIT_AMP] = bit.displacement_amplitude if bit.axial_stiffness > 0.0 else 0.0
         p[lay.BIT_LOBES] = bit.lobes
         p[lay.BIT_TORQUE] = bit.torque
@@ -460,20 +464,20 @@ class DrillstringModel:
 
         # per-body records
         g = prm.gravity
+        mass = tab.mass
+        buoy = body_fluid(prm, tab, np.full(n, np.nan))[0]
+        weight = np.where(buoy == 1.0, mass * g, mass * g * buoy)
         body_md = tab.top + tab.half
         if self.framed:
-            self.lay = self._lay_string()
+            self.lay = self._lay_string(weight)
             body_md = self.lay.md
         hole = self._hole_diameters(body_md)
         buoy, madd, clin, cq = body_fluid(prm, tab, hole)
-        mass = tab.mass
-        ma, mb = mass[:-1], mass[1:]
-        ja = np.minimum(tab.j_polar[:-1], tab.j_polar[1:])
-        jt = np.minimum(tab.j_transverse[:-1], tab.j_transverse[1:])
-        c_ax = joint_dampers(beta_ax, tab.k_axial, ma, mb, max_rate)
-        c_sh = joint_dampers(beta_ax, tab.k_shear, ma, mb, max_rate)
-        c_be = joint_dampers(beta_be, tab.k_bend, jt, jt, max_rate)
-        c_to = joint_dampers(beta_to, tab.k_tors, ja, ja, max_rate)
+        w2 = local_frequencies(tab)
+        c_ax = joint_dampers(beta_ax, tab.k_axial, w2["axial"], max_rate)
+        c_sh = joint_dampers(beta_ax, tab.k_shear, w2["shear"], max_rate)
+        c_be = joint_dampers(beta_be, tab.k_bend, w2["bend"], max_rate)
+        c_to = joint_dampers(beta_to, tab.k_tors, w2["tors"], max_rate)
         if prm.trajectory is None:
             clear = np.full(n, ct.clearance)
             rcon = np.full(n, p[lay.R_OUT]) if uniform else tab.contact_radius
@@ -493,11 +497,13 @@ class DrillstringModel:
             p[o + lay.B_M] = m
             p[o + lay.B_IM] = 1.0 / m
             p[o + lay.B_ML] = m + madd[k] if madd[k] > 0.0 else m
-            p[o + lay.B_JT] = tab.j_transverse[k]
+            # the mud's added mass also follows a segment's rotation: + m_a dx^2 / 12
+            p[o + lay.B_JT] = (tab.j_transverse[k] if madd[k] == 0.0 else
+                               tab.j_transverse[k] + madd[k] * tab.length[k] ** 2 / 12.0)
             p[o + lay.B_JP] = tab.j_polar[k]
             p[o + lay.B_IJP] = 1.0 / tab.j_polar[k]
             p[o + lay.B_H] = tab.half[k]
-            p[o + lay.B_W] = m * g if buoy[k] == 1.0 else m * g * buoy[k]
+            p[o + lay.B_W] = weight[k]
             p[o + lay.B_CLIN] = alpha_lat * m if clin[k] == 0.0 else alpha_lat * m + clin[k]
             p[o + lay.B_CQ] = cq[k]
             p[o + lay.B_R: o + lay.B_R + 9] = np.eye(3).ravel()
@@ -553,6 +559,7 @@ class DrillstringModel:
             cps = [(b - 1, 0.0, ct.clearance, p[lay.R_OUT]) for b in self.contact_bodies]
         else:
             cps = [(k, 0.0, clear[k], rcon[k]) for k in range(n)]
+            cps += self._stabilizer_points(hole)
             e = n - 1
             hole_bit = hole[e]
             cps.append((e, tab.half[e], max(0.0, 0.5 * hole_bit - bit.radius), bit.radius))
@@ -583,18 +590,41 @@ class DrillstringModel:
         self.breakpoints = np.unique(np.array([t for t in bps if math.isfinite(t) and t > 0.0],
                                               dtype=float))
 
-    def static_tensions(self, axis: np.ndarray) -> np.ndarray:
+    def _stabilizer_points(self, hole: np.ndarray) -> list[tuple[int, float, float, float]]:
+        """Contact points (body, offset from its centre [m], clearance [m], radius [m]) of the
+        sections' stabilizer blades; ``hole`` [m] the hole diameter at every body."""
+        from .sections import string_sections
+
+        tab = self.bodies
+        out = []
+        top = 0.0
+        for i, sec in enumerate(string_sections(self.params)):
+            ks = np.flatnonzero(tab.section == i)
+            for z in sec.stabilizers:
+                s = top + z  # from the top of the string
+                k = int(ks[min(np.searchsorted(tab.top[ks], s + 1e-9, side="right") - 1,
+                               ks.size - 1)])
+                r = 0.5 * sec.stabilizer_diameter
+                clr = 0.5 * hole[k] - r
+                if clr < 0.0:
+                    raise ValueError(
+                        f"sections ({sec.kind}): stabilizer_diameter {sec.stabilizer_diameter:g}"
+                        f" m does not fit the hole (diameter {hole[k]:g} m)")
+                out.append((k, s - (tab.top[k] + tab.half[k]), clr, r))
+            top += sec.length
+        return out
+
+    def static_tensions(self, axis: np.ndarray, weight: np.ndarray) -> np.ndarray:
         """Static effective tension [N] in the top spring and each joint (shape (n,): entry k is
         the spring above body k), without wall friction, for body axes ``axis`` (n, 3).
 
         From the bit up: ``T_k = T_{k+1} (a_{k+1} . a_k) + W_k a_k,Z + F_k . a_k`` with ``W`` the
-        (buoyed) weight, ``F`` the axial loads acting for good from t = 0 and ``T_n`` minus the
-        weight on bit.
+        (buoyed) weight [N] (``weight``, per body), ``F`` the axial loads acting for good from
+        t = 0 and ``T_n`` minus the weight on bit.
         """
         n = self.n
-        p = self.p
         f = np.zeros((n, 3))
-        f[:, 2] = p[lay.NP + lay.B_W: lay.NP + lay.NB * n: lay.NB]
+        f[:, 2] = weight
         for ld in self.params.loads:
             if ld.kind == "force" and ld.start <= 0.0 and math.isinf(ld.duration):
                 f[ld.body - 1, "xyz".index(ld.direction)] += ld.magnitude
@@ -606,7 +636,7 @@ class DrillstringModel:
             below = T[k]
         return T
 
-    def _lay_string(self) -> StringLay:
+    def _lay_string(self, weight: np.ndarray) -> StringLay:
         """The string along the hole at its static (frictionless) axial stretch."""
         prm = self.params
         tab = self.bodies
@@ -616,7 +646,7 @@ class DrillstringModel:
         gaps = np.zeros(n)
         lz = lay_string(path, tab.length, gaps)
         for _ in range(2):  # the stretch barely turns the axes: two passes settle it
-            T = self.static_tensions(lz.axis)
+            T = self.static_tensions(lz.axis, weight)
             gaps = np.where(k_spring > 0.0, T / np.where(k_spring > 0.0, k_spring, 1.0), 0.0)
             lz = lay_string(path, tab.length, gaps)
         return lz

@@ -520,6 +520,13 @@ class SectionParams(_Tube):
         0.0, "m", "target length of the rigid segments (fine in the BHA, ~9-30 m in drill pipe); "
         "0 = one rigid body for the whole section"
     )
+    stabilizers: tuple = _f(
+        (), "m", "positions of stabilizer blades along the section, from its top (contact points "
+        "of stabilizer_diameter on the section's bodies; a trajectory is needed)"
+    )
+    stabilizer_diameter: float = _f(
+        0.0, "m", "gauge diameter of the blades at the positions in stabilizers"
+    )
     added_mass_coefficient: float = _f(
         -1.0, "1", "lateral added-mass coefficient C_a of the displaced mud ([fluid] on); -1 = "
         "the potential-flow value for a cylinder in the concentric hole, (D_h^2 + D_o^2) / "
@@ -540,6 +547,14 @@ class SectionParams(_Tube):
                              f"allowed 0 or [{self.outer_diameter:g}, 5] m (not below the outer "
                              "diameter)")
         _check_range(o, "segment_length", self.segment_length, 0.0, 1e4, unit="m")
+        for z in self.stabilizers:
+            if isinstance(z, bool) or not isinstance(z, (int, float)):
+                raise ValueError(f"{o}.stabilizers: {z!r} is not allowed: must be numbers (m)")
+            _check_range(o, "stabilizers", float(z), 0.0, self.length, unit="m")
+        _check_range(o, "stabilizer_diameter", self.stabilizer_diameter, 0.0, 5.0, unit="m")
+        if self.stabilizers and self.stabilizer_diameter < self.outer_diameter:
+            raise ValueError(f"{o}.stabilizer_diameter = {self.stabilizer_diameter!r} is out of "
+                             f"range with stabilizers given: allowed [{self.outer_diameter:g}, 5] m")
         if self.added_mass_coefficient != -1.0:
             _check_range(o, "added_mass_coefficient", self.added_mass_coefficient, 0.0, 100.0)
 
@@ -744,6 +759,8 @@ class PlantParams:
                 raise ValueError(
                     f"stabilizers.heights: {h!r} m is beyond the string: allowed [0, {L:g}] m"
                 )
+        if self.trajectory is None and any(s.stabilizers for s in sections):
+            raise ValueError("sections.stabilizers need a [trajectory] (the hole the blades touch)")
         for b in self.contact.bodies:
             if not 1 <= b <= n:
                 raise ValueError(f"contact.bodies: {b} is out of range: allowed [1, {n}]")
@@ -815,8 +832,8 @@ class PlantParams:
         """Spans [m from the top] between lateral supports (top pin, stabilizers), top first.
 
         Supports: the top drive (lateral spring > 0), the ``stabilizers`` heights and, with
-        sections, the middle of every stabilizer section and (with a trajectory: the bit
-        touches the hole with its gauge) the bit.
+        sections, the middle of every stabilizer section, the sections' stabilizer blades and
+        (with a trajectory: the bit touches the hole with its gauge) the bit.
         """
         L = self.string_length
         sup = sorted({L - h for h in self.stabilizers.heights}) if self.stabilizers.stiffness else []
@@ -825,6 +842,7 @@ class PlantParams:
             for s in self.sections:
                 if s.kind == "stabilizer":
                     sup.append(z + 0.5 * s.length)
+                sup += [z + x for x in s.stabilizers]
                 z += s.length
             if self.trajectory is not None:
                 sup.append(L)
@@ -858,9 +876,12 @@ class PlantParams:
 
     @property
     def actuator_joints(self) -> tuple[int, ...]:
-        """Actuator/gauge sites: joint below body k (1-based), given or below each span's middle."""
+        """Actuator/gauge sites: joint below body k (1-based), given or (the uniform pipe) below
+        each span's middle; a string of sections has sites only where they are given."""
         if self.actuators.joints:
             return tuple(self.actuators.joints)
+        if not self.uniform:  # a field string: sites only where asked
+            return ()
         n = self.n_bodies
         return tuple(min(b, n - 1) for b in self.span_middle_bodies())
 

@@ -26,8 +26,8 @@ import numpy as np
 from . import fluid as fl
 from .params import PlantParams, SectionParams
 
-__all__ = ["BodyTable", "string_sections", "body_table", "joint_dampers",
-           "chain_first_frequency"]
+__all__ = ["BodyTable", "string_sections", "body_table", "joint_dampers", "local_frequencies",
+           "max_joint_frequency", "chain_first_frequency", "body_fluid"]
 
 
 def string_sections(params: PlantParams) -> tuple[SectionParams, ...]:
@@ -158,33 +158,45 @@ def chain_first_frequency(inertia: np.ndarray, k_joint: np.ndarray, k_top: float
     return math.sqrt(max(float(lam[0]), 0.0)) if n else math.nan
 
 
-def joint_dampers(beta: float, k: np.ndarray, m_a: np.ndarray, m_b: np.ndarray,
-                  max_rate: float) -> np.ndarray:
+def joint_dampers(beta: float, k: np.ndarray, w2: np.ndarray, max_rate: float) -> np.ndarray:
     """Joint damper coefficients ``c = beta_j k`` [N s/m or N m s/rad] per joint.
 
-    ``beta_j = min(beta, max_rate / w_j^2)`` with ``w_j = 2 sqrt(k / min(m_a, m_b))`` the joint's
-    highest local frequency: a stiffness-proportional damper makes a mode of frequency ``w``
-    decay at ``~beta w^2`` once overdamped, so short stiff segments (``w ~ 1/dx``) would set the
-    explicit time step through their damping alone; the cap keeps that rate below
-    ``max_rate``. ``max_rate = inf``: ``c = beta k`` (no cap).
+    ``beta_j = min(beta, max_rate / w_j^2)`` with ``w_j^2`` (``w2`` [rad^2/s^2]) the joint's
+    highest local frequency squared (:func:`local_frequencies`): a stiffness-proportional damper
+    makes a mode of frequency ``w`` decay at ``~beta w^2`` once overdamped, so short stiff
+    segments (``w ~ 1/dx``) would set the explicit time step through their damping alone; the
+    cap keeps that rate below ``max_rate``. ``max_rate = inf``: ``c = beta k`` (no cap).
     """
     if math.isinf(max_rate):
         return beta * k
-    w2 = 4.0 * k / np.minimum(m_a, m_b)
-    return np.minimum(beta, max_rate / w2) * k
+    cap = np.divide(max_rate, w2, out=np.full(w2.shape, math.inf), where=w2 > 0.0)
+    return np.minimum(beta, cap) * k
+
+
+def local_frequencies(tab: BodyTable) -> dict[str, np.ndarray]:
+    """Squared highest local frequency [rad^2/s^2] of every joint spring (shape (n - 1,)).
+
+    ``4 k / I`` with the smaller neighbour's inertia: mass for the axial spring, polar inertia
+    for torsion, transverse inertia for bending; the shear spring also turns its neighbours
+    about their mass centres at the arm h (``4 k max(1/m, h^2 / J_t)``).
+    """
+    m = np.minimum(tab.mass[:-1], tab.mass[1:])
+    rot = np.maximum(tab.half[:-1] ** 2 / tab.j_transverse[:-1],
+                     tab.half[1:] ** 2 / tab.j_transverse[1:])
+    return {
+        "axial": 4.0 * tab.k_axial / m,
+        "shear": 4.0 * tab.k_shear * np.maximum(1.0 / m, rot),
+        "bend": 4.0 * tab.k_bend / np.minimum(tab.j_transverse[:-1], tab.j_transverse[1:]),
+        "tors": 4.0 * tab.k_tors / np.minimum(tab.j_polar[:-1], tab.j_polar[1:]),
+    }
 
 
 def max_joint_frequency(tab: BodyTable) -> float:
-    """Highest local undamped joint frequency [rad/s] of the string: ``2 sqrt(k / m)`` over the
-    axial, shear, bending and torsional springs (the automatic ``damping.max_joint_rate``)."""
+    """Highest local undamped joint frequency [rad/s] of the string (the automatic
+    ``damping.max_joint_rate``): the largest of :func:`local_frequencies`."""
     if tab.n < 2:
         return 0.0
-    ma = np.minimum(tab.mass[:-1], tab.mass[1:])
-    ja = np.minimum(tab.j_polar[:-1], tab.j_polar[1:])
-    jt = np.minimum(tab.j_transverse[:-1], tab.j_transverse[1:])
-    w2 = np.concatenate([4.0 * tab.k_axial / ma, 4.0 * tab.k_shear / ma,
-                         4.0 * tab.k_bend / jt, 4.0 * tab.k_tors / ja])
-    return float(math.sqrt(w2.max()))
+    return float(math.sqrt(max(float(w.max()) for w in local_frequencies(tab).values())))
 
 
 def body_fluid(params: PlantParams, tab: BodyTable, hole_diameter: np.ndarray
