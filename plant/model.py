@@ -620,7 +620,10 @@ class DrillstringModel:
 
         From the bit up: ``T_k = T_{k+1} (a_{k+1} . a_k) + W_k a_k,Z + F_k . a_k`` with ``W`` the
         (buoyed) weight [N] (``weight``, per body), ``F`` the axial loads acting for good from
-        t = 0 and ``T_n`` minus the weight on bit.
+        t = 0 and ``T_n`` minus the weight on bit: the joint forces act along the lower body's
+        axis (the joints start without shear), so that the laid string is in exact axial
+        balance. Once released the joints shear slightly and the hook load settles at the soft
+        string's (~1 % higher in a 60 deg build).
         """
         n = self.n
         f = np.zeros((n, 3))

@@ -719,7 +719,7 @@ class PlantParams:
     damping: DampingParams = field(default_factory=DampingParams)
     top_drive: TopDriveParams = field(default_factory=TopDriveParams)
     bit: BitParams = field(default_factory=BitParams)
-    stabilizers: StabilizerParams = field(default_factory=StabilizerParams)
+    stabilizers: StabilizerParams | None = None  # None: the paper's (pipe), none (sections)
     contact: ContactParams = field(default_factory=ContactParams)
     unbalance: UnbalanceParams = field(default_factory=UnbalanceParams)
     actuators: ActuatorParams = field(default_factory=ActuatorParams)
@@ -738,8 +738,9 @@ class PlantParams:
         if sections and self.pipe != PipeParams():
             raise ValueError("pipe and sections are both given: describe the string either as "
                              "one [pipe] or as [[sections]]")
-        if sections and self.stabilizers == StabilizerParams():
-            object.__setattr__(self, "stabilizers", StabilizerParams(heights=()))
+        if self.stabilizers is None:
+            object.__setattr__(self, "stabilizers", StabilizerParams(heights=()) if sections
+                               else StabilizerParams())
         if self.trajectory is not None and not isinstance(self.trajectory, TrajectoryParams):
             raise ValueError(f"trajectory: {self.trajectory!r} is not allowed: must be "
                              "TrajectoryParams")

@@ -12,6 +12,12 @@ the element ``d_theta``, ``d_phi`` (upper minus lower end)::
 
 ``F`` is the axial (effective) tension at the element's lower end, ``r`` the radius at which the
 string touches the wall.
+
+``lateral_friction`` (rotating only): Johancsik et al. set the normal force equal to the lateral
+load ``P`` (the square root above). A rotating pipe's friction ``mu N`` acts along the wall's
+circumference, i.e. laterally: the wall's reaction ``N n + mu N t`` balances ``P`` when the pipe
+has climbed the wall by ``atan(mu)``, so ``N = P / sqrt(1 + mu^2)`` (a static balance of the
+cross-section, used to compare with a model that resolves it).
 """
 
 from __future__ import annotations
@@ -32,8 +38,8 @@ class Element:
 
 
 def soft_string(string: Sequence[Element], angles: Callable[[float], tuple[float, float]],
-                mu: float, mode: str, step: float = 1.0,
-                bit_force: float = 0.0) -> tuple[float, float]:
+                mu: float, mode: str, step: float = 1.0, bit_force: float = 0.0,
+                lateral_friction: bool = False) -> tuple[float, float]:
     """Hook load [N] and surface torque [N m] of ``string`` (top first) in a hole whose
     inclination and azimuth [rad] at measured depth s [m] are ``angles(s)``.
 
@@ -70,6 +76,8 @@ def soft_string(string: Sequence[Element], angles: Callable[[float], tuple[float
         dth = th_up - th_lo
         dph = ph_up - ph_lo
         N = math.hypot(F * dph * math.sin(th), F * dth + W * math.sin(th))
+        if lateral_friction and mode == "rotate":
+            N /= math.sqrt(1.0 + mu * mu)
         F = F + W * math.cos(th) + sign * mu * N
         if mode == "rotate":
             M += mu * N * sec.r
