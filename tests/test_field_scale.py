@@ -365,15 +365,17 @@ def test_energy_is_conserved_in_a_curved_hole():
         damping=DampingParams(axial_ratio=0.0, torsional_ratio=0.0, lateral_ratio=0.0),
         top_drive=TopDriveParams(rotary_speed=0.0), bit=BitParams(axial_stiffness=0.0),
         unbalance=UnbalanceParams(enabled=False))
-    m = DrillstringModel(p, "full3d")
-    _, v, r = simulate(m, 1.0, 0.001, outputs=["total_energy", "wall_contact_force"])
-    assert r.ok
-    assert v["wall_contact_force"].max() > 1e3  # it did hit the wall
-    e = v["total_energy"]
-    n = m.n
-    ke_scale = 0.5 * m.bodies.mass.sum() * (2 * G * 0.02)  # a 2 cm fall, for scale
-    assert np.abs(e - e[0]).max() < 1e-3 * ke_scale
-    del n
+    drift = []
+    for div in (1, 4):
+        m = DrillstringModel(p, "full3d")
+        _, v, r = simulate(m, 1.0, 0.001, outputs=["total_energy", "wall_contact_force"],
+                           max_step=m.stable_step() / div)
+        assert r.ok
+        assert v["wall_contact_force"].max() > 1e3  # it did hit the wall
+        drift.append(np.abs(v["total_energy"] - v["total_energy"][0]).max())
+    fall = 0.5 * m.bodies.mass.sum() * (2 * G * 0.02)  # the energy of a 2 cm fall, for scale
+    # measured: 3e-4 of it at h*, 8e-6 at h*/4: the integrator's error, going to zero
+    assert drift[0] < 1e-3 * fall and drift[1] < drift[0] / 10.0
 
 
 def test_vertical_field_string_axial_torsional_equals_3d():
