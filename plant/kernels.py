@@ -425,6 +425,25 @@ def top_hoist(t, p):
     return top_drive(t, p[HOIST], p[T_RAMP])
 
 
+@njit(cache=_CACHE, inline="always")
+def top_point(t, y, p, framed, oV, R0, h):
+    """Position of body 0's top end A relative to the top drive [m] and the velocity of its
+    mass centre relative to the drive [m/s] (inertial; the drive hoists along its axis)."""
+    G0, G1, G2, V0, V1, V2 = body_inertial(y, p, 0, framed, oV)
+    A0 = G0 - h * R0[0, 2]
+    A1 = G1 - h * R0[1, 2]
+    A2 = G2 - h * R0[2, 2]
+    if p[HOIST] != 0.0:
+        zt, vt = top_hoist(t, p)
+        A0 -= zt * p[TD_R + 2]
+        A1 -= zt * p[TD_R + 5]
+        A2 -= zt * p[TD_R + 8]
+        V0 -= vt * p[TD_R + 2]
+        V1 -= vt * p[TD_R + 5]
+        V2 -= vt * p[TD_R + 8]
+    return A0, A1, A2, V0, V1, V2
+
+
 @njit(cache=_CACHE)
 def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
     """Full 3D right-hand side; writes dy (12 n). wR (n + 2, 3, 3), wF (n, 3), wM (n, 3) are
@@ -588,18 +607,7 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
     wy0 = y[oW + 1]
     wz0 = y[oW + 2]
     ang, om = drive_motion(t, y, p, ip, u)
-    G0, G1, G2, V0, V1, V2 = body_inertial(y, p, 0, framed, oV)
-    A0 = G0 - h * R0[0, 2]
-    A1 = G1 - h * R0[1, 2]
-    A2 = G2 - h * R0[2, 2]
-    if p[HOIST] != 0.0:
-        zt, vt = top_hoist(t, p)
-        A0 -= zt * p[TD_R + 2]
-        A1 -= zt * p[TD_R + 5]
-        A2 -= zt * p[TD_R + 8]
-        V0 -= vt * p[TD_R + 2]
-        V1 -= vt * p[TD_R + 5]
-        V2 -= vt * p[TD_R + 8]
+    A0, A1, A2, V0, V1, V2 = top_point(t, y, p, framed, oV, R0, h)
     vA = _mv(R0, -h * wy0, h * wx0, 0.0)
     d0, d1, d2 = _mtv(R0, A0, A1, A2)
     r0, r1, r2 = _mtv(R0, V0 + vA[0], V1 + vA[1], V2 + vA[2])

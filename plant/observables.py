@@ -38,6 +38,7 @@ from .kernels import (
     relative_rotation,
     sin_small,
     top_hoist,
+    top_point,
 )
 from .layout import (
     B_CLR,
@@ -361,18 +362,7 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
     # top joint
     h = p[NP + B_H]
     R0 = wR[0]
-    G0, G1, G2, V0, V1, V2 = body_inertial(y, p, 0, framed, oV)
-    A0 = G0 - h * R0[0, 2]
-    A1 = G1 - h * R0[1, 2]
-    A2 = G2 - h * R0[2, 2]
-    if p[HOIST] != 0.0:
-        zt, vt = top_hoist(t, p)
-        A0 -= zt * p[TD_R + 2]
-        A1 -= zt * p[TD_R + 5]
-        A2 -= zt * p[TD_R + 8]
-        V0 -= vt * p[TD_R + 2]
-        V1 -= vt * p[TD_R + 5]
-        V2 -= vt * p[TD_R + 8]
+    A0, A1, A2, V0, V1, V2 = top_point(t, y, p, framed, oV, R0, h)
     e0 = R0[0, 0] * A0 + R0[1, 0] * A1 + R0[2, 0] * A2
     e1 = R0[0, 1] * A0 + R0[1, 1] * A1 + R0[2, 1] * A2
     e2 = R0[0, 2] * A0 + R0[1, 2] * A1 + R0[2, 2] * A2
