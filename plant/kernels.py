@@ -446,6 +446,16 @@ def top_point(t, y, p, framed, oV, R0, h):
 
 @njit(cache=_CACHE)
 def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
+    """Full 3D right-hand side (:func:`_rhs3d`), compiled once per frame kind: with the frame
+    flag a constant, the vertical hole's code carries no per-body frame tests."""
+    if ip[IP_FRAMED] != 0:
+        _rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM, True)
+    else:
+        _rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM, False)
+
+
+@njit(cache=_CACHE, inline="always")
+def _rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM, framed):
     """Full 3D right-hand side; writes dy (12 n). wR (n + 2, 3, 3), wF (n, 3), wM (n, 3) are
     scratch (``wR[k]`` body k's rotation to the inertial frame, ``wR[n]`` and ``wR[n + 1]``
     free).
@@ -462,7 +472,6 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
     unb = ip[IP_UNB]
     nl = ip[IP_NL]
     ncp = ip[IP_NCP]
-    framed = ip[IP_FRAMED] != 0
     oA = 3 * n
     oV = 6 * n
     oW = 9 * n

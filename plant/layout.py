@@ -68,39 +68,40 @@ BIT_ZH0 = 52  # initial hole-bottom depth [m] (drilled depth = z_h - BIT_ZH0)
 # field strings (sections, trajectory): the top drive's hoisting and frame
 HOIST = 53  # hoisting speed of the top drive along its axis [m/s] (> 0 lowers the string)
 TD_R = 54  # 9 values: frame of the top drive (body -> inertial, row-major) [1]
-NP = 63  # length of the scalar header; the body records follow it
+NP = 64  # length of the scalar header (a multiple of 8: records start on a cache line)
 
 # Per-body records: p[NP + NB * k + field] for body k (0-based); the J_* fields describe the
 # joint below body k (between bodies k and k + 1; unused for the last body). For the uniform
 # pipe every record holds the scalars above, so that the kernels compute exactly the same.
-B_M = 0  # mass [kg] (axial and rotational motion)
-B_IM = 1  # 1 / mass [1/kg]
-B_ML = 2  # lateral mass: mass + added mass of the mud [kg]
-B_JT = 3  # transverse moment of inertia about G [kg m^2]
-B_JP = 4  # polar moment of inertia [kg m^2]
-B_IJP = 5  # 1 / polar moment of inertia [1/(kg m^2)]
-B_H = 6  # half length [m]
-B_W = 7  # weight along +Z (buoyed) [N]
-B_CLIN = 8  # linear lateral drag [N s/m]
-B_CQ = 9  # quadratic lateral drag [N s^2/m^2]
-B_K1 = 10  # curvature of the hole axis at the body, local x component [1/m]
-B_K2 = 11  # ... local y component [1/m]
-B_P = 12  # 3 values: reference point of the body's local frame (inertial) [m]
-B_R = 15  # 9 values: reference frame of the body (local -> inertial, row-major) [1]
-J_KAX = 24  # joint below: axial stiffness [N/m]
-J_KSH = 25  # shear stiffness [N/m]
-J_G1 = 26  # rotational potential G1 (= torsional stiffness) [N m]
-J_G3 = 27  # G3 = 2 k_bend - k_tors [N m]
-J_CAX = 28  # axial damping [N s/m]
-J_CSH = 29  # shear damping [N s/m]
-J_CBE = 30  # bending damping [N m s/rad]
-J_CTO = 31  # torsional damping [N m s/rad]
-J_LEN = 32  # distance between the two mass centres h_a + h_b [m]
-J_RG = 33  # strain gauge radius at the joint [m]
-J_ARM = 34  # moment arm of an actuator pair at the joint [m]
-B_CLR = 35  # radial clearance of the body's mass centre to the wall [m]
-B_RC = 36  # contact radius (outer radius touching the wall) [m]
-NB = 37
+# The first 8 fields are all the axial-torsional chain reads (one cache line a body).
+B_IM = 0  # 1 / mass [1/kg]
+B_W = 1  # weight along +Z (buoyed) [N]
+B_IJP = 2  # 1 / polar moment of inertia [1/(kg m^2)]
+J_KAX = 3  # joint below: axial stiffness [N/m]
+J_CAX = 4  # axial damping [N s/m]
+J_G1 = 5  # rotational potential G1 (= torsional stiffness) [N m]
+J_CTO = 6  # torsional damping [N m s/rad]
+J_LEN = 7  # distance between the two mass centres h_a + h_b [m]
+B_M = 8  # mass [kg] (axial and rotational motion)
+B_ML = 9  # lateral mass: mass + added mass of the mud [kg]
+B_JT = 10  # transverse moment of inertia about G [kg m^2]
+B_JP = 11  # polar moment of inertia [kg m^2]
+B_H = 12  # half length [m]
+B_CLIN = 13  # linear lateral drag [N s/m]
+B_CQ = 14  # quadratic lateral drag [N s^2/m^2]
+J_KSH = 15  # shear stiffness [N/m]
+J_G3 = 16  # G3 = 2 k_bend - k_tors [N m]
+J_CSH = 17  # shear damping [N s/m]
+J_CBE = 18  # bending damping [N m s/rad]
+J_RG = 19  # strain gauge radius at the joint [m]
+J_ARM = 20  # moment arm of an actuator pair at the joint [m]
+B_CLR = 21  # radial clearance of the body's mass centre to the wall [m]
+B_RC = 22  # contact radius (outer radius touching the wall) [m]
+B_K1 = 23  # curvature of the hole axis at the body, local x component [1/m]
+B_K2 = 24  # ... local y component [1/m]
+B_P = 25  # 3 values: reference point of the body's local frame (inertial) [m]
+B_R = 28  # 9 values: reference frame of the body (local -> inertial, row-major) [1]
+NB = 40  # (37 used; a multiple of 8)
 
 # columns of the contact-point table in ``fp`` (after the load table; one row a point)
 CP_BODY = 0  # 0-based body index
