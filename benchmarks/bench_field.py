@@ -191,7 +191,7 @@ def wall_per_second(scene: str, T: float, repeat: int, kind: str | None = None,
 
 def side_by_side(quick: bool) -> list[str]:
     T = 1.0 if quick else 2.0
-    rep = 2 if quick else 3
+    rep = 2 if quick else 5
     cases = [("paper_open_loop", None, None, "paper_open_loop"),
              ("field_deviated_3km", None, None, "field_deviated_3km"),
              ("field_vertical_3km", None, None, "field_vertical_3km (axial-torsional)"),
