@@ -64,8 +64,6 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-from _dcs_controller_0_1_0 import MODES, ControllerParams
-from _dcs_controller_0_1_0 import StrainController as StrainLaw
 from _dcs_pythonfmu_0_7_0 import (
     Boolean,
     DefaultExperiment,
@@ -75,10 +73,16 @@ from _dcs_pythonfmu_0_7_0 import (
     Integer,
     Real,
 )
+from _dcs_pythonfmu_0_7_0.enums import Fmi2Status
 from _dcs_slave_support_0_1_0 import LawSlave
+from _dcs_slave_support_0_1_0.vendored import import_vendored
 
 #: Name under which the build vendors ``controller/`` into this FMU's resources.
 VENDORED_CONTROLLER = "_dcs_controller_0_1_0"
+# from a stable copy where numba can compile the law's step (its cache needs a fixed path)
+_CONTROLLER, _IMPORT_WARNING = import_vendored(VENDORED_CONTROLLER, __file__, only_with="numba")
+MODES, ControllerParams = _CONTROLLER.MODES, _CONTROLLER.ControllerParams
+StrainLaw = _CONTROLLER.StrainController
 
 
 def _io_names(n_sites: int) -> tuple[tuple[str, ...], tuple[str, ...]]:
@@ -202,6 +206,8 @@ class StrainController(LawSlave):
             description="false = open loop (zero force at all times)"))
         if self.GAIN_MATRIX is not None:
             self._register_matrix()
+        if _IMPORT_WARNING:
+            self.log(f"{self.instance_name}: {_IMPORT_WARNING}", status=Fmi2Status.warning)
 
     def _register_matrix(self) -> None:
         """The tunable relative gains ``gain_matrix_<i>_<j>`` [1], start = the layout's."""

@@ -7,7 +7,8 @@ The FMUs wrap the same objects (``fmu_src/``): :class:`PlantSlave` steps a
 :class:`TopDriveSlave` a :class:`controller.TopDriveController` exactly as the FMU adapters do
 (same times, same step sizes, outputs taken after each step, a failed plant step discarded with
 the plant's own message; the plant is the model the plant FMU builds: the scene's, or the 3D
-model for a scene the default plant FMU runs), so the master
+model for a scene the default plant FMU runs) and through the same compiled steps
+(:mod:`plant.compiled_step`, :mod:`controller.compiled`, called here through ctypes), so the master
 (:class:`cosim.master.execution.Execution`, its algorithms, delay lines and observers) gives
 the same numbers with either, bit for bit (``tests/test_sweep.py``), while the in-process
 slaves save the FMI boundary. Parameters stay typed (:class:`plant.model.DrillstringModel`,
@@ -152,6 +153,9 @@ class PlantSlave(_ArraySlave):
         super().__init__(name, simulator.input_names, simulator.model.output_names)
         self.sim = simulator
         self._halted: str | None = None
+        # the plant FMU's compiled step on this slave's arrays (None: Python do_step)
+        self._step = simulator.compiled_step(self.u, np.arange(len(self.inputs)), self.y,
+                                             np.arange(len(self.outputs)))
 
     def instantiate(self, start_time: float, stop_time: float | None) -> None:
         """Start at ``start_time`` with the outputs of the initial state."""
@@ -165,16 +169,20 @@ class PlantSlave(_ArraySlave):
         if self._halted is not None:
             self._problem = f"the simulation diverged earlier ({self._halted})"
             return FMI2_DISCARD
-        sim = self.sim
-        sim.u[:] = self.u
-        res = sim.do_step(t, h)
+        if self._step is not None:
+            res = self._step.step(t, h)  # inputs from self.u, outputs into self.y
+        else:
+            sim = self.sim
+            sim.u[:] = self.u
+            res = sim.do_step(t, h)
+            if res.ok:
+                self.y[:] = sim.outputs()
         if not res.ok:
             self._problem = res.message
             if not res.quantity:
                 return FMI2_ERROR
             self._halted = res.message
             return FMI2_DISCARD
-        self.y[:] = sim.outputs()
         return 0
 
     def _save(self):
@@ -187,15 +195,20 @@ class PlantSlave(_ArraySlave):
 
 class _LawSlave(_ArraySlave):
     """A controller law as a slave: ``law`` (``reset``, ``get_state``, ``set_state``) stepped
-    by :meth:`_advance`; a ``ValueError`` of the law is the step's error, state unchanged."""
+    by its compiled step on this slave's arrays, as in the controller FMUs, else (or for a step
+    the compiled law leaves to Python) by :meth:`_advance`; a ``ValueError`` of the law is the
+    step's error, state unchanged."""
 
     law: Any
+    _step: Any = None
 
     def _advance(self, t: float, h: float) -> None:  # pragma: no cover - each law its own
         raise NotImplementedError
 
     def do_step(self, t: float, h: float) -> int:
         """The outputs at ``t + h`` from the inputs held over the step."""
+        if self._step is not None and self._step.step(t, h) == 0:
+            return 0
         try:
             self._advance(t, h)
         except ValueError as exc:
@@ -230,6 +243,7 @@ class ControllerSlave(_LawSlave):
         super().__init__(name, [f"strain{s}_{a}" for s, a in pairs],
                          [f"actuator{s}_force_{a}" for s, a in pairs])
         self.law = StrainController(params, len(sites))
+        self._step = self.law.compiled_step(self.u, self.y)
 
     def instantiate(self, start_time: float, stop_time: float | None) -> None:
         """Zero force (the lag state) at the start."""
@@ -254,6 +268,7 @@ class TopDriveSlave(_LawSlave):
     def __init__(self, name: str, params: TopDriveControllerParams):
         super().__init__(name, ["top_rotary_speed", "top_torque"], ["top_drive_torque"])
         self.law = TopDriveController(params)
+        self._step = self.law.compiled_step(self.u, self.y)
 
     def instantiate(self, start_time: float, stop_time: float | None) -> None:
         """Zero integral and torque at the start."""
