@@ -662,18 +662,18 @@ class DrillstringModel:
 
         Exponential Euler (exact, one step a communication step) if
         :attr:`linear_time_invariant`. Else, among the methods of
-        :data:`plant.integrators.METHODS` marked ``automatic`` (they met the accuracy bar of
-        ``BENCHMARKS.md`` at their automatic step), the fewest right-hand side evaluations per
-        communication step, ``stages * ceil(h / stable step)`` (per unit time,
-        ``stages / stable step``, for ``h = None``); ties go to the higher order. At 0.25 ms
-        (the closed loop) one 3-stage step beats one RK4 step; at 1 ms three RK4 steps tie with
-        four 3-stage steps and RK4 is kept.
+        :data:`plant.integrators.METHODS` marked ``automatic`` for this model kind (they met
+        the accuracy bar of ``BENCHMARKS.md`` at their automatic step), the fewest right-hand
+        side evaluations per communication step, ``stages * ceil(h / stable step)`` (per unit
+        time, ``stages / stable step``, for ``h = None``); ties go to the higher order. For the
+        paper's 3D string at 0.25 ms (the closed loop) one step of Kutta's 3rd-order method
+        beats one RK4 step; at 1 ms three RK4 steps tie with four 3-stage steps and RK4 is kept.
         """
         if self.linear_time_invariant:
             return "expeuler"
         best: tuple[tuple[float, int], str] | None = None
         for spec in METHODS.values():
-            if not spec.automatic or not spec.radius:
+            if self.kind not in spec.automatic or not spec.radius:
                 continue
             dt = stable_step(self.max_eigenvalue, spec.radius)
             if h is None:

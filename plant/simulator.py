@@ -254,14 +254,21 @@ class PlantSimulator:
 
     def _record_in_python(self, h: float, n_out: int, idx: np.ndarray
                           ) -> tuple[np.ndarray, StepResult]:
+        """The loop of :meth:`run_record` in Python, each step compiled where it can be."""
         rows = [self.outputs()[idx].copy()]
         res = StepResult(True)
         t0 = self.time
+        recorded = np.zeros(len(idx))
+        step = self.compiled_step(self.u, np.arange(self.u.size), recorded, idx)
         for k in range(n_out):
-            res = self.do_step(t0 + k * h, h)
+            if step is not None:
+                res = step.step(t0 + k * h, h)
+            else:
+                res = self.do_step(t0 + k * h, h)
             if not res.ok and not res.quantity:
                 break
-            rows.append(self.outputs()[idx].copy())
+            rows.append(recorded.copy() if res.ok and step is not None
+                        else self.outputs()[idx].copy())
             if not res.ok:
                 break
         return np.array(rows), res
