@@ -2,8 +2,12 @@
 
 This file is the FMU's slave module. It holds no physics: ``exitInitializationMode``
 builds ``Scene -> PlantParams -> DrillstringModel -> PlantSimulator`` from the
-vendored copy of the ``plant`` package, and ``doStep`` sets the inputs, calls
-``PlantSimulator.do_step`` and writes the outputs. The build (``fmu_src/build.py``)
+vendored copy of the ``plant`` package, and ``doStep`` runs the simulator's compiled
+step (``plant.compiled_step``: the C wrapper calls it without entering Python; it reads
+the inputs and writes the outputs in the shared buffers) or, as the reference and for
+what the compiled step leaves to Python (the first step of a step size, a diverged
+instance, ``DRILLCOSIM_COMPILED_STEP=0``), ``do_step``: it sets the inputs, calls
+``PlantSimulator.do_step`` and writes the outputs; both give the same bits. The build (``fmu_src/build.py``)
 ships ``plant/`` as ``resources/_dcs_plant_0_1_0/`` and the shipped scenes as
 ``resources/scenes/*.toml``. The FMU needs numpy, scipy and numba in the Python it runs in.
 
@@ -38,9 +42,11 @@ parameters (all variability fixed: set before ``fmi2ExitInitializationMode``):
     ``scene`` (String, default "paper_open_loop"): a shipped scene name or a path
     to a scene TOML file (its ``extends`` names resolve among the shipped scenes);
     ``model`` (String "auto" | "full3d" | "axial_torsional", default "full3d":
-    "auto" keeps the scene's model); ``max_internal_step`` [s] (0 = automatic: the
-    model's stable RK4 step, or one exponential Euler step a communication step for a
-    linear time-invariant axial-torsional scene; larger values may diverge); and every scalar field of
+    "auto" keeps the scene's model); ``max_internal_step`` [s] (0 = automatic: per
+    communication step the method and stable step of ``DrillstringModel.method_for_step``,
+    or one exponential Euler step a communication step for a linear time-invariant
+    axial-torsional scene; a value > 0 means RK4 at that step bound, and larger values may
+    diverge); and every scalar field of
     ``PlantParams`` flattened as ``section.field`` (``pipe.n_segments``,
     ``contact.stiffness``, ``gravity``, ...), Real/Integer/Boolean with the unit
     and description of the field metadata and start = the ``PlantParams`` default.
@@ -98,8 +104,9 @@ Error handling (the wrapper's status protocol, see ``fmu_src/slave_support``)
 * an unexpected exception -> fmi2Error, the instance stays usable. Never fmi2Fatal.
 
 The inputs and outputs live in the shared buffers ``self.inputs`` / ``self.outputs``: in
-step mode the wrapper moves them without Python, and a doStep is one Python call that
-integrates and writes the outputs in place.
+step mode the wrapper moves them without Python, and a doStep is one call of the compiled
+step (:meth:`_fmi2_compiled_step`; its failure codes come back to
+:meth:`_fmi2_compiled_step_failed`, which reports the status and message ``do_step`` gives).
 
 FMU state: ``_get_fmu_state`` / ``_set_fmu_state`` add the simulator's time, state
 vector and held inputs (JSON-safe floats, so serialisation is bit-exact) to
@@ -353,8 +360,9 @@ class DrillstringPlant(DcsSlave):
                          "(the scene's choice)")))
         self.register_variable(_Real(
             "max_internal_step", causality=param, variability=fixed,
-            description=("Upper bound of the internal step; 0 = automatic (RK4 at the model's "
-                         "stable step, or one exact exponential step for a linear "
+            description=("Upper bound of the internal step; 0 = automatic (per communication "
+                         "step the method with the fewest right-hand sides at its stable step, "
+                         "RK4 or Kutta's 3rd order, or one exact exponential step for a linear "
                          "time-invariant axial-torsional scene)")))
         for name, _sec, _field, default, unit, doc, integer in PARAMETERS:
             getter, setter = _accessors(self._values, name)

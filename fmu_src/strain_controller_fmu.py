@@ -5,7 +5,10 @@ inputs, calls the vendored copy of the ``controller`` package and writes the
 outputs. The build (``fmu_src/build.py``) ships ``controller/`` inside the FMU as
 ``resources/_dcs_controller_0_1_0/`` and imports it under that name, so the FMU
 runs in a Python that has only numpy, and it never shadows (nor is shadowed by) a
-``controller`` package imported by the host process.
+``controller`` package imported by the host process. Where numba is installed the
+package is imported from a stable per-user copy (``slave_support.vendored``) and the
+law's compiled step (``controller.compiled``) runs every doStep without entering Python
+(``slave_support.LawSlave``); ``DRILLCOSIM_COMPILED_STEP=0`` switches it off.
 
 Interface (value references follow the registration order below)
 -----------------------------------------------------------------
@@ -51,7 +54,8 @@ Error handling (the wrapper's status protocol, see ``fmu_src/slave_support``)
 * an unexpected exception -> fmi2Error, the instance stays usable. Never fmi2Fatal.
 
 The Real inputs and outputs live in the shared buffers ``self.inputs`` / ``self.outputs``:
-in step mode the wrapper moves them without Python, and ``fmi2DoStep`` is one Python call.
+in step mode the wrapper moves them without Python, and ``fmi2DoStep`` calls the law's
+compiled step (or, without numba, is one Python call); both give the same bits.
 
 FMU state (``fmi2Get/SetFMUstate``, serialisable): pythonfmu's default saves the
 registered variables only (here including the buffered inputs and outputs);

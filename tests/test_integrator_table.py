@@ -23,8 +23,13 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from drillcosim.plant.integrators import KERNEL_ERK, KERNEL_RK4, METHODS, stable_step, \
-    stability_function
+from drillcosim.plant.integrators import (
+    KERNEL_ERK,
+    KERNEL_RK4,
+    METHODS,
+    stability_function,
+    stable_step,
+)
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.scene import load_scene
 
