@@ -28,12 +28,13 @@ from numba import carray, cfunc, njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-__all__ = ["FALLBACK", "OK", "REFUSED", "CompiledLaw", "enabled", "strain_step",
+__all__ = ["FALLBACK", "INTERNAL", "OK", "REFUSED", "CompiledLaw", "enabled", "strain_step",
            "top_drive_step"]
 
 OK = 0
 FALLBACK = 1  # run this step in Python (nothing changed)
 REFUSED = 2  # the Python law refuses this step (nothing changed)
+INTERNAL = 9  # an exception inside the compiled code (a bug; numba's wrapper would return 0)
 
 ENV = "DRILLCOSIM_COMPILED_STEP"
 _WIDTH = 3  # address, d0, d1
@@ -117,7 +118,11 @@ def strain_core(t, dt, params, matrix, decay, force, inputs, outputs):
 def strain_step(context, t, h):
     """C entry point of the strain law: slots params, matrix, decay, force, inputs, outputs."""
     c = carray(context, 6 * _WIDTH, dtype=np.int64)
-    return strain_core(t, h, _f1(c, 0), _f2(c, 1), _f1(c, 2), _f1(c, 3), _f1(c, 4), _f1(c, 5))
+    try:
+        return strain_core(t, h, _f1(c, 0), _f2(c, 1), _f1(c, 2), _f1(c, 3), _f1(c, 4),
+                           _f1(c, 5))
+    except Exception:  # noqa: BLE001 - never reported as a success
+        return INTERNAL
 
 
 # ------------------------------------------------------------------------ top drive
@@ -153,7 +158,10 @@ def top_drive_core(t, dt, params, state, inputs, outputs):
 def top_drive_step(context, t, h):
     """C entry point of the top-drive law: slots params, state, inputs, outputs."""
     c = carray(context, 4 * _WIDTH, dtype=np.int64)
-    return top_drive_core(t, h, _f1(c, 0), _f1(c, 1), _f1(c, 2), _f1(c, 3))
+    try:
+        return top_drive_core(t, h, _f1(c, 0), _f1(c, 1), _f1(c, 2), _f1(c, 3))
+    except Exception:  # noqa: BLE001 - never reported as a success
+        return INTERNAL
 
 
 _CALL = ctypes.CFUNCTYPE(ctypes.c_int32, ctypes.c_void_p, ctypes.c_double, ctypes.c_double)
@@ -204,3 +212,12 @@ class CompiledLaw:
     def step(self, t: float, h: float) -> int:
         """One compiled step (ctypes, GIL released); the code (:data:`OK` or not)."""
         return self._call(self.context, t, h)
+
+    @staticmethod
+    def check(code: int, t: float, h: float) -> None:
+        """Before the law's Python step for a failed compiled one: ``RuntimeError`` for
+        :data:`INTERNAL` (a bug; the law's state may be partly changed), else nothing."""
+        if code not in (FALLBACK, REFUSED):
+            raise RuntimeError(f"the compiled law step failed with code {code} at t = {t!r} s, "
+                               f"h = {h!r} s (an exception inside its compiled code); run with "
+                               f"DRILLCOSIM_COMPILED_STEP=0 to see it in Python")

@@ -63,13 +63,15 @@ from .observables import outputs3d, outputs_at
 if TYPE_CHECKING:
     from .simulator import PlantSimulator, StepResult
 
-__all__ = ["DIVERGED", "FALLBACK", "OK", "REFUSED", "CompiledStep", "enabled", "plant_step"]
+__all__ = ["DIVERGED", "FALLBACK", "INTERNAL", "OK", "REFUSED", "CompiledStep", "enabled",
+           "plant_step"]
 
 #: Return codes of :func:`plant_step`.
 OK = 0
 FALLBACK = 1  # run this step in Python (nothing changed but the inputs taken)
 REFUSED = 2  # bad step size, time, input or too many internal steps: state unchanged
 DIVERGED = 3  # the state left its range: the report holds (guard code, index, value)
+INTERNAL = 9  # an exception inside the compiled code (a bug): the state may be partly advanced
 
 ENV = "DRILLCOSIM_COMPILED_STEP"
 
@@ -235,13 +237,21 @@ def step_core(t, h, meta, settings, clock, y, p, ip, fp, u, wR, wF, wM, work, br
 
 @cfunc(types.int32(types.voidptr, types.float64, types.float64), nopython=True, cache=True)
 def plant_step(context, t, h):
-    """The C entry point: ``context`` is the int64 slot array of :class:`CompiledStep`."""
+    """The C entry point: ``context`` is the int64 slot array of :class:`CompiledStep`.
+
+    An exception inside (a bug: nopython code raises e.g. on a division by an exact zero) is
+    :data:`INTERNAL`, never a success: numba's cfunc wrapper would print it and return 0.
+    """
     c = carray(context, len(_SLOTS) * _WIDTH, dtype=np.int64)
-    return step_core(
-        t, h, _i1(c, 0), _f1(c, 1), _f1(c, 2), _f1(c, 3), _f1(c, 4), _i1(c, 5), _f1(c, 6),
-        _f1(c, 7), _f3(c, 8), _f2(c, 9), _f2(c, 10), _f2(c, 11), _f1(c, 12), _f1(c, 13),
-        _i1(c, 14), _f1(c, 15), _i1(c, 16), _f1(c, 17), _f1(c, 18), _f2(c, 19), _f1(c, 20),
-        _f1(c, 21), _i2(c, 22), _i1(c, 23), _f3(c, 24), _f2(c, 25), _f2(c, 26), _f2(c, 27))
+    try:
+        return step_core(
+            t, h, _i1(c, 0), _f1(c, 1), _f1(c, 2), _f1(c, 3), _f1(c, 4), _i1(c, 5), _f1(c, 6),
+            _f1(c, 7), _f3(c, 8), _f2(c, 9), _f2(c, 10), _f2(c, 11), _f1(c, 12), _f1(c, 13),
+            _i1(c, 14), _f1(c, 15), _i1(c, 16), _f1(c, 17), _f1(c, 18), _f2(c, 19),
+            _f1(c, 20), _f1(c, 21), _i2(c, 22), _i1(c, 23), _f3(c, 24), _f2(c, 25),
+            _f2(c, 26), _f2(c, 27))
+    except Exception:  # noqa: BLE001 - reported as INTERNAL (see the docstring)
+        return INTERNAL
 
 
 _CALL = ctypes.CFUNCTYPE(ctypes.c_int32, ctypes.c_void_p, ctypes.c_double, ctypes.c_double)
@@ -356,6 +366,13 @@ class CompiledStep:
         :data:`FALLBACK`: the step runs in Python now (``PlantSimulator.do_step``; outputs put
         into the buffer on success) and the context follows the simulator's new method or
         operator. :data:`REFUSED` / :data:`DIVERGED`: the simulator's own message.
+
+        Raises
+        ------
+        RuntimeError
+            :data:`INTERNAL` (an exception inside the compiled code: an internal error, the
+            state may be partly advanced; the Python step, ``DRILLCOSIM_COMPILED_STEP=0``,
+            names the exception), or a code this module does not know.
         """
         sim = self.sim
         if code == FALLBACK:
@@ -374,4 +391,9 @@ class CompiledStep:
         if code == DIVERGED:
             guard, i, val = self.report
             return sim.report(int(guard), int(i), float(val))
+        if code == INTERNAL:
+            raise RuntimeError(f"the compiled plant step raised an exception inside its compiled "
+                               f"code at t = {t!r} s, h = {h!r} s (the state may be partly "
+                               f"advanced); run with DRILLCOSIM_COMPILED_STEP=0 to see it in "
+                               f"Python")
         raise RuntimeError(f"compiled plant step returned the unknown code {code}")

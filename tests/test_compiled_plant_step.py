@@ -194,3 +194,19 @@ def test_top_drive_law_compiled_equals_python():
         np.testing.assert_array_equal(_bits(fast.get_state()), _bits(ref.get_state()))
     inp[1] = math.inf
     assert step.step(1.0, 1e-3) != 0
+
+
+def test_an_exception_inside_the_compiled_step_is_an_internal_error():
+    """numba's cfunc wrapper would print an exception and return 0 (success): the step catches
+    it and returns INTERNAL, which the Python side raises (an internal error, with traceback).
+    Provoked by a context whose internal step bound is 0 (a division by an exact zero)."""
+    from drillcosim.plant import compiled_step as cs
+
+    step, inp, out, ref = _pair("paper_closed_loop", "rk4")
+    assert step.step(0.0, 2.5e-4).ok
+    step._arrays["settings"][cs.S_MAX_STEP] = 0.0
+    y = step.sim.y.copy()
+    assert step._call(step.context, 2.5e-4, 2.5e-4) == cs.INTERNAL
+    np.testing.assert_array_equal(step.sim.y, y)  # it raised before integrating
+    with pytest.raises(RuntimeError, match="raised an exception inside its compiled code"):
+        step.step(2.5e-4, 2.5e-4)

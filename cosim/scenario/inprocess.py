@@ -207,8 +207,11 @@ class _LawSlave(_ArraySlave):
 
     def do_step(self, t: float, h: float) -> int:
         """The outputs at ``t + h`` from the inputs held over the step."""
-        if self._step is not None and self._step.step(t, h) == 0:
-            return 0
+        if self._step is not None:
+            code = self._step.step(t, h)
+            if code == 0:
+                return 0
+            self._step.check(code, t, h)  # an internal failure raises
         try:
             self._advance(t, h)
         except ValueError as exc:

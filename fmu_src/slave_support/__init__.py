@@ -280,7 +280,9 @@ class LawSlave(DcsSlave):
         return step.function, step.context
 
     def _fmi2_compiled_step_failed(self, code: int, t: float, h: float) -> None:
-        """A step the compiled law left to Python (nothing changed): :meth:`do_step`."""
+        """A step the compiled law left to Python (nothing changed): :meth:`do_step`. An
+        internal failure raises (fmi2Error with its traceback)."""
+        self._step.check(code, t, h)
         return self.do_step(t, h)
 
     # ------------------------------------------------------------- FMU state
