@@ -51,6 +51,7 @@ from typing import Any
 
 import numpy as np
 
+from .acceleration import compiled_law
 from .params import ControllerParams
 
 __all__ = ["AXES", "CHANNELS", "N_CHANNELS", "SWITCH_TIME_RTOL", "StrainController", "channels"]
@@ -268,13 +269,6 @@ class StrainController:
         """This law's compiled step (:class:`controller.compiled.CompiledLaw`) reading the
         strains from ``inputs`` and writing the forces into ``outputs`` (float64 buffers, shape
         (2 n_sites,)); None without numba or with compiled steps switched off."""
-        try:
-            from . import compiled
-        except ImportError:  # a Python with only numpy: the law runs in Python
-            return None
-        if not compiled.enabled():
-            return None
-
         def pack() -> tuple[object, list[np.ndarray]]:
             p = self._params
             params = np.array([p.gain, p.lower_limit, p.upper_limit, p.switch_on_time,
@@ -282,7 +276,7 @@ class StrainController:
             matrix = self._matrix if self._matrix is not None else np.zeros((0, 0))
             return p, [params, matrix, self._decay, self._force, inputs, outputs]
 
-        return compiled.CompiledLaw(compiled.strain_step.address, pack)
+        return compiled_law("strain_step", pack)
 
     def _check_strains(self, strains: np.ndarray) -> np.ndarray:
         eps = np.asarray(strains, dtype=float)

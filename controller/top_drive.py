@@ -49,6 +49,7 @@ from typing import Any
 
 import numpy as np
 
+from .acceleration import compiled_law
 from .params import _check_real
 
 __all__ = ["TopDriveController", "TopDriveControllerParams"]
@@ -205,17 +206,10 @@ class TopDriveController:
         """This law's compiled step (:class:`controller.compiled.CompiledLaw`) reading
         ``[speed, torque]`` from ``inputs`` (shape (2,)) and writing the motor torque into
         ``outputs`` (shape (1,)); None without numba or with compiled steps switched off."""
-        try:
-            from . import compiled
-        except ImportError:  # a Python with only numpy: the law runs in Python
-            return None
-        if not compiled.enabled():
-            return None
-
         def pack() -> tuple[object, list[np.ndarray]]:
             p = self._params
             params = np.array([p.target_speed, p.p_gain, p.i_gain, p.torque_feedback,
                                p.ramp_time, float(p.enabled)])
             return p, [params, self._state, inputs, outputs]
 
-        return compiled.CompiledLaw(compiled.top_drive_step.address, pack)
+        return compiled_law("top_drive_step", pack)

@@ -238,7 +238,7 @@ def test_controller_package_imports_are_relative_and_numpy_only() -> None:
     """The package is vendored under another name: no absolute self-imports; numpy only, but
     for the compiled steps (``compiled.py``, numba), which the laws import inside a function
     that tolerates their absence (the controller FMUs run in a Python with only numpy)."""
-    base = {"__future__", "math", "numbers", "dataclasses", "typing", "numpy"}
+    base = {"__future__", "math", "numbers", "dataclasses", "typing", "collections", "numpy"}
     for path in (ROOT / "controller").rglob("*.py"):
         allowed = base | ({"ctypes", "os", "numba"} if path.name == "compiled.py" else set())
         tree = ast.parse(path.read_text(), filename=str(path))
