@@ -10,10 +10,10 @@ what ``PlantSimulator.do_step`` + ``outputs()`` do for a fixed-step method, bit 
    steps (:data:`REFUSED`);
 3. integrate over ``[t, t + h]``, split at the load switch times (breakpoints), with the
    simulator's method and internal step;
-4. check the state (:func:`plant.guards.check_state`): a violation is :data:`DIVERGED` with
-   the guard's code, index and value in the report array;
-5. compute the outputs at the new time and put them into an output buffer
-   (``outputs[j] = out[out_index[j]]``).
+4. compute the outputs at the new time (into the model's scratch) and check the state
+   (:func:`plant.guards.check_state`, reusing the output kernel's rotation matrices): a
+   violation is :data:`DIVERGED` with the guard's code, index and value in the report array;
+5. else put the outputs into an output buffer (``outputs[j] = out[out_index[j]]``).
 
 It returns :data:`FALLBACK` (nothing changed but the inputs taken) when a step needs Python: an
 exponential integrator's operator for another step size, or the automatic method choice for a
@@ -218,18 +218,20 @@ def step_core(t, h, meta, settings, clock, y, p, ip, fp, u, wR, wF, wM, work, br
                 break
             t = te
     full3d = model == MODEL_FULL3D
+    # the outputs first (into the model's scratch): the 3D output kernel leaves the bodies'
+    # rotation matrices in wR, which the check then reuses (the same cardan, the same bits)
+    if full3d:
+        outputs3d(clock[0], y, p, ip, fp, u, wR, settings[S_ZBIT_REF], out)
+    else:
+        outputs_at(clock[0], y, p, ip, fp, u, wR, settings[S_ZBIT_REF], out)
     code, i, val = check_state(full3d, ip[0], y, settings[S_MAX_LATERAL], settings[S_MAX_TILT],
                                settings[S_MAX_SPEED], settings[S_MAX_STRAIN],
-                               settings[S_STRAIN_FACTOR], wR)
+                               settings[S_STRAIN_FACTOR], wR, True)
     if code != GUARD_OK:
         report[0] = code
         report[1] = i
         report[2] = val
         return DIVERGED
-    if full3d:
-        outputs3d(clock[0], y, p, ip, fp, u, wR, settings[S_ZBIT_REF], out)
-    else:
-        outputs_at(clock[0], y, p, ip, fp, u, wR, settings[S_ZBIT_REF], out)
     for j in range(out_index.size):
         outputs[j] = out[out_index[j]]
     return OK

@@ -1,10 +1,12 @@
 """Stepping a model over communication steps: what the plant FMU (and the benchmarks) call.
 
 :class:`PlantSimulator` holds time, state and inputs, splits each communication step into equal
-internal steps (RK4 by default) no longer than the method's stable step, and checks the state
-after every step.
+internal steps no longer than the method's stable step (the method chosen per step size,
+:meth:`DrillstringModel.method_for_step`), and checks the state after every step.
 A numerical failure is *returned* as a :class:`StepResult` naming the time and the quantity that
-diverged (scipy ``_ivp`` style); nothing is raised from :meth:`do_step`.
+diverged (scipy ``_ivp`` style); nothing is raised from :meth:`do_step`. :meth:`do_step` is the
+Python reference of the compiled step (:meth:`PlantSimulator.compiled_step`,
+``plant/compiled_step.py``) that the FMU and the in-process slave run: the same bits.
 """
 
 from __future__ import annotations
