@@ -62,8 +62,9 @@ def advance_erk(model, t0, y, n_steps, dt, A, b, c, K, yt, p, ip, fp, u, wR, wF,
 
     ``A`` (s, s) strictly lower triangular, weights ``b`` (s,), nodes ``c`` (s,) (one of
     :data:`METHODS`); ``K`` (>= s, N) stage scratch, ``yt`` scratch like ``y``. Stage ``i``:
-    ``K[i] = rhs(t + c_i dt, y + dt sum_j a_ij K[j])``; ``y1 = y + dt sum_i b_i K[i]``. Returns
-    the number of completed steps like :func:`advance_rk4`.
+    ``K[i] = rhs(t + c_i dt, y + sum_j (dt a_ij) K[j])``; ``y1 = y + sum_i (dt b_i) K[i]``,
+    each sum term by term over whole rows (contiguous, vectorised loops). Returns the number of
+    completed steps like :func:`advance_rk4`.
     """
     N = y.size
     S = b.size
@@ -72,16 +73,20 @@ def advance_erk(model, t0, y, n_steps, dt, A, b, c, K, yt, p, ip, fp, u, wR, wF,
         set_load_modes(ip, fp, t + 0.5 * dt)
         for st in range(S):
             for i in range(N):
-                acc = 0.0
-                for j in range(st):
-                    acc += A[st, j] * K[j, i]
-                yt[i] = y[i] + dt * acc
+                yt[i] = y[i]
+            for j in range(st):
+                a = dt * A[st, j]
+                if a != 0.0:
+                    kj = K[j]
+                    for i in range(N):
+                        yt[i] += a * kj[i]
             rhs(model, t + c[st] * dt, yt, K[st], p, ip, fp, u, wR, wF, wM)
-        for i in range(N):
-            acc = 0.0
-            for j in range(S):
-                acc += b[j] * K[j, i]
-            y[i] += dt * acc
+        for j in range(S):
+            w = dt * b[j]
+            if w != 0.0:
+                kj = K[j]
+                for i in range(N):
+                    y[i] += w * kj[i]
         if (s & 63) == 63 and not _all_finite(y):
             return s
     if not _all_finite(y):
