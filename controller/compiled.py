@@ -12,15 +12,14 @@ caller then runs the law's Python ``step``, which gives today's result or error 
 The context is an int64 array of ``(address, d0, d1)`` per array (:class:`CompiledLaw`); the
 arrays are the law's own (its state, its decay cache), so state save/restore sees what the
 compiled step changes. This module needs numba; the laws import it only when a compiled step is
-asked for (the controller FMUs also run in a Python with only numpy: then there is none).
-``DRILLCOSIM_COMPILED_STEP=0`` switches compiled steps off (:func:`enabled`).
+asked for, and only where numba is loaded anyway (``acceleration.py``; the controller FMUs also
+run in a Python with only numpy). ``DRILLCOSIM_COMPILED_STEP=0`` switches compiled steps off.
 """
 
 from __future__ import annotations
 
 import ctypes
 import math
-import os
 from typing import Any
 
 import numpy as np
@@ -28,7 +27,7 @@ from numba import carray, cfunc, njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-__all__ = ["FALLBACK", "INTERNAL", "OK", "REFUSED", "CompiledLaw", "enabled", "strain_step",
+__all__ = ["FALLBACK", "INTERNAL", "OK", "REFUSED", "CompiledLaw", "strain_step",
            "top_drive_step"]
 
 OK = 0
@@ -36,7 +35,6 @@ FALLBACK = 1  # run this step in Python (nothing changed)
 REFUSED = 2  # the Python law refuses this step (nothing changed)
 INTERNAL = 9  # an exception inside the compiled code (a bug; numba's wrapper would return 0)
 
-ENV = "DRILLCOSIM_COMPILED_STEP"
 _WIDTH = 3  # address, d0, d1
 
 # strain law: params (float64); the switch-on tolerance is passed in, not imported: numba's
@@ -44,11 +42,6 @@ _WIDTH = 3  # address, d0, d1
 P_GAIN, P_LOWER, P_UPPER, P_SWITCH_ON, P_ENABLED, P_TAU, P_RTOL = range(7)
 # top-drive law: params
 T_TARGET, T_P, T_I, T_KT, T_RAMP, T_ENABLED = range(6)
-
-
-def enabled() -> bool:
-    """Whether compiled steps are on: ``$DRILLCOSIM_COMPILED_STEP`` is not ``0`` (default on)."""
-    return os.environ.get(ENV, "1").strip() != "0"
 
 
 @intrinsic

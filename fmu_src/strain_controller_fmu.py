@@ -6,8 +6,9 @@ outputs. The build (``fmu_src/build.py``) ships ``controller/`` inside the FMU a
 ``resources/_dcs_controller_0_1_0/`` and imports it under that name, so the FMU
 runs in a Python that has only numpy, and it never shadows (nor is shadowed by) a
 ``controller`` package imported by the host process. Where numba is installed the
-package is imported from a stable per-user copy (``slave_support.vendored``) and the
-law's compiled step (``controller.compiled``) runs every doStep without entering Python
+package is imported from a stable per-user copy (``slave_support.vendored``), and where
+numba is loaded in the process (by the plant FMU, in the main job) the law's compiled step
+(``controller.compiled``) runs every doStep without entering Python
 (``slave_support.LawSlave``); ``DRILLCOSIM_COMPILED_STEP=0`` switches it off.
 
 Interface (value references follow the registration order below)

@@ -5,8 +5,9 @@ measured drive speed and top torque, calls the vendored copy of the ``controller
 (:class:`controller.TopDriveController`, shipped as ``resources/_dcs_controller_0_1_0/``)
 and writes the motor torque. It drives a plant FMU whose top drive is in mode ``"torque"``
 (``[top_drive] mode = "torque"``; ``drillcosim build --scene SCENE`` builds that plant with
-the input ``top_drive_torque``). Where numba is installed, every doStep runs the law's
-compiled step (``controller.compiled``, ``slave_support.LawSlave``) without entering Python.
+the input ``top_drive_torque``). Where numba is loaded in the process (by the plant FMU),
+every doStep runs the law's compiled step (``controller.compiled``, ``slave_support.LawSlave``)
+without entering Python.
 
 Interface (value references follow the registration order below)
 -----------------------------------------------------------------

@@ -210,3 +210,25 @@ def test_an_exception_inside_the_compiled_step_is_an_internal_error():
     np.testing.assert_array_equal(step.sim.y, y)  # it raised before integrating
     with pytest.raises(RuntimeError, match="raised an exception inside its compiled code"):
         step.step(2.5e-4, 2.5e-4)
+
+
+def test_a_law_compiles_only_where_numba_is_loaded_already():
+    """Importing numba (~0.5 s) only for a law of a few microseconds is not worth it: a law
+    alone in a process runs in Python; once numba is loaded (the plant does), it compiles."""
+    import subprocess
+    import sys
+    import textwrap
+
+    script = textwrap.dedent("""
+        import sys
+        import numpy as np
+        from drillcosim.controller import StrainController
+        law = StrainController()
+        buf = np.zeros(4)
+        print(law.compiled_step(buf, buf.copy()) is None, "numba" in sys.modules)
+        import numba  # noqa: F401
+        print(law.compiled_step(buf, buf.copy()) is None)
+    """)
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         check=True, timeout=300).stdout.split()
+    assert out == ["True", "False", "False"]
