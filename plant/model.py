@@ -665,22 +665,23 @@ class DrillstringModel:
         :data:`plant.integrators.METHODS` marked ``automatic`` for this model kind (they met
         the accuracy bar of ``BENCHMARKS.md`` at their automatic step), the fewest right-hand
         side evaluations per communication step, ``stages * ceil(h / stable step)`` (per unit
-        time, ``stages / stable step``, for ``h = None``); ties go to the higher order. For the
-        paper's 3D string at 0.25 ms (the closed loop) one step of Kutta's 3rd-order method
-        beats one RK4 step; at 1 ms three RK4 steps tie with four 3-stage steps and RK4 is kept.
+        time, ``stages / stable step``, for ``h = None``); ties go to fewer internal steps
+        (less work besides the right-hand sides), then to the higher order. For the paper's 3D
+        string at 0.25 ms (the closed loop) one step of Kutta's 3rd-order method beats one RK4
+        step; at 1 ms three RK4 steps tie with four 3-stage steps and RK4 is kept.
         """
         if self.linear_time_invariant:
             return "expeuler"
-        best: tuple[tuple[float, int], str] | None = None
+        best: tuple[tuple[float, float, int], str] | None = None
         for spec in METHODS.values():
             if self.kind not in spec.automatic or not spec.radius:
                 continue
             dt = stable_step(self.max_eigenvalue, spec.radius)
             if h is None:
-                cost = spec.stages / dt
+                key = (spec.stages / dt, 1.0 / dt, -spec.order)
             else:
-                cost = float(spec.stages * max(1, math.ceil(h / dt - 1e-9)))
-            key = (cost, -spec.order)
+                n_sub = max(1, math.ceil(h / dt - 1e-9))
+                key = (float(spec.stages * n_sub), float(n_sub), -spec.order)
             if best is None or key < best[0]:
                 best = (key, spec.name)
         assert best is not None, "no automatic method in the table"
