@@ -221,20 +221,20 @@ def scene_table(name: str, signals: tuple[str, ...] | None, smooth: bool, repeat
          f"Reference DOPRI5 rtol 1e-10 ({ref10.wall:.2f} s); its difference to rtol 1e-11: "
          f"{check:.2g}. Stable RK4 step h* = {model.stable_step() * 1e3:.3f} ms; the plant's "
          f"method at this H: **{chosen}**.", "",
-         "| method | stages | order | internal step [ms] | rhs per H | wall [s] | x real time | "
-         "rel. error | <= 1e-4 | Pareto front (rhs per H, error) |",
-         "|---|---:|---:|---:|---:|---:|---:|---:|---|---|"]
+         "| method | stages | order | internal step [ms] | steps per H | rhs per H | wall [s] | "
+         "x real time | rel. error | <= 1e-4 | Pareto front (cost, error) |",
+         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---|"]
     rows = sorted(cands.values(), key=lambda c: (c.run is None, c.run.wall if c.run else 0.0))
     for c in rows:
         spec = METHODS[c.method]
         mark = " (chosen)" if c.method == chosen else ""
         if c.run is None:
             L.append(f"| {c.method}{mark} | {spec.stages} | {spec.order} | - | - | - | - | - | - "
-                     f"| not applicable: {c.why} |")
+                     f"| - | not applicable: {c.why} |")
             continue
         e = errors[c.method]
         L.append(f"| {c.method}{mark} | {spec.stages} | {spec.order} | "
-                 f"{c.internal_step * 1e3:.4g} | {c.rhs_per_step} | {c.run.wall:.3f} | "
+                 f"{c.internal_step * 1e3:.4g} | {c.steps} | {c.rhs_per_step} | {c.run.wall:.3f} | "
                  f"{T / c.run.wall:.1f} | {'diverged' if not c.run.ok else f'{e:.3g}'} | "
                  f"{'yes' if e <= BAR else 'no'} | {'*' if c.method in on_front else ''} |")
     verdict = {"scene": name, "H": H, "kind": model.kind, "smooth": smooth, "chosen": chosen,
