@@ -27,8 +27,7 @@ def enabled() -> bool:
 def compiled_law(entry: str, pack: Callable[[], tuple[object, list[Any]]]) -> Any:
     """A :class:`controller.compiled.CompiledLaw` of the C entry point ``entry`` (a name in
     ``compiled``: ``"strain_step"``, ``"top_drive_step"``) and its context ``pack``; None with
-    compiled steps switched off or numba not loaded in this process (ask again later: the
-    controller FMU does after every call that enters Python)."""
+    compiled steps switched off or numba not loaded in this process."""
     if not enabled() or "numba" not in sys.modules:
         return None
     try:

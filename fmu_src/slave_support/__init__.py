@@ -181,9 +181,11 @@ class LawSlave(DcsSlave):
     * a fixed parameter changed after initialization, an invalid tunable one, a bad input:
       fmi2Error from that doStep, state unchanged;
     * FMU state: the registered variables plus the law's state and the initialization flags;
-    * compiled step (the wrapper's accelerator, ``fmu_src/wrapper``): the law's (once the law
-      has one: where numba is loaded in the process), offered while the instance is
-      initialized and its parameters are the ones last validated; a parameter
+    * compiled step (the wrapper's accelerator, ``fmu_src/wrapper``): the law's, made at the
+      first request after initialization (where numba is loaded in the process by then: the
+      hosts instantiate every FMU, the plant's import loads it, before they initialize any),
+      offered while the instance is initialized and its parameters are the ones last
+      validated; a parameter
       set through FMI makes the next doStep run in Python, which validates and applies it, and
       the compiled step is offered again after it. A step the compiled law leaves to Python (a
       refused input, a new lag decay) runs :meth:`do_step`: the same status and message.
@@ -271,8 +273,7 @@ class LawSlave(DcsSlave):
                 or self._snapshot(self.FIXED) != self._fixed_values
                 or self._snapshot(self.TUNABLE) != self._tunable_values):
             return None
-        if self._step_law_obj is not self._law or self._step is None:
-            # asked again while there is none: the law may get one later (numba loaded)
+        if self._step_law_obj is not self._law:  # once per law (per initialization)
             self._step_law_obj = self._law
             self._step = self._law.compiled_step(self.inputs, self.outputs)
         step = self._step
