@@ -123,7 +123,8 @@ def main(argv: list[str] | None = None) -> int:
         py_fmu = build_one(spec["StrainController"], work)
         fmus = {"Python (StrainController.fmu)": py_fmu,
                 "C99 (StrainControllerC.fmu)": build_c_controller(work),
-                "Python, compiled step off (DRILLCOSIM_COMPILED_STEP=0)": py_fmu}
+                "Python, compiled steps off (DRILLCOSIM_COMPILED_STEP=0; in the closed loop the "
+                "plant's too)": py_fmu}
         compiled = {label: "off" not in label for label in fmus}
         plant = build_one(spec["DrillstringPlant"], work)
         strains = np.random.default_rng(1).normal(scale=3e-6, size=(args.steps, 4))
