@@ -86,8 +86,11 @@ from _dcs_slave_support_0_1_0.vendored import import_vendored
 VENDORED_CONTROLLER = "_dcs_controller_0_1_0"
 # from a stable copy where numba can compile the law's step (its cache needs a fixed path)
 _CONTROLLER, _IMPORT_WARNING = import_vendored(VENDORED_CONTROLLER, __file__, only_with="numba")
-MODES, ControllerParams = _CONTROLLER.MODES, _CONTROLLER.ControllerParams
-StrainLaw = _CONTROLLER.StrainController
+from _dcs_controller_0_1_0 import (  # noqa: E402 - imported above from its stable copy
+    MODES,
+    ControllerParams,
+)
+from _dcs_controller_0_1_0 import StrainController as StrainLaw  # noqa: E402
 
 
 def _io_names(n_sites: int) -> tuple[tuple[str, ...], tuple[str, ...]]:

@@ -49,8 +49,10 @@ from _dcs_slave_support_0_1_0.vendored import import_vendored
 VENDORED_CONTROLLER = "_dcs_controller_0_1_0"
 # from a stable copy where numba can compile the law's step (its cache needs a fixed path)
 _CONTROLLER, _IMPORT_WARNING = import_vendored(VENDORED_CONTROLLER, __file__, only_with="numba")
-TopDriveLaw = _CONTROLLER.TopDriveController
-TopDriveControllerParams = _CONTROLLER.TopDriveControllerParams
+from _dcs_controller_0_1_0 import (  # noqa: E402 - imported above from its stable copy
+    TopDriveController as TopDriveLaw,
+)
+from _dcs_controller_0_1_0 import TopDriveControllerParams  # noqa: E402
 
 INPUTS: tuple[str, ...] = ("top_rotary_speed", "top_torque")
 OUTPUTS: tuple[str, ...] = ("top_drive_torque",)
