@@ -30,7 +30,6 @@ from pathlib import Path
 from typing import Any
 
 from .model import MODEL_KINDS, extensions, needs_lateral
-from .observables import output_names
 from .params import (
     ActuatorParams,
     BitParams,
@@ -44,6 +43,7 @@ from .params import (
     UnbalanceParams,
     describe,
 )
+from .signals import plant_outputs
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -278,9 +278,9 @@ def scene_from_dict(data: dict[str, Any], name: str = "scene", source: str = "<d
     if model not in MODEL_CHOICES:
         raise SceneError(f"{source}: model = {model!r} is not allowed{_suggest(str(model), MODEL_CHOICES)}")
     ext = bool(extensions(plant))  # the outputs DrillstringModel lists for these parameters
-    lateral_names = {r[0] for r in output_names(True, list(plant.contact_bodies),
+    lateral_names = {r[0] for r in plant_outputs(True, list(plant.contact_bodies),
                                                 len(plant.actuator_joints), extended=ext)}
-    at_names = {r[0] for r in output_names(False, [], 0, extended=ext)}
+    at_names = {r[0] for r in plant_outputs(False, [], 0, extended=ext)}
     wants_lateral = [o for o in outputs if o not in at_names]
     if model == "auto":
         need = needs_lateral(plant) or bool(controller.get("enabled", False)) or wants_lateral

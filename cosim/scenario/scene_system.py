@@ -105,8 +105,8 @@ from drillcosim.cosim.master.system import (
     SystemSpec,
     integer_multiple,
 )
-from drillcosim.plant.observables import output_names
 from drillcosim.plant.scene import Scene, scenes_dir
+from drillcosim.plant.signals import plant_outputs as output_names
 
 from .interface import InterfaceWarning, connections_of, wire_system
 from .scene_fmus import (

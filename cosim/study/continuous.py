@@ -328,8 +328,8 @@ def operating_point_simulator(scene: Any, gain: float, delay: float,
     plant.closed_loop.ClosedLoopSimulator
     """
     from drillcosim.plant.closed_loop import ClosedLoopSimulator
+    from drillcosim.plant.equilibrium import static_equilibrium
     from drillcosim.plant.linearize import operating_params
-    from drillcosim.plant.modal import static_equilibrium
     from drillcosim.plant.model import DrillstringModel
 
     sc = _load(scene, overrides)
