@@ -98,7 +98,6 @@ def operating_modes(params, kind: str = "full3d", spin: float | None = None) -> 
     back to the inertial frame by their whirl direction, so that frequencies are the ones an
     observer at rest sees. With zero spin this equals :func:`modes` at the unforced equilibrium.
     """
-
     lm = linearize(params, kind, spin)
     lam, vecs = np.linalg.eig(lm.A)
     lam_max = np.max(np.abs(lam))
