@@ -43,7 +43,7 @@ from typing import Any
 from drillcosim.controller import MODES, ControllerParams
 from drillcosim.cosim.master.interface import FmuInterface, Port, read_interface
 from drillcosim.cosim.master.slave import Slave
-from drillcosim.cosim.master.system import FmuSpec, SystemSpec
+from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec
 from drillcosim.plant.scene import Scene, scenes_dir
 from drillcosim.plant.signals import (
     AXES,
@@ -61,7 +61,7 @@ from drillcosim.plant.signals import (
 
 from .config import ConfigError, SceneConfig, plant_parameter_paths
 from .inprocess import inprocess_slaves
-from .interface import InterfaceWarning, connections_of, wire_system
+from .interface import InterfaceWarning, wire_system
 from .scene_fmus import (
     TOP_DRIVE_CONTROLLER,
     controller_recipe,
@@ -287,8 +287,12 @@ def build_system(config: SceneConfig, engine: str = "fmu", *,
     fmus = [FmuSpec(PLANT, faces[PLANT].path, params[PLANT])]
     fmus += [FmuSpec(i, faces[i].path, params[i], cosim.controller_ticks) for i in controllers]
     wiring = wire_system(faces[PLANT], [faces[i] for i in controllers], fmus, lacking)
-    delays = {PLANT: cosim.actuator_delay, **dict.fromkeys(controllers, cosim.sensor_delay)}
-    connections = connections_of(wiring, delays, cosim.coupling)
+    # what the plant receives (forces, torque) is delayed by actuator_delay, what the
+    # controllers receive (strains, speeds) by sensor_delay
+    delay = {PLANT: cosim.actuator_delay, **dict.fromkeys(controllers, cosim.sensor_delay)}
+    receiver = {ref(i, n): i for i in instances for n in faces[i].inputs()}
+    connections = [Connection(s, t, delay[receiver[t]], cosim.coupling)
+                   for s, t in wiring.connections]
     recorded = [(PLANT, n) for n in _recorded(config, faces[PLANT].outputs())]
     fed_by = {ref(i, n): (i, n) for i in controllers for n in faces[i].outputs()}
     recorded += [fed_by[s] for s, _t in wiring.connections if s in fed_by]

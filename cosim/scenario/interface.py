@@ -38,10 +38,10 @@ from drillcosim.cosim.master.interface import (
     check_system,
     pair_by_name,
 )
-from drillcosim.cosim.master.system import Connection, FmuSpec
+from drillcosim.cosim.master.system import FmuSpec
 from drillcosim.plant.signals import AXES, actuator_force, actuator_power, sites_in, strain
 
-__all__ = ["InterfaceWarning", "PairWiring", "connections_of", "wire_system"]
+__all__ = ["InterfaceWarning", "PairWiring", "wire_system"]
 
 
 class InterfaceWarning(UserWarning):
@@ -151,9 +151,3 @@ def wire_system(plant: FmuInterface, controllers: Sequence[FmuInterface],
             f"{plant.label} runs without a controller: its inputs {', '.join(idle)} keep their "
             f"start value"), stacklevel=3)
     return PairWiring(tuple(pairs), tuple(unserved))
-
-
-def connections_of(wiring: PairWiring, delays: dict[str, float], coupling: str) -> list[Connection]:
-    """Master connections of a wiring; ``delays[instance]`` is the delay of what it receives [s]."""
-    return [Connection(s, t, delays.get(t.split(".", 1)[0], 0.0), coupling)
-            for s, t in wiring.connections]

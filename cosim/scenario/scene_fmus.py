@@ -31,7 +31,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from drillcosim.fmu_src.build import REGISTRY, FmuRecipe
+from drillcosim.fmu_src.build import DEFAULT_OUT, REGISTRY, FmuRecipe, build_one, stale
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.params import PlantParams
 from drillcosim.plant.scene import Scene, scene_files, scenes_dir
@@ -84,8 +84,6 @@ def recipe_named(name: str) -> FmuRecipe:
 
 def default_fmu_dir() -> Path:
     """Where the project's FMUs are built and found by default (``build/fmus/`` of a checkout)."""
-    from drillcosim.fmu_src.build import DEFAULT_OUT
-
     return DEFAULT_OUT
 
 
@@ -205,8 +203,6 @@ def ensure_recipes(recipes: Sequence[FmuRecipe], fmu_dir: str | Path | None = No
     FileNotFoundError
         If an FMU is still missing after the build (e.g. no adapter yet).
     """
-    from drillcosim.fmu_src.build import build_one, stale
-
     folder = Path(fmu_dir) if fmu_dir is not None else default_fmu_dir()
     paths = {}
     for recipe in recipes:

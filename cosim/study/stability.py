@@ -47,6 +47,7 @@ Only single-rate loops (controller period = communication step) are modelled.
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -567,8 +568,6 @@ def _boundary_report(scene: str = "paper_closed_loop") -> list[str]:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    import sys
-
     try:
         print("\n".join(_boundary_report(*sys.argv[1:2])))
     except ValueError as exc:

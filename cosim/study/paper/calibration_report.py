@@ -25,6 +25,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from drillcosim.cosim.master.files import atomic_write
 
 from ..scene_stats import SceneTable, run_member
@@ -108,7 +110,6 @@ def plot_grid(ranked: Sequence[Mapping[str, Any]], path: Path) -> Path:
     """Mean objective of the coarse grid: WOB x damping ratio per top spring (columns) and
     gravity (rows), the better unbalance body per cell; the best cell circled."""
     import matplotlib.pyplot as plt
-    import numpy as np
     from matplotlib.colors import LogNorm
 
     from drillcosim.cosim.scenario.plots import save_figure

@@ -16,6 +16,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from drillcosim.cosim.master.files import atomic_write
 from drillcosim.cosim.scenario.config import load_config
 
@@ -176,7 +178,6 @@ def plot_stability(rows: Sequence[Mapping[str, Any]], path: Path) -> Path:
 
 def plot_benefit(rows: Sequence[Mapping[str, Any]], path: Path) -> Path:
     """Long-span benefit (colour, value written) per sites-per-span; unstable crossed out."""
-    import numpy as np
 
     from drillcosim.cosim.scenario.plots import save_figure
 
