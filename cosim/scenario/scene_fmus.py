@@ -35,6 +35,12 @@ from drillcosim.fmu_src.build import DEFAULT_OUT, REGISTRY, FmuRecipe, build_one
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.params import PlantParams
 from drillcosim.plant.scene import Scene, scene_files, scenes_dir
+from drillcosim.plant.signals import (
+    TOP_DRIVE_SPEED_COMMAND,
+    TOP_DRIVE_TORQUE,
+    actuator_force,
+    body_signal,
+)
 
 __all__ = ["DEFAULT_CONTROLLER", "DEFAULT_PLANT", "TOP_DRIVE_CONTROLLER", "PlantLayout",
            "controller_recipe", "default_fmu_dir", "ensure_recipes", "plant_layout",
@@ -147,10 +153,12 @@ def plant_recipe(scene: Scene) -> FmuRecipe:
     if layout is None:
         return base
     _name, copies = _scene_files(scene)
-    sites = sum(1 for n, _u, _d in layout.inputs if n.endswith("_force_C"))
-    bodies = sorted({n.split("_")[0][4:] for n, _u, _d in layout.outputs
-                     if n.startswith("body") and n.endswith("_X")}, key=int)
-    drive = [n for n, _u, _d in layout.inputs if n.startswith("top_drive")]
+    inputs = {n for n, _u, _d in layout.inputs}
+    outputs = {n for n, _u, _d in layout.outputs}
+    sites = sum(1 for s in range(1, len(scene.plant.actuator_joints) + 1)
+                if actuator_force(s, "C") in inputs)
+    bodies = [str(b) for b in scene.plant.contact_bodies if body_signal(b, "X") in outputs]
+    drive = [n for n in (TOP_DRIVE_TORQUE, TOP_DRIVE_SPEED_COMMAND) if n in inputs]
     description = (f"Drillstring vibration plant built for scene '{layout.scene}' "
                    f"({layout.model} model): {sites} actuator sites, contact bodies "
                    f"[{', '.join(bodies)}]" + (f", top-drive input {drive[0]}" if drive else "")

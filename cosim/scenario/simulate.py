@@ -24,7 +24,7 @@ from .build import BuiltSystem
 from .config import ConfigError
 from .result import Result
 
-__all__ = ["run_master", "simulate"]
+__all__ = ["simulate_system", "simulate"]
 
 
 def _failure(err: CosimError | None, result: MasterResult) -> dict[str, Any] | None:
@@ -42,7 +42,7 @@ def _failure(err: CosimError | None, result: MasterResult) -> dict[str, Any] | N
                        f"{err.fmu_message or err.message}"}
 
 
-def run_master(system: SystemSpec, slaves, outputs: Sequence[str], output_ticks: int,
+def simulate_system(system: SystemSpec, slaves, outputs: Sequence[str], output_ticks: int,
                stop_time: float, *, progress: bool | None = False,
                csv_path: str | Path | None = None, observers: Sequence[Any] = ()
                ) -> tuple[MasterResult, dict[str, Any] | None]:
@@ -109,7 +109,7 @@ def simulate(built: BuiltSystem, stop_time: float | None = None, *,
                           f"allowed: {', '.join(built.units)}")
     if csv_path is not None:
         Path(csv_path).parent.mkdir(parents=True, exist_ok=True)
-    result, failure = run_master(built.system, built.slaves, names, cosim.output_ticks, stop,
+    result, failure = simulate_system(built.system, built.slaves, names, cosim.output_ticks, stop,
                                  progress=progress, csv_path=csv_path, observers=observers)
     return Result(built.config, built.engine, result.data,
                   {"time": "s", **{n: built.units[n] for n in names}}, stop, result.end_time,

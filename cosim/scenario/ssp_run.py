@@ -30,7 +30,7 @@ from drillcosim.cosim.master.system import integer_multiple
 from .build import build_system
 from .config import ConfigError, SceneConfig
 from .result import seconds_text
-from .simulate import run_master
+from .simulate import simulate_system
 from .summary import write_json
 
 __all__ = ["SspOutcome", "SspWarning", "WrittenSsp", "simulate_ssp", "write_scene_ssp"]
@@ -119,7 +119,7 @@ def simulate_ssp(path: str | Path, *, stop_time: float | None = None, step: floa
             raise ConfigError(f"output interval: a positive integer multiple of the step "
                              f"{system.base_step:g} s, got {output_interval!r} s")
         csv = out / "results.csv"
-        result, failure = run_master(system, None, imp.outputs, ticks, stop, progress=progress,
+        result, failure = simulate_system(system, None, imp.outputs, ticks, stop, progress=progress,
                                      csv_path=csv)
         summary = {
             "ssp_file": str(Path(path).resolve()), "system": imp.name,

@@ -52,7 +52,7 @@ from .point import PointOptions, simulate_point
 from .table import ResultTable, full_row
 
 __all__ = ["ID_COLUMNS", "STAT_COLUMNS", "SPAN_STATS", "SITE_STATS", "ScenePoint", "SceneTable",
-           "aggregate", "measure_scene", "run_member", "run_statistics"]
+           "aggregate", "measure_scene", "simulate_member", "run_statistics"]
 
 SPANS = ("long", "short")
 SITES = (1, 2)
@@ -213,7 +213,7 @@ def run_statistics(data: np.ndarray, config: SceneConfig) -> dict[str, float]:
     return {k: float(v) for k, v in out.items()}
 
 
-def run_member(scene: str, stop_time: float, engine: str = "inprocess", *,
+def simulate_member(scene: str, stop_time: float, engine: str = "inprocess", *,
                overrides: Mapping[str, Any] | None = None, member: int = 0, eps: float = 1e-6,
                seed: int = 2024, fmu_dir: str | None = None
                ) -> tuple[np.ndarray, SceneConfig, str]:
@@ -265,7 +265,7 @@ def measure_scene(scene: str, stop_time: float, engine: str = "inprocess", *,
         the statistics of :func:`run_statistics`.
     """
     wall0 = time.perf_counter()
-    data, config, reason = run_member(scene, stop_time, engine, overrides=overrides, member=member,
+    data, config, reason = simulate_member(scene, stop_time, engine, overrides=overrides, member=member,
                                   eps=eps, seed=seed, fmu_dir=fmu_dir)
     t = data["time"]
     row: dict[str, Any] = {"status": "diverged" if reason else "ok", "reason": reason,

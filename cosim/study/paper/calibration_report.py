@@ -28,8 +28,9 @@ from typing import Any
 import numpy as np
 
 from drillcosim.cosim.master.files import atomic_write
+from drillcosim.plant.signals import PLANT, body_signal, ref
 
-from ..scene_stats import SceneTable, run_member
+from ..scene_stats import SceneTable, simulate_member
 from ..table import rows_csv
 from .calibration import (
     BASE_SCENE,
@@ -222,7 +223,7 @@ def plot_sensitivity(ranked: Sequence[Mapping[str, Any]], best: PlantChoice, pat
 
 
 def _traces(scene: str, overrides: Mapping[str, Any] | None, members: int, stop: float):
-    return [run_member(scene, stop, overrides=overrides, member=k)[0] for k in range(members)]
+    return [simulate_member(scene, stop, overrides=overrides, member=k)[0] for k in range(members)]
 
 
 def plot_traces(best: PlantChoice, path: Path, members: int = 4) -> Path:
@@ -240,7 +241,7 @@ def plot_traces(best: PlantChoice, path: Path, members: int = 4) -> Path:
         for j, (body, span) in enumerate(((11, "long"), (26, "short"))):
             ax = axes[i, j]
             for k, d in enumerate(runs):
-                ax.plot(d["time"], d[f"plant.body{body}_radial_deflection"] * MM,
+                ax.plot(d["time"], d[ref(PLANT, body_signal(body, "radial_deflection"))] * MM,
                         lw=1.0 if k == 0 else 0.5, alpha=1.0 if k == 0 else 0.6,
                         label="member 0" if k == 0 else (f"members 1-{members - 1}"
                                                          if k == 1 else None))
