@@ -26,7 +26,7 @@ from collections.abc import Collection, Iterable
 
 __all__ = ["AXES", "CONTACT_QUANTITIES", "CONTROLLER", "EXTENDED_SCALAR_OUTPUTS", "INSTANCES",
            "PLANT", "SCALAR_OUTPUTS", "TOP_DRIVE", "TOP_DRIVE_SPEED_COMMAND",
-           "TOP_DRIVE_TORQUE", "WHIRL_MIN_RADIUS", "actuator_force", "actuator_inputs",
+           "TOP_DRIVE_TORQUE", "WHIRL_MIN_RADIUS", "actuator_force", "actuator_inputs", "fmi_unit",
            "actuator_power", "body_signal", "plant_outputs", "ref", "site_channels",
            "site_signals", "sites_in", "strain"]
 
@@ -62,6 +62,14 @@ EXTENDED_SCALAR_OUTPUTS = (
     ("depth_of_cut", "m", "depth of cut per bit revolution d (bit.model 'cutting')"),
     ("bit_on_bottom", "1", "1 while the bit presses on the rock, 0 off bottom (bit bounce)"),
 )
+
+
+def fmi_unit(unit: str) -> str | None:
+    """The FMI unit name of a unit as the plant states it ("N m/rad" -> "N.m/rad", "m/s^2" ->
+    "m/s2"); None for none ("-" or "")."""
+    if unit in ("-", ""):
+        return None
+    return unit.replace("^", "").replace(" ", ".")
 
 
 def ref(instance: str, name: str) -> str:

@@ -54,6 +54,7 @@ from drillcosim.plant.signals import (
     actuator_force,
     actuator_power,
     body_signal,
+    fmi_unit,
     ref,
     site_channels,
     strain,
@@ -174,8 +175,8 @@ def _recorded(config: SceneConfig, declared: list[str]) -> list[str]:
 def _slave_interface(instance: str, slave: Slave, inputs: list[str], units: Mapping[str, str]
                      ) -> FmuInterface:
     """An in-process slave's variables as the interface check sees an FMU's."""
-    ports = {n: Port(n, "input", "Real", units.get(n)) for n in inputs}
-    ports.update({n: Port(n, "output", "Real", units.get(n)) for n in slave.outputs})
+    ports = {n: Port(n, "input", "Real", fmi_unit(units.get(n, ""))) for n in inputs}
+    ports.update({n: Port(n, "output", "Real", fmi_unit(units.get(n, ""))) for n in slave.outputs})
     return FmuInterface(instance, Path(f"<in-process {instance}>"), ports)
 
 
