@@ -106,8 +106,8 @@ HERE = Path(__file__).resolve().parent
 #: carry stray files (setuptools reuses a checkout's ``build/lib``, where a file deleted from
 #: the sources stays), and a stray ``.c`` would be linked in.
 SOURCES: tuple[Path, ...] = tuple(HERE / n for n in (
-    "dcs_discover.c", "dcs_instance.c", "dcs_python.c", "dcs_slave.c", "dcs_state.c",
-    "fmi2_functions.c"))
+    "dcs_discover.c", "dcs_instance.c", "dcs_python.c", "dcs_registry.c", "dcs_slave.c",
+    "dcs_state.c", "fmi2_functions.c"))
 #: The official FMI 2.0.5 headers and our internal ones.
 HEADERS: tuple[Path, ...] = tuple(HERE / n for n in (
     "dcs_discover.h", "dcs_python.h", "dcs_wrapper.h", "fmi2/fmi2FunctionTypes.h",
@@ -126,11 +126,13 @@ def _c_string(text: str) -> str:
     return text.replace("\\", "\\\\").replace('"', '\\"')
 
 
-def compile_wrapper(out: Path | str, cc: str | None = None) -> Path:
-    """Compile the wrapper for the running Python into the shared library ``out``.
+def compile_wrapper(out: Path | str, cc: str | None = None, flags: Sequence[str] = ()) -> Path:
+    """Compile the wrapper into the shared library ``out``: one binary for CPython 3.10-3.13.
 
-    The running interpreter is recorded as the last Python candidate (see the module
-    docstring); nothing else of this machine is compiled in.
+    The running Python's headers are used with ``Py_LIMITED_API`` = 3.10 (the compiler refuses
+    anything outside the stable ABI); the running interpreter is recorded as the last Python
+    candidate and its minor version as the preferred one among a PATH folder's names (see the
+    module docstring); nothing else of this machine is compiled in.
 
     Parameters
     ----------
@@ -138,6 +140,8 @@ def compile_wrapper(out: Path | str, cc: str | None = None) -> Path:
         Target ``.so`` (its name is irrelevant; FMUs copy it to ``<id>.so``).
     cc : str, optional
         C compiler (default ``$CC`` or ``gcc``).
+    flags : sequence of str
+        Extra compiler flags (e.g. sanitizers), after :data:`CFLAGS`.
 
     Returns
     -------
@@ -153,7 +157,8 @@ def compile_wrapper(out: Path | str, cc: str | None = None) -> Path:
     return compile_shared(
         "the native wrapper", SOURCES, out,
         flags=(f"-I{include}", f"-I{HERE}",
-               f"-DDCS_BUILD_PYTHON=\"{_c_string(sys.executable)}\""),
+               f"-DDCS_BUILD_PYTHON=\"{_c_string(sys.executable)}\"",
+               f"-DDCS_BUILD_MINOR={sys.version_info.minor}", *flags),
         libs=("-ldl", "-lpthread"), cc=cc)
 
 
