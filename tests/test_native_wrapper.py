@@ -27,7 +27,7 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.validation import validate_fmu
 
-from drillcosim.fmu_src.build import REGISTRY, FmuRecipe, build_one
+from drillcosim.fmu_src.build import REGISTRY, FmuRecipe, build_one, shipped_modules
 from drillcosim.fmu_src.wrapper import compile_wrapper
 from support import c_host
 
@@ -468,10 +468,11 @@ def test_exceptions_are_fmi2error_and_instances_stay_usable_no_heap_corruption(
 
 def test_instantiate_failure_returns_null_and_logs(raiser_fmu: Path, tmp_path: Path) -> None:
     broken = tmp_path / "Raiser.fmu"
+    slave_file = f"resources/{shipped_modules(raiser_fmu)[RAISER.slave_module]}.py"
     with zipfile.ZipFile(raiser_fmu) as src, zipfile.ZipFile(broken, "w") as dst:
         for info in src.infolist():
             data = src.read(info.filename)
-            if info.filename == f"resources/{RAISER.slave_module}.py":
+            if info.filename == slave_file:
                 data = data.replace(b"self.x = 0.0", b"self.x = 1 / 0")
             dst.writestr(info, data)
     code = PRELUDE + textwrap.dedent("""

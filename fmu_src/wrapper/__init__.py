@@ -99,7 +99,8 @@ import zipfile
 from collections.abc import Sequence
 from pathlib import Path
 
-__all__ = ["HEADERS", "SOURCES", "compile_shared", "compile_wrapper", "install_native_wrapper", "sources"]
+__all__ = ["HEADERS", "SOURCES", "compile_shared", "compile_wrapper", "install_native_wrapper",
+           "python_range", "sources"]
 
 HERE = Path(__file__).resolve().parent
 #: The C sources of the wrapper, compiled together. Named, not globbed: an installed copy can
@@ -114,6 +115,17 @@ HEADERS: tuple[Path, ...] = tuple(HERE / n for n in (
     "fmi2/fmi2Functions.h", "fmi2/fmi2TypesPlatform.h"))
 CFLAGS = ("-std=c99", "-O2", "-DNDEBUG", "-Wall", "-Wextra", "-Werror", "-shared", "-fPIC",
           "-fvisibility=hidden")
+
+
+def python_range() -> tuple[int, int]:
+    """(oldest, newest) minor version of CPython 3 the wrapper runs on, read from
+    ``dcs_python.h`` (``DCS_PY_MINOR_MIN`` / ``DCS_PY_MINOR_MAX``: the one place they are set)."""
+    import re
+
+    text = (HERE / "dcs_python.h").read_text()
+    low, high = (int(re.search(rf"#define DCS_PY_MINOR_{k} (\d+)", text).group(1))
+                 for k in ("MIN", "MAX"))
+    return low, high
 
 
 def sources() -> list[Path]:
