@@ -158,6 +158,12 @@ DEFAULT_OUT = default_out()
 #: ``resources/pythonfmu/`` by it.
 PYTHONFMU_VENDORED = "_dcs_pythonfmu_0_7_0"
 
+#: A TOML reader for Python 3.10 hosts, which have no ``tomllib``: a vendored package that does
+#: ``import tomli as ...`` (plant/scene.py below 3.11) gets this copy instead, so the FMU needs
+#: no ``tomli`` in the host. Staged from the builder's ``tomli`` if installed, else from the
+#: standard library's ``tomllib`` (tomli's code, pure Python, runs on 3.10: tested).
+TOML_VENDORED = "_dcs_tomli"
+
 #: Hex digits of the build hash appended to every shipped module name (see the module docstring).
 BUILD_HASH_LENGTH = 12
 #: The record of a build's hash and module names inside the FMU.
@@ -551,6 +557,25 @@ def _rename_modules(staging: Path, names: Mapping[str, str]) -> None:
                 src.rename(dst)
 
 
+def _vendor_toml_reader(staging: Path) -> bool:
+    """If a staged module imports ``tomli``, ship a TOML reader as :data:`TOML_VENDORED` and
+    point those imports at it; whether it did."""
+    pattern = re.compile(r"^(\s*)import tomli as ", re.M)
+    users = [p for p in staging.rglob("*.py") if pattern.search(p.read_text(encoding="utf-8"))]
+    if users:
+        import importlib.util
+
+        spec = importlib.util.find_spec("tomli") or importlib.util.find_spec("tomllib")
+        if spec is None or spec.origin is None:
+            raise RuntimeError("the FMU needs a TOML reader for Python 3.10: install tomli")
+        shutil.copytree(Path(spec.origin).parent, staging / TOML_VENDORED,
+                        ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.typed"))
+        for path in users:
+            text = path.read_text(encoding="utf-8")
+            path.write_text(pattern.sub(rf"\1import {TOML_VENDORED} as ", text), encoding="utf-8")
+    return bool(users)
+
+
 def shipped_modules(fmu: Path | str) -> dict[str, str]:
     """Canonical module name -> the name an FMU of ours ships it under (its build record).
 
@@ -592,6 +617,8 @@ def _build_in_this_process(recipe: FmuRecipe, workdir: Path) -> Path:
         _vendor(recipe, package, staging / vname)
     canonical = [PYTHONFMU_VENDORED, *(vname for _, vname in recipe.vendored),
                  recipe.slave_module]
+    if _vendor_toml_reader(staging):
+        canonical.append(TOML_VENDORED)
     if recipe.base:  # the adapter under its own module name, the variant as the slave module
         shutil.copy2(recipe.script_path, staging / f"{recipe.script_module}.py")
         (staging / f"{recipe.slave_module}.py").write_text(recipe.variant_source())

@@ -138,7 +138,8 @@ def _c_string(text: str) -> str:
     return text.replace("\\", "\\\\").replace('"', '\\"')
 
 
-def compile_wrapper(out: Path | str, cc: str | None = None, flags: Sequence[str] = ()) -> Path:
+def compile_wrapper(out: Path | str, cc: str | None = None, flags: Sequence[str] = (),
+                    include: Path | str | None = None) -> Path:
     """Compile the wrapper into the shared library ``out``: one binary for CPython 3.10-3.13.
 
     The running Python's headers are used with ``Py_LIMITED_API`` = 3.10 (the compiler refuses
@@ -154,6 +155,8 @@ def compile_wrapper(out: Path | str, cc: str | None = None, flags: Sequence[str]
         C compiler (default ``$CC`` or ``gcc``).
     flags : sequence of str
         Extra compiler flags (e.g. sanitizers), after :data:`CFLAGS`.
+    include : path-like, optional
+        Python headers to compile against (default: the running Python's).
 
     Returns
     -------
@@ -165,7 +168,7 @@ def compile_wrapper(out: Path | str, cc: str | None = None, flags: Sequence[str]
     RuntimeError
         If there is no compiler, or it fails or prints a warning (its output is included).
     """
-    include = sysconfig.get_paths()["include"]
+    include = include or sysconfig.get_paths()["include"]
     return compile_shared(
         "the native wrapper", SOURCES, out,
         flags=(f"-I{include}", f"-I{HERE}",

@@ -117,9 +117,8 @@ typedef struct {
 #define DCS_DECLARE(name) extern __typeof__(name) *p_##name;
 DCS_PYAPI(DCS_DECLARE)
 #undef DCS_DECLARE
-#pragma GCC diagnostic pop
-
 extern __typeof__(Py_UTF8Mode) *p_Py_UTF8Mode;
+#pragma GCC diagnostic pop
 
 /* Declared by hand (see the top of this file). */
 extern int *p_Py_IgnoreEnvironmentFlag;
