@@ -29,6 +29,7 @@ import shutil
 import subprocess
 import sys
 import textwrap
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -179,19 +180,45 @@ def numba_index_files(shipped_plant: str) -> list[Path]:
             if shipped_plant in str(p)]
 
 
+def run_version(python: Path, fmus: dict[str, Path], host: Path, where: Path) -> dict:
+    """Everything one version runs: the fmpy script, then both FMUs in the C host."""
+    where.mkdir(parents=True)
+    out = {"fmpy": run_fmus(python, fmus, where), "c": {}}
+    for name, case in c_host_cases(fmus).items():
+        out["c"][name] = run_c_host(host, python, case, where / f"c_{name}")
+    return out
+
+
+@pytest.fixture(scope="module")
+def version_runs(project_fmus: dict[str, Path], host: Path,
+                 tmp_path_factory: pytest.TempPathFactory) -> dict[int, Future]:
+    """Each other version's venv and runs, two versions at a time (the first use of a version
+    compiles the plant's numba kernels for it: ~15 s of CPU each; a fresh venv ~10 s)."""
+    where = tmp_path_factory.mktemp("versions")
+    found = {m: find_python(m) for m in MINORS if m != sys.version_info.minor}
+
+    def work(minor: int, exe: str) -> dict:
+        return run_version(venv_for(exe), project_fmus, host, where / f"3.{minor}")
+
+    pool = ThreadPoolExecutor(max_workers=2)
+    runs = {m: pool.submit(work, m, exe) for m, exe in found.items() if exe is not None}
+    pool.shutdown(wait=False)
+    return runs
+
+
 @pytest.mark.slow
 @pytest.mark.interop
 @pytest.mark.needs_cc
 @pytest.mark.parametrize("minor", MINORS)
 def test_the_fmus_run_in_python_and_c_hosts_of_each_version(
-        minor: int, project_fmus: dict[str, Path], reference: dict, host: Path,
-        c_reference: dict[str, np.ndarray], tmp_path: Path) -> None:
+        minor: int, version_runs: dict[int, Future], project_fmus: dict[str, Path],
+        reference: dict, c_reference: dict[str, np.ndarray]) -> None:
     exe = python_or_skip(minor)
-    python = venv_for(exe)
-    got = run_fmus(python, project_fmus, tmp_path)
-    assert got["python"].startswith(f"3.{minor}.")
+    got = version_runs[minor].result(timeout=1800)
+    python = venv_for(exe)  # made by the run: only its path here
+    assert got["fmpy"]["python"].startswith(f"3.{minor}.")
     for run in ("plant", "controller", "closed_loop"):
-        assert_close(np.array(got[run]), np.array(reference[run]), f"3.{minor} {run}")
+        assert_close(np.array(got["fmpy"][run]), np.array(reference[run]), f"3.{minor} {run}")
     assert np.max(np.abs(np.array(reference["closed_loop"])[:, -4:])) > 1.0  # forces act
     # numba's cache of the plant kernels: one per Python version, side by side
     shipped = shipped_modules(project_fmus["DrillstringPlant"])[CANONICAL_PLANT]
@@ -200,8 +227,7 @@ def test_the_fmus_run_in_python_and_c_hosts_of_each_version(
     assert any(p.name.endswith(f".py3{minor}.nbi") for p in index), index
     assert any(p.name.endswith(mine) for p in index), index
     # the C host, this version's Python named by $DRILLCOSIM_PYTHON
-    for name, case in c_host_cases(project_fmus).items():
-        rows, log = run_c_host(host, python, case, tmp_path / f"c_{name}")
+    for name, (rows, log) in got["c"].items():
         assert f"1. $DRILLCOSIM_PYTHON = {python}: Python 3.{minor}." in log, log
         assert "used" in log
         assert_close(rows, c_reference[name], f"3.{minor} C host {name}")
