@@ -249,12 +249,15 @@ static int field(const char *out, const char *key, char *dst, size_t n)
     return found;
 }
 
-/* Last line of the child's output that is not ours (an error of the candidate itself). */
-static void last_foreign_line(const char *out, char *dst, size_t n)
+/* The line of the child's output that is not ours and says what went wrong: the last one after
+ * a Python traceback (the exception), else the first (e.g. "pyenv: python3.13: command not
+ * found" of a pyenv shim, whose later lines are advice). */
+static void foreign_line(const char *out, char *dst, size_t n)
 {
     const char *p = out, *line_end;
+    int traceback = strstr(out, "Traceback (most recent call last)") != NULL;
     dst[0] = '\0';
-    while (*p) {
+    while (*p && (traceback || dst[0] == '\0')) {
         line_end = strchr(p, '\n');
         if (line_end == NULL)
             line_end = p + strlen(p);
@@ -280,7 +283,7 @@ static int check_candidate(const char *exe, const DcsWant *want, const char *req
     } else if ((wstatus = run_child(exe, want, requires, out, sizeof out, why, nwhy)) == -1) {
         /* why set by run_child */
     } else if (strstr(out, "dcs:done") == NULL) {
-        last_foreign_line(out, line, sizeof line);
+        foreign_line(out, line, sizeof line);
         snprintf(why, nwhy, "does not run as a Python 3 interpreter (exit status %d%s%s)",
                  WIFEXITED(wstatus) ? WEXITSTATUS(wstatus) : -1, line[0] ? ": " : "", line);
     } else {
