@@ -4,24 +4,30 @@ The C sources beside this file (one job per file, see ``dcs_wrapper.h``) replace
 0.7.0's prebuilt C++ binary, which can return only fmi2OK, fmi2Discard and fmi2Fatal, needs
 libpython preloaded in a C host, and releases an instance's Python objects twice after an
 exception. The build (``python -m drillcosim.fmu_src.build``) compiles them against the running
-Python's headers into ``binaries/linux64/<modelIdentifier>.so``; the rest of the FMU (slave
+Python's headers with ``Py_LIMITED_API`` = 3.10 into ``binaries/linux64/<modelIdentifier>.so``:
+one binary for CPython 3.10 to 3.13 (:func:`python_range`), every C-API function resolved with
+``dlsym`` at run time, no structure whose layout differs per version; the rest of the FMU (slave
 module, ``resources/``, modelDescription.xml) is pythonfmu's. The FMI 2.0 declarations come
 from the official headers in ``fmi2/`` (BSD 2-Clause, see ``fmi2/LICENSE.txt``).
 
 Which Python runs the slave
 ---------------------------
-* In a Python host (fmpy, libcosimpy) the running interpreter; it must be the major.minor the
-  wrapper is compiled for (else fmi2Instantiate fails with one message saying so).
+* In a Python host (fmpy, libcosimpy) the running interpreter; it must be CPython 3.10 to 3.13
+  (else fmi2Instantiate fails with one message saying so).
 * In a host without Python (a C/C++ tool), at fmi2Instantiate, the first that fits of:
   ``$DRILLCOSIM_PYTHON``; a config file ``drillcosim.conf`` with a line
   ``python = /path/to/python3``, in the FMU's unzip folder, then in
-  ``$XDG_CONFIG_HOME/drillcosim/`` (``~/.config/drillcosim/``); every ``python3`` and
-  ``python3.M`` on ``PATH``; last, the interpreter that built the FMU. Each is checked in a
-  child process (``python -E``: version, shared libpython, ``import`` of the modules listed in
+  ``$XDG_CONFIG_HOME/drillcosim/`` (``~/.config/drillcosim/``); on ``PATH``, folder by folder:
+  ``python3``, ``python3.<building minor>``, then ``python3.13`` down to ``python3.10``; last,
+  the interpreter that built the FMU. Each is checked in a child process (``python -E -X utf8``:
+  version, shared libpython, ``import`` of the modules listed in
   ``resources/python_requires.txt``). None fits: fmi2Instantiate returns NULL with ONE message
   listing each candidate and what it lacked, and how to fix it. The chosen libpython is loaded
-  and started with ``PyConfig.use_environment = 0``, so a host's ``PYTHONHOME``/``PYTHONPATH``
-  change nothing (``dcs_python.c``, ``dcs_discover.c``; ``docs/interop.md``).
+  and started through the stable ABI with the environment ignored (``Py_IgnoreEnvironmentFlag``),
+  so a host's ``PYTHONHOME``/``PYTHONPATH`` change nothing, no signal handlers, and the host's
+  ``LC_CTYPE`` restored after the start (``dcs_python.c``, ``dcs_discover.c``;
+  ``docs/interop.md``). ``drillcosim doctor`` runs the same search without starting anything
+  (the exported ``drillcosim_doctor``; :mod:`.doctor`).
 
 The status protocol (what a slave method's outcome becomes)
 -----------------------------------------------------------
@@ -78,7 +84,9 @@ Other behaviour
   passed to the logger, OK messages only with debug logging on (and the category enabled by
   ``fmi2SetDebugLogging``, no categories = all).
 * The FMI calling sequence is a state-mask table (``fmi2_functions.c``): a call in a state
-  that does not allow it is fmi2Error naming the state; NULL/freed components: fmi2Error.
+  that does not allow it is fmi2Error naming the state; NULL/freed/foreign components and FMU
+  states: fmi2Error (handles are looked up in registries of the live ones, ``dcs_registry.c``,
+  never probed through a pointer that may be freed).
 * ``fmi2Reset``: ``slave.reset()`` if it exists, else a new slave object replaces the old one.
 * FMU state: the object of ``slave._get_fmu_state()`` is held by the C state (freed by
   ``fmi2FreeFMUstate``); serialization through ``_fmu_state_to_bytes``/``_fmu_state_from_bytes``.
