@@ -11,7 +11,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import venv
 from pathlib import Path
 
 import pytest
@@ -19,19 +18,6 @@ import pytest
 from support import c_host
 
 pytestmark = [pytest.mark.needs_cc]
-
-
-@pytest.fixture(scope="module")
-def host(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return c_host.compile_host(tmp_path_factory.mktemp("c_host"))
-
-
-@pytest.fixture(scope="module")
-def bare_python(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A venv of this interpreter without packages (no numpy)."""
-    where = tmp_path_factory.mktemp("bare") / "venv"
-    venv.EnvBuilder(with_pip=False, symlinks=True).create(where)
-    return where / "bin" / "python3"
 
 
 def host_env(tmp_path: Path, **extra: str) -> dict[str, str]:

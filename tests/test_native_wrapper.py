@@ -18,7 +18,6 @@ import shutil
 import subprocess
 import sys
 import textwrap
-import venv
 import zipfile
 from pathlib import Path
 
@@ -573,19 +572,7 @@ def test_libcosim_runs_native_fmus_like_our_master(native_dir: Path, tmp_path: P
 
 
 # --------------------------------------------------------------- hosts without Python
-@pytest.fixture(scope="session")
-def host(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    if shutil.which("gcc") is None:
-        pytest.skip("no gcc")
-    return c_host.compile_host(tmp_path_factory.mktemp("c_host"))
-
-
-@pytest.fixture(scope="session")
-def bare_python(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A Python 3 of this version without numpy (a venv of this interpreter, no packages)."""
-    where = tmp_path_factory.mktemp("bare") / "venv"
-    venv.EnvBuilder(with_pip=False, symlinks=True).create(where)
-    return where / "bin" / "python3"
+# (fixtures host and bare_python: conftest.py)
 
 
 def plain_env(tmp_path: Path, path: str = "/usr/bin:/bin", **extra: str) -> dict[str, str]:

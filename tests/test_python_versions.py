@@ -125,13 +125,6 @@ def reference(project_fmus: dict[str, Path], tmp_path_factory: pytest.TempPathFa
     return run_fmus(sys.executable, project_fmus, tmp_path_factory.mktemp("reference"))
 
 
-@pytest.fixture(scope="module")
-def host(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    if shutil.which("gcc") is None:
-        pytest.skip("no gcc for the C host")
-    return c_host.compile_host(tmp_path_factory.mktemp("c_host"))
-
-
 #: (FMU, stop [s], step [s], settings in initialization mode, outputs) of the C host runs.
 def c_host_cases(fmus: dict[str, Path]) -> dict[str, tuple]:
     from fmpy import read_model_description
