@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
-from drillcosim.fmu_src.build import REGISTRY, build_one, shipped_modules
+from drillcosim.fmu_src.build import REGISTRY, TOML_VENDORED, build_one, shipped_modules
 
 pytestmark = [pytest.mark.needs_cc, pytest.mark.slow]
 
@@ -116,6 +116,8 @@ def test_two_builds_in_one_host_each_run_their_own_code(
     assert np.all(np.abs(rows["original"][:, hook]) > 1e3)  # a real signal, not zeros
     # two instances of one build share its modules: each build's modules are there once
     shipped = set(a.values()) | set(b.values())
-    assert set(out["modules"]) == shipped, out["modules"]
+    imported = {n for names in (a, b) for k, n in names.items()  # the TOML reader: 3.10 only
+                if k != TOML_VENDORED or sys.version_info < (3, 11)}
+    assert imported <= set(out["modules"]) <= shipped, out["modules"]
     assert out["files"][a[CANONICAL]] != out["files"][b[CANONICAL]]
 

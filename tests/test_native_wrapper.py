@@ -609,6 +609,16 @@ def test_c_host_without_python_runs_the_fmu(host: Path, native_dir: Path,
     assert got == [[k * 1e-3, 0.0 if k == 0 else gain * 1e-6] for k in range(5)]
 
 
+def test_the_host_keeps_its_locale_and_signal_handlers(host: Path, native_dir: Path,
+                                                       tmp_path: Path) -> None:
+    """Python's start sets LC_CTYPE from the environment (no PyPreConfig in the stable ABI):
+    the wrapper restores the host's; Py_InitializeEx(0) installs no signal handler."""
+    env = plain_env(tmp_path, LANG="C.UTF-8", LC_CTYPE="C.UTF-8")
+    proc = controller_run(host, native_dir, tmp_path, env)
+    assert proc.returncode == 0, proc.stderr
+    assert "HOST locale=C sigint=default" in proc.stderr.splitlines()
+
+
 def test_no_usable_python_is_one_message_listing_what_each_candidate_lacked(
         host: Path, native_dir: Path, bare_python: Path, tmp_path: Path) -> None:
     env = plain_env(tmp_path, DRILLCOSIM_PYTHON=str(bare_python))
