@@ -12,7 +12,11 @@ with ``clang -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-fr
   then coupled) in such a process;
 * the plain C host (``support/fmi2_host.c``) compiled with the sanitizers itself (a clean
   sanitized host, nothing preloaded), where the wrapper finds and starts a Python: the
-  controller and the plant.
+  controller and the plant;
+* handles a host should not pass (a freed FMU state set and freed again, a freed instance
+  stepped and freed again): fmi2Error or ignored, and no read of the freed memory (the wrapper
+  looks handles up in its registries; reading a magic number through them was a
+  heap-use-after-free).
 
 Each run must exit normally (a finding is an abort) and print no sanitizer report. Needs clang
 and its sanitizer runtime (``.ci/run`` installs Debian's clang when missing): skipped with the
@@ -21,6 +25,7 @@ reason otherwise.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -191,3 +196,53 @@ def test_a_sanitized_c_host_runs_the_sanitized_fmus(sanitized: dict[str, Path],
         assert_clean(proc, f"the C host with {name}")
         rows = c_host.rows(proc.stdout)
         assert "used" in proc.stderr and len(rows) == 5 and rows[-1][1] != 0.0, proc.stdout
+
+
+FREED_HANDLES = """
+import ctypes, json, sys
+from ctypes import byref, c_char_p, c_double, c_int, c_void_p
+lib = ctypes.CDLL(sys.argv[1])
+LOG = ctypes.CFUNCTYPE(None, c_void_p, c_char_p, c_int, c_char_p, c_char_p)
+log = LOG(lambda *args: None)
+class Callbacks(ctypes.Structure):
+    _fields_ = [("logger", LOG), ("alloc", c_void_p), ("free", c_void_p), ("step", c_void_p),
+                ("env", c_void_p)]
+callbacks = Callbacks(log)
+lib.fmi2Instantiate.restype = c_void_p
+lib.fmi2SetupExperiment.argtypes = [c_void_p, c_int, c_double, c_double, c_int, c_double]
+lib.fmi2DoStep.argtypes = [c_void_p, c_double, c_double, c_int]
+for name in ("fmi2EnterInitializationMode", "fmi2ExitInitializationMode", "fmi2FreeInstance"):
+    getattr(lib, name).argtypes = [c_void_p]
+lib.fmi2GetFMUstate.argtypes = lib.fmi2FreeFMUstate.argtypes = [c_void_p, c_void_p]
+lib.fmi2SetFMUstate.argtypes = [c_void_p, c_void_p]
+c = lib.fmi2Instantiate(b"freed", 1, b"", sys.argv[2].encode(), byref(callbacks), 0, 0)
+assert c is not None
+out = {"setup": lib.fmi2SetupExperiment(c, 0, 0.0, 0.0, 0, 0.0),
+       "enter": lib.fmi2EnterInitializationMode(c), "exit": lib.fmi2ExitInitializationMode(c)}
+state = c_void_p()
+out["get_state"] = lib.fmi2GetFMUstate(c, byref(state))
+freed = state.value
+out["free_state"] = lib.fmi2FreeFMUstate(c, byref(state))
+out["set_freed_state"] = lib.fmi2SetFMUstate(c, freed)
+again = c_void_p(freed)
+out["free_freed_state"] = lib.fmi2FreeFMUstate(c, byref(again))
+lib.fmi2FreeInstance(c)
+out["step_freed_instance"] = lib.fmi2DoStep(c, 0.0, 1e-3, 1)
+lib.fmi2FreeInstance(c)  # a second free: ignored
+print(json.dumps(out))
+"""
+
+
+def test_freed_handles_are_refused_without_reading_them(sanitized: dict[str, Path],
+                                                        asan_runtime: Path,
+                                                        tmp_path: Path) -> None:
+    d = c_host.unzip(sanitized["StrainController"], tmp_path / "unzip")
+    proc = subprocess.run([sys.executable, "-c", FREED_HANDLES,
+                           str(d / "binaries" / "linux64" / "StrainController.so"),
+                           (d / "resources").as_uri()],
+                          env=sanitizer_env(LD_PRELOAD=str(asan_runtime)), capture_output=True,
+                          text=True, timeout=300)
+    assert_clean(proc, "freed handles")
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out == {"setup": 0, "enter": 0, "exit": 0, "get_state": 0, "free_state": 0,
+                   "set_freed_state": 3, "free_freed_state": 3, "step_freed_instance": 3}
