@@ -223,6 +223,12 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_doctor(args: argparse.Namespace) -> int:
+    from drillcosim.fmu_src.wrapper.doctor import doctor_command
+
+    return doctor_command(args.fmu)
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     import importlib.util
 
@@ -362,6 +368,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="report: folder of the PNGs and CSVs (default OUT/report)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_calibrate)
+    p = sub.add_parser("doctor", help="which Python an FMU would run in on this machine, and why")
+    p.add_argument("fmu", nargs="?", help="an FMU built by drillcosim (default: the built "
+                   "DrillstringPlant.fmu); exit 0 if a host without Python finds one, 1 if not")
+    p.set_defaults(func=_cmd_doctor)
     return ap
 
 
