@@ -46,7 +46,8 @@ from fmpy import extract, read_model_description, simulate_fmu  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
 from drillcosim.cosim.master.execution import Execution  # noqa: E402
-from drillcosim.cosim.scenario.scene_system import scene_system  # noqa: E402
+from drillcosim.cosim.scenario.build import build_system  # noqa: E402
+from drillcosim.cosim.scenario.config import load_config  # noqa: E402
 from drillcosim.fmu_src.build import build_all  # noqa: E402
 from drillcosim.plant.model import DrillstringModel  # noqa: E402
 from drillcosim.plant.scene import load_scene  # noqa: E402
@@ -251,7 +252,7 @@ def closed_loop_plant_step(fmu: Path, n: int = 4000, repeat: int = 5) -> dict[st
 
 def closed_loop(fmu_dir: Path, stop: float) -> tuple[float, float]:
     """(wall, CPU) [s] of ``paper_closed_loop`` through Execution (0.25 ms, no recording)."""
-    ss = scene_system(load_scene("paper_closed_loop"), fmu_dir)
+    ss = build_system(load_config("paper_closed_loop"), "fmu", fmu_dir=fmu_dir)
     with Execution(ss.system) as ex:
         ex.initialize()
         return timed(ex.simulate_until, stop)

@@ -154,12 +154,12 @@ _ERRORS_KEY = "__dcs_errors__"
 
 
 _PLANT, _IMPORT_WARNING = import_vendored(
-    VENDORED_PLANT, __file__, ("params", "scene", "model", "simulator", "observables"))
+    VENDORED_PLANT, __file__, ("params", "scene", "model", "simulator", "signals"))
 _params_mod = sys.modules[f"{VENDORED_PLANT}.params"]
 _scene_mod = sys.modules[f"{VENDORED_PLANT}.scene"]
 _model_mod = sys.modules[f"{VENDORED_PLANT}.model"]
 _sim_mod = sys.modules[f"{VENDORED_PLANT}.simulator"]
-_obs_mod = sys.modules[f"{VENDORED_PLANT}.observables"]
+_signals_mod = sys.modules[f"{VENDORED_PLANT}.signals"]
 
 
 def scenes_folder(resources: str | None = None) -> Path:
@@ -221,7 +221,8 @@ def _declared_outputs() -> list[tuple[str, str, str]]:
     ``PlantParams`` defaults (a test checks), so no scene file is read here.
     """
     plant = _params_mod.PlantParams()
-    return _obs_mod.output_names(True, list(plant.contact_bodies), len(plant.actuator_joints))
+    return _signals_mod.plant_outputs(True, list(plant.contact_bodies),
+                                      len(plant.actuator_joints))
 
 
 PARAMETERS = _parameter_table()

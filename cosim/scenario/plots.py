@@ -27,8 +27,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from drillcosim.cosim.master.files import AtomicFile  # noqa: E402
+from drillcosim.plant.signals import CONTROLLER, PLANT, TOP_DRIVE  # noqa: E402
 
-from .scene_system import CONTROLLER, PLANT, TOP_DRIVE  # noqa: E402
 from .summary import column, contact_bodies  # noqa: E402
 
 __all__ = ["plot_actuators", "plot_axial_torsional", "plot_deflection_contact", "plot_orbit",
