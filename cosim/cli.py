@@ -224,9 +224,13 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_doctor(args: argparse.Namespace) -> int:
-    from drillcosim.fmu_src.wrapper.doctor import doctor_command
+    from drillcosim.cosim.master.errors import UserError
+    from drillcosim.fmu_src.wrapper.doctor import NotAnFmu, doctor_command
 
-    return doctor_command(args.fmu)
+    try:
+        return doctor_command(args.fmu)
+    except NotAnFmu as exc:
+        raise UserError(str(exc)) from None
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
