@@ -225,11 +225,11 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 def _cmd_doctor(args: argparse.Namespace) -> int:
     from drillcosim.cosim.master.errors import UserError
-    from drillcosim.fmu_src.wrapper.doctor import NotAnFmu, doctor_command
+    from drillcosim.fmu_src.wrapper.doctor import NotAnFmuError, doctor_command
 
     try:
         return doctor_command(args.fmu)
-    except NotAnFmu as exc:
+    except NotAnFmuError as exc:
         raise UserError(str(exc)) from None
 
 
