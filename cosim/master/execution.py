@@ -11,6 +11,11 @@ run bit for bit.
 Observers only read (``on_step(execution)``, called after every step, and
 ``on_start`` / ``on_stop`` if they define them); manipulators only write
 (``before_step(execution)``, called before every step).
+
+Two loops step the same plan with the same results, bit for bit: the native loop
+(:mod:`.native`: chunks of steps in C calling the FMUs' entry points, Python between the
+chunks), chosen wherever it applies, and the Python loop (:meth:`Execution.simulate_until`)
+for everything else.
 """
 
 from __future__ import annotations
@@ -89,6 +94,7 @@ class Execution:
         self._states: list[ExecutionState] = []
         self.algorithm = algorithm or make_algorithm(system.algorithm)
         self._read_outputs = tuple(read_outputs)
+        self._native = None          # the native loop's plan, built at the first use
         self.initialized = False
         self.closed = False
         given = dict(slaves or {})
@@ -190,8 +196,11 @@ class Execution:
         if k_stop < self.tick:
             raise ValueError(f"stop_time: >= current time {self.time} s, got {stop_time} s")
         fmi_log.claim()
-        do_step = self.algorithm.do_step
         observers = tuple(o.on_step for o in self.observers)
+        native = self._native_loop(k_stop)
+        if native is not None and native.run(k_stop, observers, self.manipulators):
+            return
+        do_step = self.algorithm.do_step
         manipulators = tuple(m.before_step for m in self.manipulators)
         tick = self.tick
         if not observers and not manipulators:
@@ -208,6 +217,18 @@ class Execution:
             self.tick = tick
             for o in observers:
                 o(self)
+
+    def _native_loop(self, k_stop: int):
+        """The native loop if it applies to this run (see :mod:`.native.runner`), else None."""
+        from .native.runner import NativeLoop
+
+        native = self._native
+        if native is None or native.observed != (self.observers, self.manipulators):
+            native = NativeLoop.for_execution(self, self.observers, self.manipulators)
+            self._native = native
+        if native is None or not native.exact_until(k_stop):
+            return None
+        return native
 
     # -- access ----------------------------------------------------------------
     def get_real(self, ref: str) -> float:

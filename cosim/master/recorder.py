@@ -95,7 +95,9 @@ class Recorder:
         self.interval_ticks = interval_ticks
         self.flush_every = flush_every
         self.keep_in_memory = keep_in_memory
-        self._rows: list[tuple[float, ...]] = []     # rows not yet flushed
+        self._rows: list[tuple[float, ...]] = []     # rows not yet flushed (newest)
+        self._blocks: list[np.ndarray] = []           # row blocks not yet flushed (older)
+        self._n_blocked = 0                           # rows in _blocks
         self._chunks: list[np.ndarray] = []           # flushed rows kept in memory
         self.n_rows = 0
         self.csv_path = Path(csv_path) if csv_path is not None else None
@@ -143,17 +145,48 @@ class Recorder:
         if len(self._rows) >= self.flush_every:
             self.flush()
 
+    def exchanged_columns(self, y_index) -> list[int] | None:
+        """Indices in the exchange buffer of the recorded variables (``y_index``: the
+        algorithm's name -> index), or None if one is not exchanged (read by name)."""
+        columns = [y_index.get(v, -1) for v in self.variables]
+        return None if min(columns, default=0) < 0 else columns
+
+    def add_rows(self, block: np.ndarray) -> None:
+        """Record rows made elsewhere (the native loop): shape (n, 1 + len(variables)),
+        float64, time first; the same as :meth:`on_step` recording them one by one."""
+        if not len(block):
+            return
+        if self._rows:
+            self._blocks.append(np.array(self._rows, dtype=self.dtype))
+            self._n_blocked += len(self._rows)
+            self._rows = []
+        rows = np.ascontiguousarray(block, dtype=np.float64).view(self.dtype).reshape(-1)
+        self._blocks.append(rows)
+        self._n_blocked += len(rows)
+        self.n_rows += len(rows)
+        self._last_time = float(rows["time"][-1])
+        if self._n_blocked >= self.flush_every:
+            self.flush()
+
     def on_stop(self, execution) -> None:
         """Flush buffered rows (the file is finalised by :meth:`close`)."""
         self.flush()
 
     # -- storage -----------------------------------------------------------------
+    def _pending(self) -> list[np.ndarray]:
+        """The rows not flushed yet, oldest first."""
+        parts = list(self._blocks)
+        if self._rows:
+            parts.append(np.array(self._rows, dtype=self.dtype))
+        return parts
+
     def flush(self) -> None:
         """Move buffered rows to the in-memory array and/or the CSV file."""
-        if not self._rows:
+        parts = self._pending()
+        if not parts:
             return
-        chunk = np.array(self._rows, dtype=self.dtype)
-        self._rows = []
+        chunk = parts[0] if len(parts) == 1 else np.concatenate(parts)
+        self._rows, self._blocks, self._n_blocked = [], [], 0
         if self.keep_in_memory:
             self._chunks.append(chunk)
         if self._csv is not None:
@@ -177,9 +210,7 @@ class Recorder:
     @property
     def data(self) -> np.ndarray:
         """Recorded rows, shape (n_rows,), structured dtype ``time`` first [s]."""
-        parts = list(self._chunks)
-        if self._rows:
-            parts.append(np.array(self._rows, dtype=self.dtype))
+        parts = self._chunks + self._pending()
         if not parts:
             return np.zeros(0, dtype=self.dtype)
         return np.concatenate(parts)
