@@ -389,3 +389,55 @@ def test_closed_loop_fmus_native_equals_python_bit_for_bit(project_fmus, monkeyp
     same(ref.data, got.data)
     forces = [o for o in ss.outputs if "force" in o and o.startswith("controller.")]
     assert forces and np.abs(got.data[forces[0]]).max() > 0     # the loop is closed
+
+
+_SANITIZED_RUN = """
+import sys
+from pathlib import Path
+from drillcosim.cosim.master import native
+native.library_path = lambda: Path(sys.argv[1])     # the sanitized build, no rebuild
+from drillcosim.cosim.master.master import Master
+from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec
+fmu = sys.argv[2]
+system = SystemSpec(
+    [FmuSpec("a", fmu, {"m": 1.0, "kc": 2.0, "x0": 1.0}),
+     FmuSpec("b", fmu, {"m": 2.0, "k": 0.5, "kc": 2.0}, 3)],
+    [Connection("a.x", "b.x_other", coupling="linear", delay=0.037),
+     Connection("b.x", "a.x_other", delay=0.02)], 0.01, sys.argv[3])
+result = Master(system).simulate(2.0, outputs=["a.x", "b.x"], output_ticks=3)
+assert native.library() is not None
+print(repr(result.data["a.x"].tolist()))
+"""
+
+
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss_seidel"])
+def test_the_loop_runs_clean_under_address_and_undefined_sanitizers(fmus, tmp_path, algorithm):
+    """steps.c built with clang -fsanitize=address,undefined (aborting on any finding) runs a
+    delayed, extrapolated, multirate system with the same numbers as the normal build."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    clang = shutil.which("clang")
+    if clang is None:
+        pytest.skip("clang not installed")
+    runtime = subprocess.run([clang, "-print-file-name=libclang_rt.asan-x86_64.so"],
+                             capture_output=True, text=True).stdout.strip()
+    if not os.path.isfile(runtime):
+        pytest.skip("clang's address-sanitizer runtime not installed")
+    lib = tmp_path / "steps_sanitized.so"
+    subprocess.run([clang, "-std=c99", "-O1", "-g", "-Wall", "-Wextra", "-Werror", "-shared",
+                    "-fPIC", "-ffp-contract=off", "-fsanitize=address,undefined",
+                    "-fno-sanitize-recover=all", str(native.SOURCE), "-o", str(lib), "-lm"],
+                   check=True)
+    env = dict(os.environ, LD_PRELOAD=runtime, ASAN_OPTIONS="detect_leaks=0")
+    env.pop(LOOP_ENV, None)
+    args = [sys.executable, "-c", _SANITIZED_RUN, str(lib), str(fmus["mt_mass"]), algorithm]
+    sanitized = subprocess.run(args, env=env, capture_output=True, text=True, timeout=300)
+    assert sanitized.returncode == 0, sanitized.stderr[-3000:]
+    plain = subprocess.run([*args[:3], str(native.library_path()), *args[4:]],
+                           capture_output=True, text=True, timeout=300,
+                           env={k: v for k, v in os.environ.items() if k != LOOP_ENV})
+    assert plain.returncode == 0, plain.stderr[-3000:]
+    assert sanitized.stdout == plain.stdout and sanitized.stdout.count(",") == 66

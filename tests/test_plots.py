@@ -53,3 +53,66 @@ def test_a_chain_run_summary_has_no_bending_actuators(tmp_path) -> None:
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert out.exit_code == 0 and summary["actuators"] == {}
     assert summary["torsional"]["bit_speed_max_rad_s"] > 0.0
+
+
+def test_envelope_keeps_every_pixel_columns_min_and_max() -> None:
+    """Against the undecimated data: in each of the columns of a 300-dpi figure, the decimated
+    series has the same smallest and largest value, and the same first and last sample."""
+    from drillcosim.cosim.scenario.plots import envelope
+
+    rng = np.random.default_rng(7)
+    n, columns = 30001, 1500
+    t = np.linspace(0.0, 30.0, n)
+    y = np.sin(7.3 * t) * np.exp(0.05 * t) + 0.3 * rng.standard_normal(n)
+    y[12345] = 40.0                          # single-sample spikes must survive
+    y[23456] = -55.0
+    td, yd = envelope(t, y, columns)
+    assert len(td) <= 4 * columns < n / 4
+    assert np.all(np.diff(td) > 0)           # in time order, no sample twice
+    edges = np.linspace(t[0], t[-1], columns + 1)
+    col, cold = (np.clip(np.searchsorted(edges, x, side="right") - 1, 0, columns - 1)
+                 for x in (t, td))
+    for c in range(columns):
+        full, dec = y[col == c], yd[cold == c]
+        assert dec.min() == full.min() and dec.max() == full.max()
+        assert dec[0] == full[0] and dec[-1] == full[-1]
+    assert yd.max() == 40.0 and yd.min() == -55.0
+    short_t, short_y = envelope(t[:100], y[:100], columns)   # fewer samples: all kept
+    assert np.array_equal(short_t, t[:100]) and np.array_equal(short_y, y[:100])
+
+
+def test_thin_path_keeps_the_path_to_one_pixel() -> None:
+    """Every dropped orbit sample lies in the pixel of a kept sample of its run; the samples
+    where the path changes pixel are all kept."""
+    from drillcosim.cosim.scenario.plots import thin_path
+
+    s = np.linspace(0.0, 60.0, 30001)
+    x, y = 20 * np.cos(s) * np.cos(0.1 * s), 20 * np.sin(s) * np.cos(0.07 * s)
+    cell = 0.03
+    xd, yd = thin_path(x, y, cell)
+    assert len(xd) < len(x)
+    kept = {(a, b) for a, b in zip(np.floor(xd / cell), np.floor(yd / cell))}
+    assert all((a, b) in kept for a, b in zip(np.floor(x / cell), np.floor(y / cell)))
+    assert (xd[0], yd[0], xd[-1], yd[-1]) == (x[0], y[0], x[-1], y[-1])
+
+
+def test_a_long_run_is_drawn_from_its_envelope(tmp_path) -> None:
+    """The figures of a 30 s run at 1 ms draw at most 4 samples per 300-dpi column."""
+    from drillcosim.cosim.scenario import plots
+
+    data = _record(["plant.body11_X", "plant.body11_Y", "plant.body11_radial_deflection",
+                    "plant.body11_contact_force"], n=30001)
+    drawn = []
+    real = plots._series
+
+    def spy(ax, t, y, **kw):
+        real(ax, t, y, **kw)
+        drawn.append(len(ax.lines[-1].get_xdata()))
+
+    plots._series = spy
+    try:
+        plots.plot_deflection_contact(data, tmp_path / "d.png", 0.02)
+    finally:
+        plots._series = real
+    assert len(drawn) == 2 and max(drawn) <= 4 * 5 * plots.SHOW_DPI < 30001 / 4
+    assert imread(tmp_path / "d.png").shape[:2] == (720, 600)
