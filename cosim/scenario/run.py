@@ -23,10 +23,13 @@ rejecting its parameters with fmi2Error at initialization).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import importlib
 import math
 import os
 import sys
+import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -166,6 +169,19 @@ def simulate_into(system, outputs: Sequence[str], output_ticks: int, stop: float
     return result, _failure(err, result), csv
 
 
+def _preload(module: str) -> threading.Thread:
+    """Import ``module`` (matplotlib) in a thread while the run steps (the master's native loop
+    runs in C without the GIL); a failed import here is silent (the plotting code's own import
+    raises it)."""
+    def target() -> None:
+        with contextlib.suppress(Exception):
+            importlib.import_module(module)
+
+    thread = threading.Thread(target=target, name=f"import {module}", daemon=True)
+    thread.start()
+    return thread
+
+
 def simulate_system(ss, out_dir: str | Path, stop_time: float | None = None,
                     progress: bool | None = None, plots: bool = True) -> SceneOutcome:
     """Run a :class:`cosim.scenario.scene_system.SceneSystem` and write results, summary and plots.
@@ -202,8 +218,13 @@ def simulate_system(ss, out_dir: str | Path, stop_time: float | None = None,
     stop = ss.stop_time if stop_time is None else float(stop_time)
     if not (math.isfinite(stop) and stop > 0):
         raise ValueError(f"stop time: a finite number > 0 [s], got {stop!r}")
-    result, failure, csv = simulate_into(ss.system, ss.outputs, ss.settings.output_ticks, stop,
-                                         out, progress)
+    preload = _preload("drillcosim.cosim.scenario.plots") if plots else None
+    try:
+        result, failure, csv = simulate_into(ss.system, ss.outputs, ss.settings.output_ticks,
+                                             stop, out, progress)
+    finally:
+        if preload is not None:
+            preload.join()
     scene = ss.scene
     spans = span_info(scene)
     n_sites = len(scene.plant.actuator_joints)
