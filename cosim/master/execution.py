@@ -27,13 +27,12 @@ from fractions import Fraction
 from pathlib import Path
 from typing import Protocol
 
-from fmpy import extract
-
 from . import fmi_log
 from .algorithms import GaussSeidelAlgorithm, JacobiAlgorithm, _Algorithm, make_algorithm
 from .errors import CosimError
 from .slave import FmuSlave, Slave
 from .system import SystemSpec, split_variable
+from .unpack import unpack
 
 
 class Observer(Protocol):
@@ -110,8 +109,9 @@ class Execution:
                     continue
                 path = Path(spec.path).resolve()
                 if path not in dirs and path.is_file():
-                    dirs[path] = extract(str(path))
-                    self._dirs.append(dirs[path])
+                    dirs[path], owned = unpack(path)
+                    if owned:
+                        self._dirs.append(dirs[path])
                 self.slaves[spec.name] = FmuSlave(spec, dirs.get(path))
         except BaseException:
             for slave in given.values():  # ready-made ones not taken over yet
@@ -264,7 +264,8 @@ class Execution:
         self.tick = state.tick
 
     def close(self) -> None:
-        """Free saved states, close all slaves (FMUs: terminate, free), delete extracted files."""
+        """Free saved states, close all slaves (FMUs: terminate, free), delete temporary
+        unpacked files (the shared cache of :mod:`.unpack` stays)."""
         if self.closed:
             return
         self.closed = True

@@ -19,12 +19,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NoReturn
 
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
 
 from . import fmi_log
 from .errors import FMI2_ERROR, FMI2_FATAL, CosimError, raise_for_status
 from .system import FmuSpec, ParameterValue, _did_you_mean
+from .unpack import unpack
 
 __all__ = ["CompiledCalls", "FmiCalls", "FmuSlave", "Slave", "c_double_ptr"]
 
@@ -221,8 +222,8 @@ class FmuSlave(Slave):
     spec : FmuSpec
         Instance name, path, parameters.
     unzip_dir : str, optional
-        Where the FMU was already extracted (shared between instances of one file);
-        extracted to a temporary folder owned by this object otherwise.
+        Where the FMU was already unpacked (shared between instances of one file); unpacked
+        by :func:`.unpack.unpack` otherwise.
     """
 
     def __init__(self, spec: FmuSpec, unzip_dir: str | None = None):
@@ -234,8 +235,10 @@ class FmuSlave(Slave):
         self.model_description = md = read_model_description(str(path))
         if md.coSimulation is None:
             raise CosimError(spec.name, "load", math.nan, "the FMU has no co-simulation interface")
-        self._own_dir = unzip_dir is None
-        self.unzip_dir = unzip_dir or extract(str(path))
+        self._own_dir = False
+        if unzip_dir is None:
+            unzip_dir, self._own_dir = unpack(path)
+        self.unzip_dir = unzip_dir
         self.variables = {v.name: v for v in md.modelVariables}
         self.can_get_set_state = bool(md.coSimulation.canGetAndSetFMUstate)
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self.unzip_dir,
