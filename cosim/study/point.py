@@ -236,30 +236,6 @@ def point_scene(scene: str, gain: float, delay: float, step: float, stop_time: f
     return load_scene(scene, overrides=over), over
 
 
-class _ForceCap:
-    """Observer: stop the master (as a divergence) when a force exceeds the cap.
-
-    The forces are exchanged outputs: read from the master's output buffer (as the recorder
-    does), no FMI call per step.
-    """
-
-    def __init__(self, refs: list[str], cap: float):
-        self.refs = refs
-        self.cap = cap
-
-    def on_start(self, execution) -> None:
-        self._y = execution.algorithm.y
-        self._index = [(execution.algorithm.y_index[r], r) for r in self.refs]
-
-    def on_step(self, execution) -> None:
-        y, cap = self._y, self.cap
-        for i, ref in self._index:
-            if not abs(y[i]) <= cap:
-                from drillcosim.cosim.master.errors import DivergenceError
-
-                raise DivergenceError(ref, execution.time, y[i])
-
-
 def simulate_point(sc, over: Mapping[str, Any], opts: PointOptions, engine: str = "fmu",
                    fmu_dir: str | None = None, initial_offset: np.ndarray | None = None
                    ) -> tuple[np.ndarray, str]:
@@ -328,6 +304,7 @@ def run_system(ss, slaves: Mapping[str, Any] | None, opts: PointOptions
     :func:`simulate_point`; ``slaves`` as for :class:`~cosim.master.execution.Execution`)."""
     from drillcosim.cosim.master.errors import CosimError, DivergenceError
     from drillcosim.cosim.master.execution import Execution
+    from drillcosim.cosim.master.limits import OutputLimit
     from drillcosim.cosim.master.recorder import Recorder
 
     recorder = Recorder(ss.outputs, ss.settings.output_ticks)
@@ -337,8 +314,8 @@ def run_system(ss, slaves: Mapping[str, Any] | None, opts: PointOptions
     try:
         execution = Execution(ss.system, read_outputs=ss.outputs, slaves=slaves)
         execution.add_observer(recorder)
-        if forces:
-            execution.add_observer(_ForceCap(forces, opts.force_cap))
+        if forces:   # a force beyond the cap stops the point as a divergence
+            execution.add_observer(OutputLimit(forces, opts.force_cap))
         execution.initialize()
         execution.simulate_until(ss.stop_time)
     except DivergenceError as exc:
