@@ -296,7 +296,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="only the master's budget per step (section 5)")
     args = ap.parse_args(argv)
     if args.budget:
-        text = "\n".join(budget_lines(master_budget(repeat=args.repeat, stop=args.stop_time),
+        budget = master_budget(repeat=args.repeat, stop=args.stop_time)
+        budget.update(step_parts())
+        text = "\n".join(budget_lines(budget,
                                        "python benchmarks/bench_one_master.py --budget "
                                        f"--repeat {args.repeat} --stop-time {args.stop_time:g}"))
         if args.out:
