@@ -429,7 +429,7 @@ def test_the_loop_runs_clean_under_address_and_undefined_sanitizers(fmus, tmp_pa
     lib = tmp_path / "steps_sanitized.so"
     subprocess.run([clang, "-std=c99", "-O1", "-g", "-Wall", "-Wextra", "-Werror", "-shared",
                     "-fPIC", "-ffp-contract=off", "-fsanitize=address,undefined",
-                    "-fno-sanitize-recover=all", str(native.SOURCE), "-o", str(lib), "-lm"],
+                    "-fno-sanitize-recover=all", *map(str, native.SOURCES), "-o", str(lib), "-lm"],
                    check=True)
     env = dict(os.environ, LD_PRELOAD=runtime, ASAN_OPTIONS="detect_leaks=0")
     env.pop(LOOP_ENV, None)
@@ -441,3 +441,27 @@ def test_the_loop_runs_clean_under_address_and_undefined_sanitizers(fmus, tmp_pa
                            env={k: v for k, v in os.environ.items() if k != LOOP_ENV})
     assert plain.returncode == 0, plain.stderr[-3000:]
     assert sanitized.stdout == plain.stdout and sanitized.stdout.count(",") == 66
+
+
+def test_csv_rows_made_in_c_equal_numpy_savetxt():
+    """The recorder's writer thread makes its text in C (rows.c): the same as
+    numpy.savetxt(fmt="%.17g", delimiter=","), for every kind of double."""
+    import io
+
+    from drillcosim.cosim.master.recorder import CsvWriter
+
+    rng = np.random.default_rng(3)
+    bits = rng.integers(0, 2**63, size=40000, dtype=np.uint64) * np.uint64(2) + \
+        rng.integers(0, 2, size=40000, dtype=np.uint64)
+    values = bits.view(np.float64)                         # every exponent, both signs, NaN
+    special = [0.0, -0.0, 5e-324, -2.2250738585072014e-308, 1.7976931348623157e308,
+               math.inf, -math.inf, math.nan, -math.nan, 0.1, 1e16, 1e17, 1e-5, 1e-4, 30.0]
+    rows = np.concatenate([values, rng.standard_normal(9985) * 1e3, special]).reshape(-1, 25)
+    text = io.StringIO()
+    writer = CsvWriter(text, native.library().dcs_format_rows)
+    writer.submit(rows[:1000])
+    writer.submit(rows[1000:])
+    writer.close()
+    reference = io.StringIO()
+    np.savetxt(reference, rows, delimiter=",", fmt="%.17g")
+    assert text.getvalue() == reference.getvalue()

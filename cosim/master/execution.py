@@ -265,13 +265,18 @@ class Execution:
 
     def close(self) -> None:
         """Free saved states, close all slaves (FMUs: terminate, free), delete temporary
-        unpacked files (the shared cache of :mod:`.unpack` stays)."""
+        unpacked files (the shared cache of :mod:`.unpack` stays). An observer's ``on_stop``
+        that raises (e.g. the recorder's last write) is raised after all that."""
         if self.closed:
             return
         self.closed = True
+        failure = None
         for obs in self.observers:
             if hasattr(obs, "on_stop"):
-                obs.on_stop(self)
+                try:
+                    obs.on_stop(self)
+                except Exception as exc:  # noqa: BLE001 - raised once everything is freed
+                    failure = failure or exc
         for state in self._states:
             for slave, fs in zip(self.slaves.values(), state.fmu_states):
                 slave.free_state(fs)
@@ -280,6 +285,8 @@ class Execution:
             slave.close()
         for d in self._dirs:
             shutil.rmtree(d, ignore_errors=True)
+        if failure is not None:
+            raise failure
 
     def __enter__(self) -> Execution:
         return self

@@ -11,6 +11,12 @@ never truncated before the new one is complete; if the run fails, closing
 (which the facade does in a ``finally``) still finalises the partial,
 readable file under the target name.
 
+The text of a block of rows is made by :class:`CsvWriter` in a thread, in C without the GIL
+(:mod:`cosim.master.native`, ``rows.c``: the text of ``numpy.savetxt(fmt="%.17g")``), while
+the run steps on; blocks are written in order, and each flush first waits for the block before
+it, so a failed write is raised at the next flush (or at :meth:`Recorder.close`), always the
+same one. Without the native library the rows are written at once in Python.
+
 If writing the CSV fails (disk full, quota, I/O error), the recorder raises
 :class:`ResultWriteError` (a :class:`~cosim.master.errors.CosimError`: when it happens
 while stepping, the facade attaches the rows recorded in memory as
@@ -22,7 +28,9 @@ replaces the target: an earlier file under the target name stays unchanged.
 
 from __future__ import annotations
 
+import ctypes
 from collections.abc import Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +61,57 @@ class ResultWriteError(CosimError):
 
     def __reduce__(self):
         return (type(self), (self.path, self.time, self.message, self.os_errno))
+
+
+class CsvWriter:
+    """Appends row blocks to an open text file in a thread, in order (see the module docstring).
+
+    Parameters
+    ----------
+    file : text file
+        Open for writing; only this writer writes to it until :meth:`close`.
+    format_rows : ctypes function
+        ``dcs_format_rows`` of the native library.
+    """
+
+    #: bytes that hold one value and its separator (``rows.c``)
+    VALUE_BYTES = 25
+
+    def __init__(self, file, format_rows):
+        self.file = file
+        self.format_rows = format_rows
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="csv-writer")
+        self._pending: Future | None = None
+
+    def _write(self, rows: np.ndarray) -> None:
+        n, ncols = rows.shape
+        cap = n * (ncols * self.VALUE_BYTES + 1)
+        buf = ctypes.create_string_buffer(cap)
+        length = self.format_rows(rows.ctypes.data, n, ncols, buf, cap)   # GIL released
+        if length < 0:
+            raise RuntimeError("internal: dcs_format_rows ran out of room")
+        self.file.write(buf.raw[:length].decode("ascii"))
+        self.file.flush()
+
+    def submit(self, rows: np.ndarray) -> None:
+        """Wait for the block before (raising its ``OSError``), then start writing ``rows``
+        (shape (n, ncols), float64)."""
+        self.wait()
+        self._pending = self._pool.submit(self._write, np.ascontiguousarray(rows, np.float64))
+
+    def wait(self) -> None:
+        """Wait for the block being written; raise its ``OSError``."""
+        pending, self._pending = self._pending, None
+        if pending is not None:
+            pending.result()
+
+    def close(self) -> None:
+        """Stop the thread (after the block being written; its error is not raised)."""
+        try:
+            self.wait()
+        except Exception:  # noqa: BLE001 - closing after a failure: nothing more to report
+            pass
+        self._pool.shutdown()
 
 
 class Recorder:
@@ -102,6 +161,7 @@ class Recorder:
         self.n_rows = 0
         self.csv_path = Path(csv_path) if csv_path is not None else None
         self._csv: AtomicFile | None = None
+        self._writer: CsvWriter | None = None
         self._last_time = float("nan")
         self.write_error: ResultWriteError | None = None
         self.closed = False
@@ -117,6 +177,11 @@ class Recorder:
             raise OSError(exc.errno, f"cannot write results to '{target}': directory "
                           f"'{directory}' is not writable ({exc.strerror})") from exc
         self._csv.file.write(",".join(self.names) + "\n")
+        from .native import library
+
+        lib = library()
+        if lib is not None:
+            self._writer = CsvWriter(self._csv.file, lib.dcs_format_rows)
 
     # -- observer hooks --------------------------------------------------------
     def on_start(self, execution) -> None:
@@ -192,13 +257,22 @@ class Recorder:
         if self._csv is not None:
             flat = chunk.view(np.float64).reshape(len(chunk), len(self.names))
             try:
-                np.savetxt(self._csv.file, flat, delimiter=",", fmt="%.17g")
-                self._csv.file.flush()
+                if self._writer is not None:
+                    self._writer.submit(flat)
+                else:
+                    np.savetxt(self._csv.file, flat, delimiter=",", fmt="%.17g")
+                    self._csv.file.flush()
             except OSError as exc:
                 self._write_failed(exc)
 
+    def _stop_writer(self) -> None:
+        writer, self._writer = self._writer, None
+        if writer is not None:
+            writer.close()
+
     def _write_failed(self, exc: OSError) -> None:
         """Drop the temporary file (never the target) and raise :class:`ResultWriteError`."""
+        self._stop_writer()
         csv, self._csv = self._csv, None
         csv.discard()
         kept = "kept in memory" if self.keep_in_memory else "lost (keep_in_memory=False)"
@@ -220,6 +294,7 @@ class Recorder:
         if self.closed:
             return
         self.closed = True
+        self._stop_writer()
         if self._csv is not None:
             self._csv.discard()
             self._csv = None
@@ -236,6 +311,12 @@ class Recorder:
             return
         self.closed = True
         self.flush()
+        if self._writer is not None:
+            try:
+                self._writer.wait()
+            except OSError as exc:
+                self._write_failed(exc)
+            self._stop_writer()
         if self._csv is not None:
             try:
                 self._csv.commit()

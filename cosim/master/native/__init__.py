@@ -1,4 +1,5 @@
-"""The master's stepping loop in C (``steps.c``), and how it is built and loaded.
+"""The master's stepping loop in C (``steps.c``; and the recorder's CSV text, ``rows.c``),
+and how it is built and loaded.
 
 :class:`~.runner.NativeLoop` runs chunks of base steps of an
 :class:`~cosim.master.execution.Execution` in C, calling the components' C entry points (an
@@ -26,9 +27,11 @@ from pathlib import Path
 
 from drillcosim._toolchain import CFLAGS, compile_shared, user_cache
 
-__all__ = ["SOURCE", "library", "library_path"]
+__all__ = ["SOURCE", "SOURCES", "library", "library_path"]
 
 SOURCE = Path(__file__).resolve().with_name("steps.c")
+#: every C file of the library: the stepping loop and the recorder's CSV rows (``rows.c``)
+SOURCES = (SOURCE, SOURCE.with_name("rows.c"))
 #: no fused multiply-add: the C expressions round exactly as Python's
 FLAGS = ("-ffp-contract=off",)
 LIBS = ("-lm",)
@@ -38,7 +41,9 @@ _loaded: dict[str, ctypes.CDLL | None] = {}
 
 def library_path() -> Path:
     """Where the compiled library of this source and these flags lives in the user cache."""
-    digest = hashlib.sha256(SOURCE.read_bytes())
+    digest = hashlib.sha256()
+    for source in SOURCES:
+        digest.update(source.read_bytes())
     digest.update("\0".join((*CFLAGS, *FLAGS, *LIBS, os.environ.get("CC") or "gcc")).encode())
     return user_cache() / "master" / f"dcs_steps-{digest.hexdigest()[:16]}.so"
 
@@ -48,7 +53,7 @@ def _build(target: Path) -> None:
     fd, tmp = tempfile.mkstemp(prefix=".dcs_steps-", suffix=".so", dir=target.parent)
     os.close(fd)
     try:
-        compile_shared("the master's native stepping loop", [SOURCE], tmp, flags=FLAGS,
+        compile_shared("the master's native stepping loop", SOURCES, tmp, flags=FLAGS,
                        libs=LIBS)
         os.replace(tmp, target)       # atomic: concurrent first uses each write their own
     finally:
@@ -68,6 +73,9 @@ def library() -> ctypes.CDLL | None:
             lib = ctypes.CDLL(key)
             lib.dcs_run_steps.argtypes = (ctypes.c_void_p, ctypes.c_int64)
             lib.dcs_run_steps.restype = ctypes.c_int
+            lib.dcs_format_rows.argtypes = (ctypes.c_void_p, ctypes.c_int64, ctypes.c_int32,
+                                            ctypes.c_char_p, ctypes.c_int64)
+            lib.dcs_format_rows.restype = ctypes.c_int64
         except (OSError, RuntimeError) as exc:
             _log.warning("the master's native stepping loop is not available, the Python "
                          "loop runs: %s", " ".join(str(exc).split())[:500])
