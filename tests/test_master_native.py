@@ -244,15 +244,18 @@ def test_the_library_is_built_into_the_user_cache(tmp_path, monkeypatch):
 
 # --- a compiled in-process slave (contract item 10, CompiledCalls) ---------------------------
 numba = pytest.importorskip("numba")
-U, X, N, FAIL_AT = range(4)
+U, X, N, FAIL_AT, PY_EVERY, N_PY = range(6)
+LEAVE_TO_PYTHON = 1
 
 
 @numba.cfunc(numba.types.int32(numba.types.voidptr, numba.types.float64,
                                numba.types.float64), nopython=True)
 def _integrate(context, t, h):
-    c = numba.carray(context, 4, dtype=np.float64)
+    c = numba.carray(context, 6, dtype=np.float64)
     if 0.0 <= c[FAIL_AT] <= t + 1e-12:
         return 7
+    if c[PY_EVERY] > 0 and c[N] % c[PY_EVERY] == c[PY_EVERY] - 1:
+        return LEAVE_TO_PYTHON             # this step is done in Python (nothing changed)
     c[X] = c[X] + c[U] * h
     c[N] += 1.0
     return 0
@@ -263,10 +266,11 @@ class CompiledIntegrator(Slave):
 
     can_get_set_state = True
 
-    def __init__(self, name: str, x0: float = 0.0, fail_at: float = -1.0):
+    def __init__(self, name: str, x0: float = 0.0, fail_at: float = -1.0,
+                 python_every: int = 0):
         self.name = name
-        self.ctx = np.array([0.0, x0, 0.0, fail_at])
-        self.names = {"u": U, "x": X, "n_steps": N}
+        self.ctx = np.array([0.0, x0, 0.0, fail_at, python_every, 0.0])
+        self.names = {"u": U, "x": X, "n_steps": N, "n_python": N_PY}
         self.problem = None
 
     def check_variable(self, name, causalities):
@@ -301,6 +305,12 @@ class CompiledIntegrator(Slave):
                              tuple(self.outs))
 
     def native_step_failed(self, code, t, h):
+        if code == LEAVE_TO_PYTHON:        # the step in Python, as the compiled one would
+            c = self.ctx
+            c[X] = c[X] + c[U] * h
+            c[N] += 1.0
+            c[N_PY] += 1.0
+            return 0
         self.problem = f"{self.name}: step failed at t = {t!r} s (code {code})"
         return 2
 
@@ -348,6 +358,28 @@ def test_compiled_in_process_slaves_equal_the_compiled_fmus(fmus, monkeypatch, c
     monkeypatch.setenv(LOOP_ENV, "python")
     via_fmus = Master(system(fmus["mt_integrator"])).simulate(2.0, outputs=outputs)
     same(via_fmus.data, got.data)
+
+
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss_seidel"])
+def test_a_compiled_step_left_to_python_goes_on_in_the_chunk(fmus, monkeypatch, chunks,
+                                                              algorithm):
+    """Every 3rd step of a (every 5th of b) the compiled step leaves to Python: the Python loop
+    and the native loop (which settles that step in Python and goes on after it, mid-tick) give
+    the same numbers."""
+    def run():
+        slaves = {"a": CompiledIntegrator("a", 1.0, python_every=3),
+                  "b": CompiledIntegrator("b", python_every=5)}
+        system = SystemSpec([FmuSpec("a", fmus["mt_integrator"]),
+                             FmuSpec("b", fmus["mt_integrator"], {}, 2)],
+                            [Connection("a.x", "b.u"), Connection("b.x", "a.u", delay=0.03)],
+                            0.01, algorithm)
+        return Master(system, slaves).simulate(1.0, outputs=["a.x", "b.x", "a.n_python",
+                                                             "b.n_python", "a.n_steps"])
+
+    ref, got = both(monkeypatch, chunks, run)
+    same(ref.data, got.data)
+    assert got.data["a.n_steps"][-1] == 100
+    assert got.data["a.n_python"][-1] == 33 and got.data["b.n_python"][-1] == 10
 
 
 def test_a_failed_compiled_step_is_reported_as_in_python(fmus, monkeypatch, chunks):

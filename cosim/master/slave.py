@@ -71,10 +71,12 @@ class Slave(abc.ABC):
         until the next call of any other method of the slave (the master asks again before
         each chunk of steps): :class:`FmiCalls` (an FMU's functions) or :class:`CompiledCalls`
         (a compiled step over arrays the slave keeps alive and in place); None (the default):
-        the master steps this slave in Python. A compiled step returns 0 or a failure code;
-        for a code the master calls :meth:`native_step_failed` ``(code, t, h)``, which returns
-        the status the Python :meth:`do_step` would have returned (Discard or worse) and
-        leaves the same message for :meth:`take_problem`.
+        the master steps this slave in Python. A compiled step returns 0 (done) or another
+        code; for that the master calls :meth:`native_step_failed` ``(code, t, h)``, which
+        settles the step as the Python :meth:`do_step` would (e.g. does it in Python, or
+        records the failure for :meth:`take_problem`) and returns its status: OK or Warning
+        and the run goes on after that step, else the failure is reported as from
+        :meth:`do_step`.
 
     This base class implements :meth:`fail` from :meth:`take_problem` and refuses state
     handling.
@@ -132,7 +134,7 @@ class Slave(abc.ABC):
         return None
 
     def native_step_failed(self, code: int, t: float, h: float) -> int:
-        """Status (Discard or worse) of a compiled step that returned ``code`` (item 10)."""
+        """Settle a compiled step that returned ``code``; its FMI status (item 10)."""
         raise NotImplementedError(f"{type(self).__name__} has no compiled step")
 
     def fail(self, status: int, call: str, time: float) -> NoReturn:

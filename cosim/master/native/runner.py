@@ -30,7 +30,6 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from ..errors import FMI2_DISCARD
 from ..limits import OutputLimit
 from ..recorder import Recorder
 from ..slave import CompiledCalls, FmiCalls
@@ -79,7 +78,7 @@ class _Steps(ctypes.Structure):
                 ("limit_index", _I32P), ("limit", _F64P), ("tick", ctypes.c_int64),
                 ("event_tick", ctypes.c_int64), ("event", ctypes.c_int32),
                 ("event_slave", ctypes.c_int32), ("event_call", ctypes.c_int32),
-                ("event_status", ctypes.c_int32)]
+                ("event_status", ctypes.c_int32), ("resume", ctypes.c_int32)]
 
 
 def _i32(values: Sequence[int]):
@@ -157,6 +156,7 @@ class NativeLoop:
         self.c_horizons = _f64(horizons)
         self.newest = (ctypes.c_int64 * len(plans))()
         s = self.steps = _Steps()
+        s.resume = -1
         s.algorithm = 0 if alg.name == "jacobi" else 1
         s.n_slaves, s.n_lines = len(plans), len(self.lines)
         s.n_y = len(alg.y)
@@ -278,11 +278,16 @@ class NativeLoop:
         ex = self.execution
         s = self.steps
         befores = tuple(m.before_step for m in manipulators)
+        settled = False          # a failed compiled step was settled in Python: go on after it
         while ex.tick < k_stop:
             tick = ex.tick
-            for before in befores:
-                before(ex)
+            if not settled:
+                for before in befores:
+                    before(ex)
             if self.compiled and not self._compiled_ready():
+                if settled:
+                    raise RuntimeError("internal: a compiled step went away in the middle of "
+                                       "a step")
                 return False
             end = self._chunk_end(tick, k_stop, manipulators)
             self._sync_in()
@@ -290,20 +295,23 @@ class NativeLoop:
             event = self.run_steps(ctypes.byref(s), end)
             self._sync_out()
             ex.tick = s.tick
+            settled = False
             if event in (_DONE, _FULL):
                 for obs in self.strided:
                     obs(ex)
                 continue
-            self._report(event, observers)
+            settled = self._report(event, observers)
         return True
 
-    def _report(self, event: int, observers: Sequence[Callable]) -> None:
-        """Raise what the Python loop raises for the event that stopped the chunk."""
+    def _report(self, event: int, observers: Sequence[Callable]) -> bool:
+        """Do what the Python loop does at the event that stopped the chunk: raise its error,
+        or run the observers of a limit's tick, or settle a failed compiled step in Python
+        (True: it went well, the chunk goes on after it)."""
         ex, s = self.execution, self.steps
         if event == _LIMIT:            # tick completed: its observers in order, in Python
             for obs in observers:
                 obs(ex)
-            return
+            return False
         if event == _NON_FINITE:
             self.algorithm.check_finite()
             raise RuntimeError("internal: the native loop saw a non-finite output the "
@@ -313,10 +321,10 @@ class NativeLoop:
         status = s.event_status
         if event == _STEP_FAILED:
             status = plan.slave.native_step_failed(status, t, plan.h)
-            if status < FMI2_DISCARD:
-                raise RuntimeError(f"internal: {plan.name}.native_step_failed returned status "
-                                   f"{status} for a failed compiled step")
+            if status <= 1:
+                s.resume = s.event_slave
+                return True
         elif event != _FAILED:
             raise RuntimeError(f"internal: unknown event {event} of the native loop")
         plan.slave.fail(status, _CALLS[s.event_call], t)
-
+        raise RuntimeError("internal: Slave.fail returned")   # pragma: no cover

@@ -14,7 +14,9 @@
  *   DCS_DONE         stop reached
  *   DCS_FAILED       an FMI call returned a status > fmi2Warning (slave, call, status, tick of
  *                    the time the Python loop reports); nothing after it was called
- *   DCS_STEP_FAILED  a compiled step returned a non-zero code (slave, code, tick)
+ *   DCS_STEP_FAILED  a compiled step returned a non-zero code (slave, code, tick); Python
+ *                    settles that step (slave.native_step_failed) and, if it went well, calls
+ *                    again with `resume` = that slave: the tick goes on after its step
  *   DCS_NON_FINITE   an exchanged output is not finite (the step's divergence check; the tick
  *                    is not completed)
  *   DCS_LIMIT        a limited output exceeds its bound after the step to `tick` (completed,
@@ -89,6 +91,7 @@ typedef struct {
     /* where the run is, and the event that stopped it */
     int64_t tick, event_tick;
     int32_t event, event_slave, event_call, event_status;
+    int32_t resume;           /* >= 0: the first tick goes on after this slave's step */
 } DcsSteps;
 
 static double time_of(const DcsSteps *r, int64_t k)
@@ -200,11 +203,12 @@ static int finite(const DcsSteps *r)
     return 1;
 }
 
-static int jacobi_step(DcsSteps *r, int64_t tick)
+/* The step from `tick`; slaves up to `after` (-1: none) have stepped already. */
+static int jacobi_step(DcsSteps *r, int64_t tick, int32_t after)
 {
     int64_t k1 = tick + 1;
     int32_t i;
-    for (i = 0; i < r->n_slaves; i++)
+    for (i = after + 1; i < r->n_slaves; i++)
         if (tick % r->slaves[i].period == 0 && step_slave(r, i, tick))
             return 1;
     for (i = 0; i < r->n_slaves; i++)
@@ -218,15 +222,17 @@ static int jacobi_step(DcsSteps *r, int64_t tick)
     return 0;
 }
 
-static int gauss_seidel_step(DcsSteps *r, int64_t tick)
+/* The step from `tick`; slave `after` (-1: none) has stepped already, those before it are done. */
+static int gauss_seidel_step(DcsSteps *r, int64_t tick, int32_t after)
 {
     int32_t i;
-    for (i = 0; i < r->n_slaves; i++) {
+    for (i = after < 0 ? 0 : after; i < r->n_slaves; i++) {
         int32_t p = r->slaves[i].period;
         if (tick % p)
             continue;
-        if (apply_inputs(r, i, tick, tick) || step_slave(r, i, tick)
-            || read_outputs(r, i, tick + p))
+        if (i != after && (apply_inputs(r, i, tick, tick) || step_slave(r, i, tick)))
+            return 1;
+        if (read_outputs(r, i, tick + p))
             return 1;
     }
     if (!finite(r))
@@ -254,10 +260,13 @@ static int observe(DcsSteps *r, int64_t k1)
 
 __attribute__((visibility("default"))) int dcs_run_steps(DcsSteps *r, int64_t stop)
 {
+    int32_t after = r->resume;
+    r->resume = -1;
     r->event = DCS_DONE;
     while (r->tick < stop) {
-        int stopped = r->algorithm == DCS_JACOBI ? jacobi_step(r, r->tick)
-                                                 : gauss_seidel_step(r, r->tick);
+        int stopped = r->algorithm == DCS_JACOBI ? jacobi_step(r, r->tick, after)
+                                                 : gauss_seidel_step(r, r->tick, after);
+        after = -1;
         if (stopped)
             return r->event;
         r->tick++;
