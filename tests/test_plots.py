@@ -116,3 +116,33 @@ def test_a_long_run_is_drawn_from_its_envelope(tmp_path) -> None:
         plots._series = real
     assert len(drawn) == 2 and max(drawn) <= 4 * 5 * plots.SHOW_DPI < 30001 / 4
     assert imread(tmp_path / "d.png").shape[:2] == (720, 600)
+
+
+def test_plot_workers_write_the_same_figures_as_this_process(tmp_path) -> None:
+    """Two worker processes draw the figures (each its group): the same PNG bytes as
+    plot_run in this process, the paths in its order; a dead worker's share is drawn here."""
+    from drillcosim.cosim.scenario.plot_workers import PlotWorkers
+
+    data = _record(["plant.body11_X", "plant.body11_Y", "plant.body11_radial_deflection",
+                    "plant.body11_contact_force", "plant.actuator1_power",
+                    "controller.actuator1_force_C"], n=3000)
+    for name in ("here", "there", "again"):
+        (tmp_path / name).mkdir()
+    here = plot_run(data, tmp_path / "here", clearance=0.02, n_sites=1, title="t")
+    with PlotWorkers(2) as workers:
+        assert len(workers.procs) == 2
+        there = workers.plot_run(data, tmp_path / "there", clearance=0.02, n_sites=1,
+                                 title="t")
+    assert [p.name for p in there] == [p.name for p in here] == [
+        "orbit.png", "orbit_steady.png", "deflection_contact.png", "actuators.png"]
+    for a, b in zip(here, there):
+        assert a.read_bytes() == b.read_bytes()
+    with PlotWorkers(2) as workers:
+        workers.procs[0].kill()                       # its group falls back to this process
+        workers.procs[0].wait()
+        again = workers.plot_run(data, tmp_path / "again", clearance=0.02, n_sites=1,
+                                 title="t")
+    assert [p.name for p in again] == [p.name for p in here]
+    assert all(a.read_bytes() == b.read_bytes() for a, b in zip(here, again))
+    with PlotWorkers(0) as none:                      # one core: no workers
+        assert none.procs == []

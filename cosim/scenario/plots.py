@@ -24,7 +24,7 @@ matplotlib ``Figure`` objects (no pyplot state).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 
 import matplotlib
@@ -35,7 +35,7 @@ from matplotlib.figure import Figure  # noqa: E402
 
 from drillcosim.cosim.master.files import AtomicFile  # noqa: E402
 
-from .scene_system import CONTROLLER, PLANT, TOP_DRIVE  # noqa: E402
+from .instances import CONTROLLER, PLANT, TOP_DRIVE  # noqa: E402
 from .summary import column, contact_bodies  # noqa: E402
 
 __all__ = ["SHOW_DPI", "envelope", "plot_actuators", "plot_axial_torsional",
@@ -314,10 +314,14 @@ def plot_axial_torsional(data: np.ndarray, path: str | Path, title: str = "") ->
 
 def plot_run(data: np.ndarray, out_dir: str | Path, clearance: float,
              spans: Mapping[int, Mapping] | None = None, n_sites: int = 2,
-             title: str = "", switch_on_time: float | None = None) -> list[Path]:
+             title: str = "", switch_on_time: float | None = None,
+             figures: Collection[str] | None = None) -> list[Path]:
     """Write ``orbit.png``, ``orbit_steady.png`` (last third), ``deflection_contact.png``
     and ``actuators.png`` (a scene without contact bodies, i.e. the axial-torsional chain:
-    ``axial_torsional.png`` instead); return their paths (a plot without data is skipped)."""
+    ``axial_torsional.png`` instead); return their paths (a plot without data is skipped).
+
+    ``figures``: only these (file names without ``.png``; default: all; the figures drawn by
+    worker processes: :mod:`.plot_workers`)."""
     out = Path(out_dir)
     t = data["time"]
     t_from = float(t[0] + 2.0 / 3.0 * (t[-1] - t[0])) if len(t) > 1 else None
@@ -325,12 +329,16 @@ def plot_run(data: np.ndarray, out_dir: str | Path, clearance: float,
     if spans:
         site_spans = [info.get("span", "") for _, info in sorted(spans.items())]
     if not contact_bodies(data):  # the axial-torsional chain: no lateral motion to show
-        path = plot_axial_torsional(data, out / "axial_torsional.png", title)
-        return [path] if path is not None else []
-    paths = [plot_orbit(data, out / "orbit.png", clearance, spans, title),
-             plot_orbit(data, out / "orbit_steady.png", clearance, spans, title, t_from),
-             plot_deflection_contact(data, out / "deflection_contact.png", clearance, spans,
-                                     title, switch_on_time),
-             plot_actuators(data, out / "actuators.png", n_sites, site_spans, title,
-                            switch_on_time)]
+        draw = {"axial_torsional": lambda: plot_axial_torsional(
+            data, out / "axial_torsional.png", title)}
+    else:
+        draw = {
+            "orbit": lambda: plot_orbit(data, out / "orbit.png", clearance, spans, title),
+            "orbit_steady": lambda: plot_orbit(data, out / "orbit_steady.png", clearance, spans,
+                                               title, t_from),
+            "deflection_contact": lambda: plot_deflection_contact(
+                data, out / "deflection_contact.png", clearance, spans, title, switch_on_time),
+            "actuators": lambda: plot_actuators(data, out / "actuators.png", n_sites,
+                                                site_spans, title, switch_on_time)}
+    paths = [f() for name, f in draw.items() if figures is None or name in figures]
     return [p for p in paths if p is not None]

@@ -23,13 +23,10 @@ rejecting its parameters with fmi2Error at initialization).
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import importlib
 import math
 import os
 import sys
-import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -169,19 +166,6 @@ def simulate_into(system, outputs: Sequence[str], output_ticks: int, stop: float
     return result, _failure(err, result), csv
 
 
-def _preload(module: str) -> threading.Thread:
-    """Import ``module`` (matplotlib) in a thread while the run steps (the master's native loop
-    runs in C without the GIL); a failed import here is silent (the plotting code's own import
-    raises it)."""
-    def target() -> None:
-        with contextlib.suppress(Exception):
-            importlib.import_module(module)
-
-    thread = threading.Thread(target=target, name=f"import {module}", daemon=True)
-    thread.start()
-    return thread
-
-
 def simulate_system(ss, out_dir: str | Path, stop_time: float | None = None,
                     progress: bool | None = None, plots: bool = True) -> SceneOutcome:
     """Run a :class:`cosim.scenario.scene_system.SceneSystem` and write results, summary and plots.
@@ -210,21 +194,25 @@ def simulate_system(ss, out_dir: str | Path, stop_time: float | None = None,
     CosimError
         If the run failed before its first step (earlier files are kept).
     """
-    from .scene_system import scene_controller, scene_top_drive_controller, span_info
-    from .summary import summarize, write_json
+    from .plot_workers import PlotWorkers
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     stop = ss.stop_time if stop_time is None else float(stop_time)
     if not (math.isfinite(stop) and stop > 0):
         raise ValueError(f"stop time: a finite number > 0 [s], got {stop!r}")
-    preload = _preload("drillcosim.cosim.scenario.plots") if plots else None
-    try:
+    with PlotWorkers(None if plots else 0) as workers:   # they import matplotlib meanwhile
         result, failure, csv = simulate_into(ss.system, ss.outputs, ss.settings.output_ticks,
                                              stop, out, progress)
-    finally:
-        if preload is not None:
-            preload.join()
+        return _write_outputs(ss, out, stop, result, failure, csv, plots, workers)
+
+
+def _write_outputs(ss, out: Path, stop: float, result: Result, failure: dict[str, Any] | None,
+                   csv: Path, plots: bool, workers) -> SceneOutcome:
+    """Summary, plots and the one-line message of :func:`simulate_system`."""
+    from .scene_system import scene_controller, scene_top_drive_controller, span_info
+    from .summary import summarize, write_json
+
     scene = ss.scene
     spans = span_info(scene)
     n_sites = len(scene.plant.actuator_joints)
@@ -242,10 +230,8 @@ def simulate_system(ss, out_dir: str | Path, stop_time: float | None = None,
     summary["cosim"] = {**vars(ss.settings), "output_interval": ss.settings.output_interval}
     files = [csv, write_json(summary, out / "summary.json")]
     if plots and len(result.data) > 1:
-        from .plots import plot_run  # matplotlib: imported only when plotting
-
-        files += plot_run(result.data, out, scene.plant.contact.clearance, spans, n_sites,
-                          title=scene.name, switch_on_time=switch or None)
+        files += workers.plot_run(result.data, out, scene.plant.contact.clearance, spans,
+                                  n_sites, title=scene.name, switch_on_time=switch or None)
     if failure is not None:
         msg = (f"run stopped at t = {result.end_time:.6g} s of {stop:g} s: "
                f"{failure['message']}; partial results in {out}")

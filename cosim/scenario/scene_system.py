@@ -108,6 +108,7 @@ from drillcosim.cosim.master.system import (
 from drillcosim.plant.observables import output_names
 from drillcosim.plant.scene import Scene, scenes_dir
 
+from .instances import CONTROLLER, PLANT, TOP_DRIVE
 from .interface import InterfaceWarning, connections_of, wire_system
 from .scene_fmus import (
     TOP_DRIVE_CONTROLLER,
@@ -139,9 +140,6 @@ __all__ = [
     "top_drive_controller_parameters",
 ]
 
-PLANT = "plant"            #: instance name of the plant FMU
-CONTROLLER = "controller"  #: instance name of the strain controller FMU
-TOP_DRIVE = "top_drive_controller"  #: instance name of the top-drive controller FMU
 AXES = ("C", "E")
 NO_LIMIT = 1e30            #: the controller FMU's "no symmetric force limit"
 

@@ -54,7 +54,7 @@ import numpy as np
 
 from drillcosim.cosim.master.files import atomic_write
 
-from .scene_system import CONTROLLER, PLANT, TOP_DRIVE
+from .instances import CONTROLLER, PLANT, TOP_DRIVE
 
 __all__ = ["STICK_SPEED", "SUMMARY_KEYS", "column", "contact_bodies", "load_results",
            "stick_slip_metrics", "summarize", "write_json"]
