@@ -11,14 +11,15 @@ run without ``PYTHONDONTWRITEBYTECODE`` (as a user's shell: byte-code caches on)
 
 * main job: ``drillcosim run paper_closed_loop --stop-time T`` (plots on), and ``--no-plots``
   with the default controller FMU and with ``StrainControllerC.fmu``;
-* start-up: the stages of ``drillcosim run`` up to its first step in a fresh process
-  (``benchmarks/bench_one_master.py``'s script: imports, scene, system, FMUs, first step), and
+* start-up: the stages of ``drillcosim run`` up to its first step in a fresh process (the
+  tree's own ``benchmarks/bench_one_master.py``: imports, scene, system, FMUs, first step), and
   the whole one-step process (``--stop-time 0.00025 --no-plots``: also the summary, the CSV and
   the interpreter's exit, ~0.2 s of which is numba's teardown), next to the floor
   ``python -c "import numpy, numba"``;
 * the plant alone: ``plant.simulator.simulate`` of the scene's plant over T at 1 ms outputs
   (the call, timed in the process after a warm-up call);
-* a 7-point sweep (actuator delay 0 .. 1.5 ms), ``--engine python`` and ``--engine fmu``,
+* a 7-point sweep (actuator delay 0 .. 1.5 ms), ``--engine python`` (``inprocess`` in trees
+  with the one typed configuration) and ``--engine fmu``,
   ``--workers 0`` (in one process, one point after the other);
 * the calibration's ``refine`` stage on its first 2 sets (around today's set), 4 members each,
   in one process (``workers=0``).
@@ -57,7 +58,10 @@ print(json.dumps(time.perf_counter() - t0))
 _REFINE = r"""
 import json, sys, tempfile, time
 from pathlib import Path
-from drillcosim.cosim.study import calibration as c
+try:
+    from drillcosim.cosim.study.paper import calibration as c
+except ImportError:                     # before the paper study moved (ae51f5f)
+    from drillcosim.cosim.study import calibration as c
 from drillcosim.cosim.study.scene_stats import measure_scene
 from drillcosim.cosim.study.sweep import execute_points
 sets = c.refine_sets(c.TODAY)[:2]
@@ -72,21 +76,12 @@ print(json.dumps(wall))
 """
 
 
-def _first_step() -> str:
-    """bench_one_master.py's start-up script (printing its stages as JSON)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from bench_one_master import _STARTUP
-
-    return _STARTUP
-
-
-def _stages(cmd: list[str], cwd: str) -> float:
-    """Sum of the stage times [s] a start-up script prints (JSON), plus ``python -c pass``."""
-    proc = subprocess.run(cmd, cwd=cwd, env=_env(), capture_output=True, text=True)
-    if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
-    return sum(json.loads(proc.stdout.strip().splitlines()[-1]).values()) + _timed(
-        [cmd[0], "-c", "pass"], cwd)
+_FIRST_STEP = r"""
+import json, sys
+sys.path.insert(0, sys.argv[1])         # the tree's own benchmarks/bench_one_master.py
+import bench_one_master
+print(json.dumps(sum(bench_one_master.startup().values())))
+"""
 
 
 def _env() -> dict[str, str]:
@@ -123,8 +118,8 @@ def _reported(cmd: list[str], cwd: str) -> float:
 
 
 def tasks(tree: Path, args: argparse.Namespace) -> dict[str, tuple[str, list[str]]]:
-    """``{task: (kind, argv)}``; kind ``wall`` (process wall time), ``reported`` (a number the
-    process prints) or ``stages`` (the sum of the stage times it prints)."""
+    """``{task: (kind, argv)}``; kind ``wall`` (process wall time) or ``reported`` (a number
+    the process prints)."""
     py = _python(tree)
     cli = [py, "-m", "drillcosim.cosim.cli"]
     run = [*cli, "run", "paper_closed_loop", "--no-progress", "--out", "out"]
@@ -132,19 +127,22 @@ def tasks(tree: Path, args: argparse.Namespace) -> dict[str, tuple[str, list[str
     t, ts = f"{args.stop_time:g}", f"{args.sweep_stop_time:g}"
     sweep = [*cli, "sweep", "paper_closed_loop", "--delay", "0:0.0015:7", "--stop-time", ts,
              "--workers", "0", "--no-progress"]
+    # the in-process engine: 'python' before the one typed configuration, 'inprocess' since
+    inprocess = "inprocess" if (tree / "cosim" / "scenario" / "build.py").is_file() else "python"
     return {
         f"main job, {t} s, plots": ("wall", [*run, "--stop-time", t]),
         f"main job, {t} s, --no-plots": ("wall", [*run, "--stop-time", t, "--no-plots"]),
         f"main job, {t} s, --no-plots, C controller": (
             "wall", [*run, "--stop-time", t, "--no-plots", "--controller-fmu", str(c_fmu)]),
-        "start-up: to the first step (sum of the stages)": ("stages", [py, "-c", _first_step()]),
+        "start-up: to the first step (sum of the stages)": (
+            "reported", [py, "-c", _FIRST_STEP, str(tree / "benchmarks")]),
         "start-up: one-step run, whole process, --no-plots": (
             "wall", [*run, "--stop-time", "0.00025", "--no-plots"]),
         "floor: python -c 'import numpy, numba'": ("wall", [py, "-c", "import numpy, numba"]),
         f"plant alone, {t} s (simulate call)": ("reported",
                                                 [py, "-c", _PLANT_ALONE, str(args.stop_time)]),
-        f"sweep, 7 points x {ts} s, --engine python": (
-            "wall", [*sweep, "--engine", "python", "--out", "sweep_py"]),
+        f"sweep, 7 points x {ts} s, --engine python / inprocess": (
+            "wall", [*sweep, "--engine", inprocess, "--out", "sweep_py"]),
         f"sweep, 7 points x {ts} s, --engine fmu": (
             "wall", [*sweep, "--engine", "fmu", "--out", "sweep_fmu"]),
         f"calibrate refine, 2 sets x 4 members x {args.calibrate_stop_time:g} s": (
@@ -163,8 +161,7 @@ def measure(trees: dict[str, Path], args: argparse.Namespace) -> dict[str, dict[
             for name in trees:
                 kind, cmd = plans[name][task]
                 with tempfile.TemporaryDirectory() as cwd:
-                    value = {"wall": _timed, "reported": _reported, "stages": _stages}[kind](
-                        cmd, cwd)
+                    value = (_timed if kind == "wall" else _reported)(cmd, cwd)
                 if rnd:
                     best[name][task] = min(best[name].get(task, float("inf")), value)
                 print(f"[{rnd}] {name:6s} {task}: {value:.3f} s", file=sys.stderr)

@@ -36,10 +36,10 @@ from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
 from drillcosim.cosim.master.master import Master  # noqa: E402
-from drillcosim.cosim.scenario.scene_system import scene_system  # noqa: E402
+from drillcosim.cosim.scenario.build import build_system  # noqa: E402
+from drillcosim.cosim.scenario.config import load_config  # noqa: E402
 from drillcosim.fmu_src.build import REGISTRY, build_one  # noqa: E402
 from drillcosim.fmu_src.build_c import build_c_controller  # noqa: E402
-from drillcosim.plant.scene import load_scene  # noqa: E402
 
 INPUTS = ["strain1_C", "strain1_E", "strain2_C", "strain2_E"]
 OUTPUTS = ["actuator1_force_C", "actuator1_force_E", "actuator2_force_C", "actuator2_force_E"]
@@ -91,7 +91,8 @@ class ControllerLoop:
 
 def closed_loop(plant: Path, controller: Path, stop: float) -> tuple[float, np.ndarray, int]:
     """(wall [s], structured result, base steps) of paper_closed_loop through our master."""
-    ss = scene_system(load_scene("paper_closed_loop"), plant_fmu=plant, controller_fmu=controller)
+    config = load_config("paper_closed_loop", plant_fmu=plant, controller_fmu=controller)
+    ss = build_system(config, "fmu")
     res = Master(ss.system).simulate(stop, ss.outputs)
     return res.wall_time, res.data, round(stop / ss.system.base_step)
 

@@ -41,7 +41,8 @@ from fmpy import extract, read_model_description, simulate_fmu  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
 from drillcosim.cosim.master.execution import Execution  # noqa: E402
-from drillcosim.cosim.scenario.scene_system import scene_system  # noqa: E402
+from drillcosim.cosim.scenario.build import build_system  # noqa: E402
+from drillcosim.cosim.scenario.config import load_config  # noqa: E402
 from drillcosim.fmu_src.build import build_all  # noqa: E402
 from drillcosim.plant.model import DrillstringModel  # noqa: E402
 from drillcosim.plant.scene import load_scene  # noqa: E402
@@ -160,7 +161,7 @@ def per_call(fmu: Path, n: int = 20000, repeat: int = 5) -> dict[str, float]:
 
 def closed_loop(fmu_dir: Path, stop: float) -> tuple[float, float]:
     """(wall, CPU) [s] of ``paper_closed_loop`` through Execution (0.25 ms, no recording)."""
-    ss = scene_system(load_scene("paper_closed_loop"), fmu_dir)
+    ss = build_system(load_config("paper_closed_loop"), "fmu", fmu_dir=fmu_dir)
     with Execution(ss.system) as ex:
         ex.initialize()
         return timed(ex.simulate_until, stop)

@@ -50,14 +50,14 @@ import time
 T0 = time.perf_counter()
 marks = {}
 from drillcosim.cosim import cli                       # the console script's module
-from drillcosim.cosim.scenario import run as run_module
-marks["import cli + scenario.run (numpy, fmpy, the master)"] = time.perf_counter()
-from drillcosim.plant.scene import load_scene
-marks["import plant.scene (numba, scipy, the plant model)"] = time.perf_counter()
-sc = load_scene("paper_closed_loop", overrides={"cosim": {"stop_time": 0.00025}})
+from drillcosim.cosim.scenario import simulate as simulate_module
+marks["import cli + scenario.simulate (numpy, fmpy, the master)"] = time.perf_counter()
+from drillcosim.cosim.scenario.config import load_config
+marks["import scenario.config (numba, scipy, the plant model)"] = time.perf_counter()
+config = load_config("paper_closed_loop", {"cosim.stop_time": 0.00025})
 marks["load the scene"] = time.perf_counter()
-from drillcosim.cosim.scenario.scene_system import scene_system
-ss = scene_system(sc)
+from drillcosim.cosim.scenario.build import build_system
+ss = build_system(config, "fmu")
 marks["build the system (FMU staleness check)"] = time.perf_counter()
 from drillcosim.cosim.master.execution import Execution
 ex = Execution(ss.system, read_outputs=ss.outputs)
@@ -91,16 +91,15 @@ def closed_loop(stop: float, engine: str, loop: str | None = None) -> float:
     ``"python"`` or ``"auto"`` for the master's loop; None: as the environment says)."""
     from drillcosim.cosim.master.execution import Execution
     from drillcosim.cosim.master.recorder import Recorder
-    from drillcosim.cosim.scenario.inprocess import inprocess_slaves
-    from drillcosim.cosim.scenario.scene_system import scene_system
-    from drillcosim.plant.scene import load_scene
+    from drillcosim.cosim.scenario.build import build_system
+    from drillcosim.cosim.scenario.config import load_config
 
-    ss = scene_system(load_scene("paper_closed_loop", overrides={"cosim": {"stop_time": stop}}))
-    slaves = inprocess_slaves(ss) if engine == "in-process" else None
+    ss = build_system(load_config("paper_closed_loop", {"cosim.stop_time": stop}),
+                      "inprocess" if engine == "in-process" else "fmu")
     old = _with_loop(loop)
     try:
-        with Execution(ss.system, read_outputs=ss.outputs, slaves=slaves) as ex:
-            ex.add_observer(Recorder(ss.outputs, ss.settings.output_ticks))
+        with Execution(ss.system, read_outputs=ss.outputs, slaves=ss.slaves) as ex:
+            ex.add_observer(Recorder(ss.outputs, ss.config.cosim.output_ticks))
             ex.initialize()
             t0 = time.perf_counter()
             ex.simulate_until(stop)
@@ -140,12 +139,11 @@ def _mean_us(f, n: int = 4000) -> float:
 def step_parts(h: float = 0.00025) -> dict[str, float]:
     """Microseconds per 0.25 ms step of each part of the closed loop, timed alone."""
     from drillcosim.cosim.master.slave import FmuSlave
-    from drillcosim.cosim.scenario.inprocess import inprocess_slaves
-    from drillcosim.cosim.scenario.scene_system import scene_system
-    from drillcosim.plant.scene import load_scene
+    from drillcosim.cosim.scenario.build import build_system
+    from drillcosim.cosim.scenario.config import load_config
 
-    ss = scene_system(load_scene("paper_closed_loop"))
-    local = inprocess_slaves(ss)
+    ss = build_system(load_config("paper_closed_loop"), "fmu")
+    local = build_system(ss.config, "inprocess").slaves
     sim, law = local["plant"].sim, local["controller"].law
     model = sim.model
     sim.time = 0.0
@@ -308,7 +306,7 @@ def main(argv: list[str] | None = None) -> int:
     closed_loop(0.01, "fmu")          # build/compile/load caches once, outside the timing
     walls: dict[str, list[float]] = {"fmu": [], "in-process": []}
     starts: list[dict[str, float]] = []
-    from drillcosim.cosim.scenario.scene_system import default_fmu_dir
+    from drillcosim.cosim.scenario.scene_fmus import default_fmu_dir
     c_controller = default_fmu_dir() / "StrainControllerC.fmu"
     wholes: dict[str, tuple[str, ...]] = {
         "with plots": (), "`--no-plots`": ("--no-plots",),

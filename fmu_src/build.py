@@ -316,7 +316,7 @@ REGISTRY: tuple[FmuRecipe, ...] = (
         # the numpy reference rhs (tests, benchmarks), the linear/modal analysis and the
         # continuous-time closed loop (study layer): the FMU never imports them (tested)
         exclude=("plant/numpy_rhs.py", "plant/linearize.py", "plant/modal.py",
-                 "plant/closed_loop.py"),
+                 "plant/equilibrium.py", "plant/closed_loop.py"),
     ),
     FmuRecipe(
         name="TopDriveController",

@@ -238,7 +238,7 @@ def _import_plant() -> tuple[Any, str]:
         sys.path.insert(0, str(base))
         try:
             importlib.import_module(VENDORED_PLANT)
-            for sub in ("params", "scene", "model", "simulator", "observables"):
+            for sub in ("params", "scene", "model", "simulator", "signals"):
                 importlib.import_module(f"{VENDORED_PLANT}.{sub}")
         finally:
             sys.path.remove(str(base))  # submodules resolve through the package's __path__
@@ -250,7 +250,7 @@ _params_mod = sys.modules[f"{VENDORED_PLANT}.params"]
 _scene_mod = sys.modules[f"{VENDORED_PLANT}.scene"]
 _model_mod = sys.modules[f"{VENDORED_PLANT}.model"]
 _sim_mod = sys.modules[f"{VENDORED_PLANT}.simulator"]
-_obs_mod = sys.modules[f"{VENDORED_PLANT}.observables"]
+_signals_mod = sys.modules[f"{VENDORED_PLANT}.signals"]
 
 
 def scenes_folder(resources: str | None = None) -> Path:
@@ -312,7 +312,8 @@ def _declared_outputs() -> list[tuple[str, str, str]]:
     ``PlantParams`` defaults (a test checks), so no scene file is read here.
     """
     plant = _params_mod.PlantParams()
-    return _obs_mod.output_names(True, list(plant.contact_bodies), len(plant.actuator_joints))
+    return _signals_mod.plant_outputs(True, list(plant.contact_bodies),
+                                      len(plant.actuator_joints))
 
 
 PARAMETERS = _parameter_table()

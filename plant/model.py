@@ -41,8 +41,16 @@ from .integrators import (
     exponential_matrices,
     stable_step,
 )
-from .observables import output_names, outputs3d, outputs_at
+from .observables import outputs3d, outputs_at
 from .params import BIT_MODELS, TOP_DRIVE_MODES, PlantParams
+from .signals import (
+    TOP_DRIVE_SPEED_COMMAND,
+    TOP_DRIVE_TORQUE,
+    actuator_force,
+    actuator_inputs,
+    plant_outputs,
+    site_channels,
+)
 
 __all__ = ["DrillstringModel", "FIXED_STEP_METHODS", "ModelKind", "extensions", "needs_lateral",
            "series"]
@@ -189,7 +197,7 @@ class DrillstringModel:
         DOFs (see :func:`needs_lateral`).
     extended_outputs : bool, optional
         List the outputs of the extensions beyond the paper (whirl speed and direction per
-        contact body, ...; :func:`plant.observables.output_names`). Default: when one of them
+        contact body, ...; :func:`plant.signals.plant_outputs`). Default: when one of them
         is active (:func:`extensions`), so that the paper's scenes keep the paper's interface.
     """
 
@@ -224,8 +232,8 @@ class DrillstringModel:
         self.wM = np.zeros((n, 3))
         self._scratch = [np.zeros(self.n_state) for _ in range(5)]
         self.verlet_lambda = 1.0  # velocity predictor of the Verlet damping forces (0.5 .. 1)
-        names = output_names(kind == "full3d", list(self.contact_bodies), self.n_sites,
-                             extended=self.extended_outputs)
+        names = plant_outputs(kind == "full3d", list(self.contact_bodies), self.n_sites,
+                              extended=self.extended_outputs)
         self.input_names, self.input_units, self.input_docs = self._input_layout()
         self.n_inputs = len(self.input_names)
         #: the inputs that act on this model, in input order: the actuator forces only in the
@@ -260,7 +268,7 @@ class DrillstringModel:
 
     def _actuator_inputs(self) -> list[str]:
         """Names of the actuator force inputs, two per site (C, E)."""
-        return [f"actuator{s}_force_{a}" for s in range(1, self.n_sites + 1) for a in "CE"]
+        return actuator_inputs(self.n_sites)
 
     def _input_layout(self) -> tuple[list[str], dict[str, str], dict[str, str]]:
         """Names, units and descriptions of the entries of the input vector ``u``.
@@ -269,22 +277,22 @@ class DrillstringModel:
         (``top_drive_speed_command`` [rad/s]) and "torque" (``top_drive_torque`` [N m]).
         """
         names, units, docs = [], {}, {}
-        for nm in self._actuator_inputs():
-            s, a = nm[len("actuator"):].split("_force_")
+        for s, a in site_channels(range(1, self.n_sites + 1)):
+            nm = actuator_force(s, a)
             names.append(nm)
             units[nm] = "N"
             docs[nm] = (f"actuator force at {a} of site {s}, > 0 opposing a positive strain "
                         f"(a bending couple of arm {self.p[lay.ACT_ARM]:g} m)")
         mode = self.params.top_drive.mode
         if mode == "speed":
-            names.append("top_drive_speed_command")
-            units["top_drive_speed_command"] = "rad/s"
-            docs["top_drive_speed_command"] = ("rotary speed of the top drive (an ideal speed "
+            names.append(TOP_DRIVE_SPEED_COMMAND)
+            units[TOP_DRIVE_SPEED_COMMAND] = "rad/s"
+            docs[TOP_DRIVE_SPEED_COMMAND] = ("rotary speed of the top drive (an ideal speed "
                                                "source; replaces the prescribed ramp)")
         elif mode == "torque":
-            names.append("top_drive_torque")
-            units["top_drive_torque"] = "N m"
-            docs["top_drive_torque"] = ("motor torque on the top-drive rotor (inertia "
+            names.append(TOP_DRIVE_TORQUE)
+            units[TOP_DRIVE_TORQUE] = "N m"
+            docs[TOP_DRIVE_TORQUE] = ("motor torque on the top-drive rotor (inertia "
                                         f"{self.params.top_drive.inertia:g} kg m^2)")
         return names, units, docs
 

@@ -406,15 +406,16 @@ def test_a_failed_compiled_step_is_reported_as_in_python(fmus, monkeypatch, chun
 ])
 def test_closed_loop_fmus_native_equals_python_bit_for_bit(project_fmus, monkeypatch, chunks,
                                                            cosim):
-    from drillcosim.cosim.scenario.scene_system import scene_system
-    from drillcosim.plant.scene import load_scene
+    from drillcosim.cosim.scenario.build import build_system
+    from drillcosim.cosim.scenario.config import load_config
 
-    sc = load_scene("paper_closed_loop", overrides={"cosim": {"stop_time": 0.05, **cosim}})
-    ss = scene_system(sc, project_fmus["DrillstringPlant"].parent)
+    over = {"cosim.stop_time": 0.05, **{f"cosim.{k}": v for k, v in cosim.items()}}
+    ss = build_system(load_config("paper_closed_loop", over), "fmu",
+                      fmu_dir=project_fmus["DrillstringPlant"].parent)
 
     def run():
         return Master(ss.system).simulate(outputs=ss.outputs,
-                                          output_ticks=ss.settings.output_ticks)
+                                          output_ticks=ss.config.cosim.output_ticks)
 
     ref, got = both(monkeypatch, chunks, run)
     assert len(got.data) == 51 and got.diverged is None

@@ -11,7 +11,6 @@ crash shows as a failed exit code).
 from __future__ import annotations
 
 import ctypes
-import dataclasses
 import json
 import os
 import shutil
@@ -538,13 +537,14 @@ def test_libcosim_runs_native_fmus_like_our_master(native_dir: Path, tmp_path: P
     pytest.importorskip("libcosimpy")
     from drillcosim.cosim.master.master import Master
     from drillcosim.cosim.master.ssp import export_ssp
-    from drillcosim.cosim.scenario.scene_system import scene_system
-    from drillcosim.plant.scene import load_scene
+    from drillcosim.cosim.scenario.build import build_system
+    from drillcosim.cosim.scenario.config import load_config
     from support.engines import LIBCOSIM_HOST as HOST
 
-    sc = load_scene("paper_restricted_actuator", overrides={"controller": {"gain": 5e8}})
-    sc = dataclasses.replace(sc, cosim={"step": 1e-3, "controller_sample_period": 2e-3})
-    ss = scene_system(sc, native_dir)
+    config = load_config("paper_restricted_actuator", {
+        "controller.gain": 5e8, "cosim.step": 1e-3, "cosim.controller_sample_period": 2e-3,
+        "cosim.algorithm": "jacobi", "cosim.order": ["plant", "controller"]})
+    ss = build_system(config, "fmu", fmu_dir=native_dir)
     n = 200
     ours = Master(ss.system).simulate(n * 1e-3, ss.outputs).data
     exp = export_ssp(ss.system, tmp_path / "sys.ssp")

@@ -46,12 +46,12 @@ def test_a_chain_run_summary_has_no_bending_actuators(tmp_path) -> None:
     the summary must not list two sites with zero force."""
     import json
 
-    from drillcosim.cosim.scenario.run import simulate_scene
+    from drillcosim import simulate
 
-    out = simulate_scene("stick_slip", stop_time=0.5, out_dir=tmp_path, plots=False,
-                         progress=False)
+    res = simulate("stick_slip", stop_time=0.5)
+    res.save(tmp_path, plots=False)
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert out.exit_code == 0 and summary["actuators"] == {}
+    assert res.completed and summary["actuators"] == {}
     assert summary["torsional"]["bit_speed_max_rad_s"] > 0.0
 
 

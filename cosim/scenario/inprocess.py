@@ -13,9 +13,8 @@ the same numbers with either, bit for bit (``tests/test_sweep.py``), while the i
 slaves save the FMI boundary. Parameters stay typed (:class:`plant.model.DrillstringModel`,
 :class:`controller.ControllerParams`).
 
-:func:`inprocess_slaves` makes the slaves that stand in for the FMUs of a
-:class:`~.scene_system.SceneSystem` (the FMU files still describe the system: instance names,
-variables, wiring; they are not loaded).
+:func:`inprocess_slaves` makes the slaves that stand in for the FMUs of a configuration
+(:func:`.build.build_system` with ``engine="inprocess"`` wires them as it wires the FMUs).
 """
 
 from __future__ import annotations
@@ -35,21 +34,21 @@ from drillcosim.cosim.master.errors import FMI2_DISCARD, FMI2_ERROR, CosimError
 from drillcosim.cosim.master.slave import Slave
 from drillcosim.cosim.master.system import ParameterValue, _did_you_mean
 from drillcosim.plant.model import DrillstringModel
-from drillcosim.plant.simulator import PlantSimulator
-
-from .scene_fmus import plant_layout
-from .scene_system import (
-    AXES,
+from drillcosim.plant.signals import (
     CONTROLLER,
     PLANT,
     TOP_DRIVE,
-    SceneSystem,
-    scene_controller,
-    scene_top_drive_controller,
+    TOP_DRIVE_TORQUE,
+    actuator_force,
+    site_channels,
+    strain,
 )
+from drillcosim.plant.simulator import PlantSimulator
 
-__all__ = ["ControllerSlave", "PlantSlave", "TopDriveSlave", "inprocess_slaves",
-           "inprocess_system"]
+from .config import SceneConfig
+from .scene_fmus import plant_layout
+
+__all__ = ["ControllerSlave", "PlantSlave", "TopDriveSlave", "inprocess_slaves"]
 
 
 class _ArraySlave(Slave):
@@ -226,9 +225,9 @@ class ControllerSlave(_LawSlave):
     """
 
     def __init__(self, name: str, params: ControllerParams, sites: Sequence[int] = (1, 2)):
-        pairs = [(s, a) for s in sites for a in AXES]
-        super().__init__(name, [f"strain{s}_{a}" for s, a in pairs],
-                         [f"actuator{s}_force_{a}" for s, a in pairs])
+        pairs = site_channels(sites)
+        super().__init__(name, [strain(s, a) for s, a in pairs],
+                         [actuator_force(s, a) for s, a in pairs])
         self.law = StrainController(params, len(sites))
 
     def instantiate(self, start_time: float, stop_time: float | None) -> None:
@@ -252,7 +251,7 @@ class TopDriveSlave(_LawSlave):
     """
 
     def __init__(self, name: str, params: TopDriveControllerParams):
-        super().__init__(name, ["top_rotary_speed", "top_torque"], ["top_drive_torque"])
+        super().__init__(name, ["top_rotary_speed", "top_torque"], [TOP_DRIVE_TORQUE])
         self.law = TopDriveController(params)
 
     def instantiate(self, start_time: float, stop_time: float | None) -> None:
@@ -264,89 +263,26 @@ class TopDriveSlave(_LawSlave):
         self.y[0] = self.law.step(t, h, float(self.u[0]), float(self.u[1]))
 
 
-def inprocess_slaves(ss: SceneSystem) -> dict[str, Slave]:
-    """In-process slaves standing in for the FMUs of a scene's system (built from the scene).
+def inprocess_slaves(config: SceneConfig) -> dict[str, Slave]:
+    """In-process slaves standing in for the FMUs of a configuration's system.
+
+    The plant is the model the plant FMU builds: the scene's own (any number of actuator
+    sites), or the 3D model for a scene the default plant FMU runs (:func:`.scene_fmus.
+    plant_layout`); the strain controller serves every site of the plant.
 
     Returns
     -------
     dict
         ``{"plant": PlantSlave, "controller": ControllerSlave, "top_drive_controller":
-        TopDriveSlave}`` (the controllers the system has), for ``Execution(..., slaves=...)``.
+        TopDriveSlave}`` (the enabled controllers), for ``Master(system, slaves)``.
     """
-    scene = ss.scene
+    scene = config.scene
     kind = "full3d" if plant_layout(scene) is None else scene.model
     slaves: dict[str, Slave] = {
         PLANT: PlantSlave(PLANT, PlantSimulator(DrillstringModel(scene.plant, kind)))}
-    instances = {f.name for f in ss.system.fmus}
-    if CONTROLLER in instances:
-        slaves[CONTROLLER] = ControllerSlave(
-            CONTROLLER, scene_controller(scene),
-            tuple(range(1, len(scene.plant.actuator_joints) + 1)))
-    if TOP_DRIVE in instances:
-        slaves[TOP_DRIVE] = TopDriveSlave(TOP_DRIVE, scene_top_drive_controller(scene))
+    if config.controller.enabled:
+        slaves[CONTROLLER] = ControllerSlave(CONTROLLER, config.controller,
+                                             tuple(range(1, config.n_sites + 1)))
+    if config.top_drive.enabled:
+        slaves[TOP_DRIVE] = TopDriveSlave(TOP_DRIVE, config.top_drive)
     return slaves
-
-
-def inprocess_system(scene) -> tuple[SceneSystem, dict[str, Slave]]:
-    """A scene's system and its in-process slaves, for any number of actuator sites.
-
-    No FMU file is needed (:func:`~.scene_system.scene_system` uses, and builds, FMUs for the
-    scene's layout): the plant takes the scene's sites (``[actuators] joints``) and
-    :class:`ControllerSlave` serves all of them, so the same master, with the same algorithm,
-    order, delays and sampling as :func:`~.scene_system.scene_system` builds from the scene's
-    ``[cosim]``, runs e.g. 1, 2 or 3 sites per span. No FMU file is read; the instances'
-    paths are placeholders.
-
-    Parameters
-    ----------
-    scene : plant.scene.Scene
-        A loaded scene (``model = 'full3d'`` when its controller is enabled).
-
-    Returns
-    -------
-    SceneSystem, dict
-        The system (recorded outputs: per contact body X, Y, radial deflection, contact
-        force; per site the strains C/E and the actuator power; the controller's forces) and
-        ``{"plant": PlantSlave, "controller": ControllerSlave}`` (no controller when the
-        scene's controller is disabled) for ``Execution(ss.system, slaves=...)``.
-    """
-    from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec
-
-    from .scene_system import cosim_settings
-
-    settings = cosim_settings(scene)
-    params = scene_controller(scene)
-    plant = PlantSlave(PLANT, PlantSimulator(DrillstringModel(scene.plant, scene.model)))
-    slaves: dict[str, Slave] = {PLANT: plant}
-    sites = range(1, len(scene.plant.actuator_joints) + 1)
-    outputs = [f"{PLANT}.body{b}_{q}" for b in scene.plant.contact_bodies
-               for q in ("X", "Y", "radial_deflection", "contact_force")]
-    outputs += [f"{PLANT}.{n}" for s in sites
-                for n in (*(f"strain{s}_{a}" for a in AXES), f"actuator{s}_power")]
-    missing = [o for o in outputs if o.split(".", 1)[1] not in plant.outputs]
-    if missing:
-        raise ValueError(f"{scene.source}: the plant has no output {', '.join(missing)}")
-    fmus = [FmuSpec(PLANT, "<in-process plant>")]
-    connections: list[Connection] = []
-    order: tuple[str, ...] = (PLANT,)
-    if params.enabled:
-        if scene.model != "full3d":
-            raise ValueError(f"{scene.source}: the controller needs model = 'full3d', "
-                             f"got '{scene.model}'")
-        ctrl = ControllerSlave(CONTROLLER, params, tuple(sites))
-        slaves[CONTROLLER] = ctrl
-        fmus.append(FmuSpec(CONTROLLER, "<in-process controller>", {},
-                            settings.controller_sample_ticks))
-        for s in sites:
-            for a in AXES:
-                connections.append(Connection(f"{PLANT}.strain{s}_{a}",
-                                              f"{CONTROLLER}.strain{s}_{a}",
-                                              settings.sensor_delay, settings.coupling))
-                connections.append(Connection(f"{CONTROLLER}.actuator{s}_force_{a}",
-                                              f"{PLANT}.actuator{s}_force_{a}",
-                                              settings.actuator_delay, settings.coupling))
-        outputs += [f"{CONTROLLER}.{n}" for n in ctrl.outputs]
-        order = settings.order
-    system = SystemSpec(fmus, connections, settings.step, settings.algorithm, order, 0.0,
-                        settings.stop_time)
-    return SceneSystem(scene, system, settings, tuple(outputs)), slaves

@@ -34,8 +34,8 @@ import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from drillcosim.cosim.master.files import AtomicFile  # noqa: E402
+from drillcosim.plant.signals import CONTROLLER, PLANT, TOP_DRIVE  # noqa: E402
 
-from .instances import CONTROLLER, PLANT, TOP_DRIVE  # noqa: E402
 from .summary import column, contact_bodies  # noqa: E402
 
 __all__ = ["SHOW_DPI", "envelope", "plot_actuators", "plot_axial_torsional",
