@@ -143,21 +143,25 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     if _is_ssp(args.scene):
         return _run_ssp(args)
+    from drillcosim.cosim.scenario.plot_workers import PlotWorkers
+
     out = Path(args.out) if args.out is not None else Path("out") / Path(args.scene).stem
-    try:
-        result = simulate(args.scene, stop_time=args.stop_time, step=args.step, delay=args.delay,
-                          gain=args.gain, overrides=_parse_set(args.set), engine=args.engine,
-                          progress=_progress(args), fmu_dir=args.fmu_dir,
-                          plant_fmu=args.plant_fmu, controller_fmu=args.controller_fmu,
-                          csv_path=out / "results.csv")
-    except CosimError as exc:  # failed before the first step: earlier files are kept
-        if exc.call == "fmi2ExitInitializationMode" and exc.status == FMI2_ERROR:
-            # the FMU rejected its parameters (its message names them): bad input
-            print(f"drillcosim run: error: {exc}", file=sys.stderr)
-            return EXIT_USAGE
-        print(f"drillcosim run: failed: {exc}", file=sys.stderr)
-        return EXIT_FAILED
-    files = result.save(out, plots=not args.no_plots)
+    # the figures' worker processes import matplotlib while the run steps
+    with PlotWorkers(0 if args.no_plots else None) as workers:
+        try:
+            result = simulate(args.scene, stop_time=args.stop_time, step=args.step,
+                              delay=args.delay, gain=args.gain, overrides=_parse_set(args.set),
+                              engine=args.engine, progress=_progress(args),
+                              fmu_dir=args.fmu_dir, plant_fmu=args.plant_fmu,
+                              controller_fmu=args.controller_fmu, csv_path=out / "results.csv")
+        except CosimError as exc:  # failed before the first step: earlier files are kept
+            if exc.call == "fmi2ExitInitializationMode" and exc.status == FMI2_ERROR:
+                # the FMU rejected its parameters (its message names them): bad input
+                print(f"drillcosim run: error: {exc}", file=sys.stderr)
+                return EXIT_USAGE
+            print(f"drillcosim run: failed: {exc}", file=sys.stderr)
+            return EXIT_FAILED
+        files = result.save(out, plots=not args.no_plots, workers=workers)
     message = result.message(out, files)
     print(message, file=sys.stdout if result.completed else sys.stderr)
     return EXIT_OK if result.completed else EXIT_FAILED
@@ -224,9 +228,13 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_doctor(args: argparse.Namespace) -> int:
-    from drillcosim.fmu_src.wrapper.doctor import doctor_command
+    from drillcosim.cosim.master.errors import UserError
+    from drillcosim.fmu_src.wrapper.doctor import NotAnFmuError, doctor_command
 
-    return doctor_command(args.fmu)
+    try:
+        return doctor_command(args.fmu)
+    except NotAnFmuError as exc:
+        raise UserError(str(exc)) from None
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:

@@ -24,8 +24,6 @@ from drillcosim.cosim.scenario.build import ENGINES, build_system, scene_recipes
 from drillcosim.cosim.scenario.config import SceneConfig, key_paths, load_config
 from drillcosim.cosim.scenario.result import Result
 from drillcosim.cosim.scenario.simulate import simulate as simulate_built
-from drillcosim.cosim.study.sweep import execute_sweep, sweep_spec
-from drillcosim.cosim.study.table import read_table
 from drillcosim.fmu_src.build import build_all, build_one, default_out
 from drillcosim.fmu_src.build_c import build_c_controller
 from drillcosim.plant import scene as _scene
@@ -189,6 +187,10 @@ def sweep(scene: str | Path = "paper_closed_loop", *, gains: Sequence[float] = (
         the run's counts (:class:`cosim.study.sweep.SweepOutcome`).
     """
     import pandas as pd  # an optional heavy import: only here
+
+    # the study (scipy.signal, scipy.stats: ~0.5 s) only here: `drillcosim run` never needs it
+    from drillcosim.cosim.study.sweep import execute_sweep, sweep_spec
+    from drillcosim.cosim.study.table import read_table
 
     spec = sweep_spec(str(scene), gains, delays, steps, stop_time, engine,
                       key_paths(overrides), options, gain_key)

@@ -97,6 +97,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
+from drillcosim._toolchain import user_cache
+
 __all__ = [
     "DEFAULT_OUT",
     "REGISTRY",
@@ -123,15 +125,6 @@ def _checkout() -> bool:
         return 'name = "drillcosim"' in (ROOT / "pyproject.toml").read_text()
     except OSError:
         return False
-
-
-def user_cache() -> Path:
-    """Per-user cache folder: ``$DRILLCOSIM_CACHE``, else ``$XDG_CACHE_HOME/drillcosim``."""
-    env = os.environ.get("DRILLCOSIM_CACHE")
-    if env:
-        return Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "drillcosim"
 
 
 def default_out() -> Path:

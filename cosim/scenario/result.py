@@ -137,8 +137,11 @@ class Result:
         ctrl = self.config.controller
         return ctrl.switch_on_time if ctrl.enabled else None
 
-    def plot(self, folder: str | Path | None = None) -> Figures:
+    def plot(self, folder: str | Path | None = None, workers=None) -> Figures:
         """Draw the run's figures as PNGs into ``folder`` (default: a new temporary folder).
+
+        ``workers``: a :class:`.plot_workers.PlotWorkers` started with the run (``drillcosim
+        run`` does), which draws the figures in parallel; default: drawn in this process.
 
         Returns
         -------
@@ -147,7 +150,10 @@ class Result:
         """
         if len(self.data) < 2:
             return Figures()
-        from .plots import plot_run  # matplotlib: imported only when plotting
+        if workers is None:
+            from .plots import plot_run  # matplotlib: imported only when plotting
+        else:
+            plot_run = workers.plot_run
 
         out = Path(folder) if folder is not None else Path(tempfile.mkdtemp(prefix="drillcosim_"))
         out.mkdir(parents=True, exist_ok=True)
@@ -155,10 +161,10 @@ class Result:
                                 self.spans, self.config.n_sites, title=self.config.name,
                                 switch_on_time=self._switch_on_time or None))
 
-    def save(self, folder: str | Path, plots: bool = True) -> list[Path]:
+    def save(self, folder: str | Path, plots: bool = True, workers=None) -> list[Path]:
         """Write ``results.csv``, ``summary.json`` and (``plots``) the PNGs into ``folder``
         (created if missing; each file written atomically). A ``results.csv`` the run streamed
-        into ``folder`` is kept as it is.
+        into ``folder`` is kept as it is. ``workers``: as for :meth:`plot`.
 
         Returns
         -------
@@ -176,7 +182,7 @@ class Result:
                 np.savetxt(fh, flat, delimiter=",", fmt="%.17g")
         files = [csv, write_json(self.summary, out / "summary.json")]
         if plots:
-            files += list(self.plot(out))
+            files += list(self.plot(out, workers))
         return files
 
     def message(self, folder: Path | None = None, files: list[Path] | None = None) -> str:

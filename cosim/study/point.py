@@ -60,7 +60,7 @@ from typing import Any
 import numpy as np
 from scipy.signal import butter, sosfilt
 
-from drillcosim.cosim.master.errors import DivergenceError
+from drillcosim.cosim.master.limits import OutputLimit
 from drillcosim.cosim.scenario.build import ENGINES, build_system
 from drillcosim.cosim.scenario.config import ConfigError, SceneConfig, key_paths, load_config
 from drillcosim.cosim.scenario.simulate import simulate
@@ -242,28 +242,6 @@ def point_config(scene: str, gain: float, delay: float, step: float, stop_time: 
     return load_config(scene, over)
 
 
-class ForceCap:
-    """Observer: stop the master (as a divergence) when a force exceeds the cap.
-
-    The forces are exchanged outputs: read from the master's output buffer (as the recorder
-    does), no FMI call per step.
-    """
-
-    def __init__(self, refs: list[str], cap: float):
-        self.refs = refs
-        self.cap = cap
-
-    def on_start(self, execution) -> None:
-        self._y = execution.algorithm.y
-        self._index = [(execution.algorithm.y_index[r], r) for r in self.refs]
-
-    def on_step(self, execution) -> None:
-        y, cap = self._y, self.cap
-        for i, name in self._index:
-            if not abs(y[i]) <= cap:
-                raise DivergenceError(name, execution.time, y[i])
-
-
 def simulate_point(config: SceneConfig, opts: PointOptions, engine: str = "fmu",
                    fmu_dir: str | None = None, initial_offset: np.ndarray | None = None
                    ) -> tuple[np.ndarray, str]:
@@ -310,7 +288,8 @@ def simulate_point(config: SceneConfig, opts: PointOptions, engine: str = "fmu",
     channels = site_channels(range(1, config.n_sites + 1))
     forces = [o for o in (ref(CONTROLLER, actuator_force(s, a)) for s, a in channels)
               if o in built.outputs]
-    res = simulate(built, observers=[ForceCap(forces, opts.force_cap)] if forces else ())
+    # a force beyond the cap stops the point as a divergence (checked in C by the native loop)
+    res = simulate(built, observers=[OutputLimit(forces, opts.force_cap)] if forces else ())
     f = res.failure
     if f is None:
         return res.data, ""

@@ -99,16 +99,17 @@ Other behaviour
 from __future__ import annotations
 
 import os
-import shutil
-import subprocess
 import sys
 import sysconfig
 import zipfile
 from collections.abc import Sequence
 from pathlib import Path
 
-__all__ = ["HEADERS", "SOURCES", "compile_shared", "compile_wrapper", "install_native_wrapper",
-           "python_range", "sources"]
+# the one place the project runs a C compiler (shared with the master's native loop)
+from drillcosim._toolchain import CFLAGS, compile_shared
+
+__all__ = ["CFLAGS", "HEADERS", "SOURCES", "compile_shared", "compile_wrapper",
+           "install_native_wrapper", "python_range", "sources"]
 
 HERE = Path(__file__).resolve().parent
 #: The C sources of the wrapper, compiled together. Named, not globbed: an installed copy can
@@ -121,8 +122,6 @@ SOURCES: tuple[Path, ...] = tuple(HERE / n for n in (
 HEADERS: tuple[Path, ...] = tuple(HERE / n for n in (
     "dcs_discover.h", "dcs_python.h", "dcs_wrapper.h", "fmi2/fmi2FunctionTypes.h",
     "fmi2/fmi2Functions.h", "fmi2/fmi2TypesPlatform.h"))
-CFLAGS = ("-std=c99", "-O2", "-DNDEBUG", "-Wall", "-Wextra", "-Werror", "-shared", "-fPIC",
-          "-fvisibility=hidden")
 
 
 def python_range() -> tuple[int, int]:
@@ -183,43 +182,6 @@ def compile_wrapper(out: Path | str, cc: str | None = None, flags: Sequence[str]
                f"-DDCS_BUILD_PYTHON=\"{_c_string(sys.executable)}\"",
                f"-DDCS_BUILD_MINOR={sys.version_info.minor}", *flags),
         libs=("-ldl", "-lpthread"), cc=cc)
-
-
-def compile_shared(what: str, sources: Sequence[Path], out: Path | str, *,
-                   flags: Sequence[str] = (), libs: Sequence[str] = (),
-                   cc: str | None = None) -> Path:
-    """Compile C ``sources`` into the shared library ``out`` with :data:`CFLAGS` (the one place
-    the project runs a C compiler: the wrapper and the C-coded FMUs share flags and checks).
-
-    Parameters
-    ----------
-    what : str
-        What is compiled, for messages (e.g. "the native wrapper").
-    sources : sequence of Path
-        C files.
-    out : path-like
-        Target ``.so``.
-    flags, libs : sequence of str
-        Extra compiler flags (before the sources) and libraries (after them).
-    cc : str, optional
-        C compiler (default ``$CC`` or ``gcc``).
-
-    Raises
-    ------
-    RuntimeError
-        No compiler, or it failed or printed a warning (its command and output included).
-    """
-    out = Path(out)
-    cc = cc or os.environ.get("CC") or "gcc"
-    if shutil.which(cc) is None:
-        raise RuntimeError(f"C compiler {cc!r} not found: building {what} needs one "
-                           f"(Debian: apt install gcc; or set $CC)")
-    cmd = [cc, *CFLAGS, *flags, *map(str, sources), "-o", str(out), *libs]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0 or proc.stderr.strip():
-        raise RuntimeError(f"compiling {what} failed:\n{' '.join(cmd)}\n"
-                           f"{proc.stdout}{proc.stderr}")
-    return out
 
 
 def install_native_wrapper(fmu: Path | str, class_name: str, library: Path | str,

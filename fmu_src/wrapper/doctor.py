@@ -25,9 +25,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-__all__ = ["Diagnosis", "diagnose", "doctor_command"]
+__all__ = ["Diagnosis", "NotAnFmuError", "diagnose", "doctor_command"]
 
 REPORT_BYTES = 1 << 20  #: room for the C report (a few KB in practice)
+
+
+class NotAnFmuError(ValueError):
+    """The file named is not an FMU of ours (missing, not a zip, no binary, no doctor entry):
+    bad input, one line."""
 
 
 @dataclass(frozen=True)
@@ -78,10 +83,10 @@ def _model_identifier(fmu: Path, zf: zipfile.ZipFile) -> str:
     try:
         root = ET.fromstring(zf.read("modelDescription.xml"))
     except (KeyError, ET.ParseError) as exc:
-        raise ValueError(f"{fmu}: not an FMU (no readable modelDescription.xml: {exc})") from None
+        raise NotAnFmuError(f"{fmu}: not an FMU (no readable modelDescription.xml: {exc})") from None
     cs = root.find("CoSimulation")
     if cs is None or not cs.get("modelIdentifier"):
-        raise ValueError(f"{fmu}: not a co-simulation FMU (no CoSimulation modelIdentifier)")
+        raise NotAnFmuError(f"{fmu}: not a co-simulation FMU (no CoSimulation modelIdentifier)")
     return cs.get("modelIdentifier", "")
 
 
@@ -119,16 +124,16 @@ def diagnose(fmu: Path | str) -> Diagnosis:
     """
     fmu = Path(fmu)
     if not fmu.is_file():
-        raise FileNotFoundError(f"{fmu}: no such FMU file")
+        raise NotAnFmuError(f"{fmu}: no such FMU file")
     try:
         zf = zipfile.ZipFile(fmu)
     except zipfile.BadZipFile:
-        raise ValueError(f"{fmu}: not an FMU (not a zip file)") from None
+        raise NotAnFmuError(f"{fmu}: not an FMU (not a zip file)") from None
     with zf, tempfile.TemporaryDirectory(prefix="dcs_doctor_") as tmp:
         ident = _model_identifier(fmu, zf)
         binary = f"binaries/linux64/{ident}.so"
         if binary not in zf.namelist():
-            raise ValueError(f"{fmu}: no {binary} (no binary for linux64)")
+            raise NotAnFmuError(f"{fmu}: no {binary} (no binary for linux64)")
         zf.extractall(tmp)
         try:
             cpython = json.loads(zf.read("resources/dcs_build.json"))["cpython"]
@@ -137,7 +142,7 @@ def diagnose(fmu: Path | str) -> Diagnosis:
         lib = ctypes.CDLL(str(Path(tmp) / binary))
         entry = getattr(lib, "drillcosim_doctor", None)
         if entry is None:
-            raise ValueError(f"{fmu}: its binary has no drillcosim_doctor: not an FMU built by "
+            raise NotAnFmuError(f"{fmu}: its binary has no drillcosim_doctor: not an FMU built by "
                              "drillcosim's build (or built before the doctor existed)")
         entry.restype = ctypes.c_int
         entry.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_size_t]
@@ -163,7 +168,7 @@ def doctor_command(fmu: Path | str | None) -> int:
 
         fmu = default_out() / "DrillstringPlant.fmu"
         if not fmu.is_file():
-            raise FileNotFoundError(f"{fmu} does not exist: build it with `drillcosim build`, "
+            raise NotAnFmuError(f"{fmu} does not exist: build it with `drillcosim build`, "
                                     "or name an FMU: drillcosim doctor FMU")
     diagnosis = diagnose(fmu)
     sys.stdout.write(diagnosis.text(Path(fmu)))
