@@ -47,7 +47,6 @@ import bench_work_precision as wp  # noqa: E402
 
 from drillcosim.plant.integrators import KERNEL_VERLET, METHODS  # noqa: E402
 from drillcosim.plant.model import DrillstringModel  # noqa: E402
-from drillcosim.plant.scene import load_scene  # noqa: E402
 from drillcosim.plant.simulator import PlantSimulator  # noqa: E402
 
 BAR = 1e-4  # relative trajectory error over T
@@ -79,11 +78,14 @@ class Candidate:
     steps: int = 0  # internal steps per H
 
 
-def scene_step(name: str) -> tuple[DrillstringModel, float]:
-    """The scene's model (its own kind) and communication step H [s]."""
-    sc = load_scene(name)
-    step = float(sc.cosim.get("step", 1e-3))
-    return DrillstringModel(sc.plant, sc.model), step
+def scene_step(name: str) -> tuple[DrillstringModel, float, bool]:
+    """The scene's model (its own kind), communication step H [s], whether it has a strain
+    controller."""
+    from drillcosim.cosim.scenario.config import load_config
+
+    config = load_config(name)
+    sc = config.scene
+    return DrillstringModel(sc.plant, sc.model), config.cosim.step, config.controller.enabled
 
 
 def run_fixed(model: DrillstringModel, H: float, T: float, method: str,
@@ -150,24 +152,28 @@ def front(cands: list[Candidate], errors: dict[str, float]) -> set[str]:
 def closed_loop_table(name: str, H: float, T: float, names: list[str]) -> list[str]:
     """The scene's closed loop (in-process) with each automatic-capable method in the plant."""
     from drillcosim.cosim.master.master import Master
-    from drillcosim.cosim.scenario.inprocess import PlantSlave, inprocess_system
+    from drillcosim.cosim.scenario.build import build_system
+    from drillcosim.cosim.scenario.config import load_config
+    from drillcosim.cosim.scenario.inprocess import PlantSlave
 
-    sc = load_scene(name, overrides={"cosim": {"stop_time": T}})
-    base = DrillstringModel(sc.plant, sc.model)
+    config = load_config(name, {"cosim.stop_time": T})
+    algorithm = config.cosim.algorithm
+    model0 = build_system(config, "inprocess").slaves["plant"].sim.model  # the FMU's model
+    base = DrillstringModel(model0.params, model0.kind)
 
     def run(method: str, max_step: float | None) -> tuple[np.ndarray, float]:
-        ss, slaves = inprocess_system(sc)
-        plant = PlantSimulator(DrillstringModel(sc.plant, sc.model), max_step, method)
-        slaves["plant"] = PlantSlave("plant", plant)
+        built = build_system(config, "inprocess")
+        plant = PlantSimulator(DrillstringModel(base.params, base.kind), max_step, method)
+        built.slaves["plant"] = PlantSlave("plant", plant)
         t0 = time.perf_counter()
-        res = Master(ss.system, slaves=slaves).simulate(outputs=ss.outputs)
+        res = Master(built.system, built.slaves).simulate(outputs=built.outputs)
         wall = time.perf_counter() - t0
         every = max(1, int(round(DT_OUT / H)))
         return np.array([res.data[f"plant.{n}"][::every] for n in names]).T, wall
 
     ref, ref_wall = run("rk4", base.stable_step() / 8)
     scale = np.abs(ref).max(axis=0)
-    L = [f"Closed loop ({sc.cosim.get('algorithm', 'jacobi')}, H = {H * 1e3:g} ms, {T:g} s, "
+    L = [f"Closed loop ({algorithm}, H = {H * 1e3:g} ms, {T:g} s, "
          f"in-process slaves): each method in the plant against RK4 at h*/8 in the plant "
          f"({ref_wall:.2f} s).", "",
          "| method in the plant | rhs per H | wall [s] | rel. error | <= 1e-4 |",
@@ -191,7 +197,7 @@ def closed_loop_table(name: str, H: float, T: float, names: list[str]) -> list[s
 def scene_table(name: str, signals: tuple[str, ...] | None, smooth: bool, repeat: int,
                 T: float) -> tuple[list[str], dict]:
     """Markdown of one scene and its verdicts."""
-    model, H = scene_step(name)
+    model, H, controlled = scene_step(name)
     names = list(signals or wp.SIGNALS[model.kind])
     if H > DT_OUT:
         raise ValueError(f"{name}: H = {H} s longer than {DT_OUT} s is not supported")
@@ -242,7 +248,7 @@ def scene_table(name: str, signals: tuple[str, ...] | None, smooth: bool, repeat
                "automatic_fail": [m for m, sp in METHODS.items() if model.kind in sp.automatic
                                   and cands[m].run is not None and errors[m] > BAR]}
     L += [""]
-    if load_scene(name).controller.get("enabled", False):
+    if controlled:
         L += closed_loop_table(name, H, T, names)
     return L, verdict
 

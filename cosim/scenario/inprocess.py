@@ -32,7 +32,7 @@ from drillcosim.controller import (
     TopDriveControllerParams,
 )
 from drillcosim.cosim.master.errors import FMI2_DISCARD, FMI2_ERROR, CosimError
-from drillcosim.cosim.master.slave import Slave
+from drillcosim.cosim.master.slave import CompiledCalls, Slave
 from drillcosim.cosim.master.system import ParameterValue, _did_you_mean
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.signals import (
@@ -130,6 +130,13 @@ class _ArraySlave(Slave):
         self.u[:], self.y[:] = u, y
         self.errored = False
 
+    def _compiled_calls(self, step: Any) -> CompiledCalls:
+        """The master's native loop view of ``step`` (a compiled step reading ``self.u`` and
+        writing ``self.y``, both kept in place): the bound inputs and outputs by slot."""
+        return CompiledCalls(step.function, step.context, self.u.ctypes.data,
+                             tuple(int(i) for i in self._in_idx), self.y.ctypes.data,
+                             tuple(int(i) for i in self._out_idx))
+
     def _save(self):  # pragma: no cover - each subclass has its own
         raise NotImplementedError
 
@@ -176,6 +183,10 @@ class PlantSlave(_ArraySlave):
             res = sim.do_step(t, h)
             if res.ok:
                 self.y[:] = sim.outputs()
+        return self._settle(res)
+
+    def _settle(self, res) -> int:
+        """The status of a step's :class:`~plant.simulator.StepResult` (its message kept)."""
         if not res.ok:
             self._problem = res.message
             if not res.quantity:
@@ -183,6 +194,19 @@ class PlantSlave(_ArraySlave):
             self._halted = res.message
             return FMI2_DISCARD
         return 0
+
+    def native_calls(self) -> CompiledCalls | None:
+        """The compiled step for the master's native loop (None once diverged: every later
+        step is discarded in Python, as the FMU does)."""
+        if self._step is None or self._halted is not None:
+            return None
+        self._step.refresh()  # the method or operator may have changed in Python
+        return self._compiled_calls(self._step)
+
+    def native_step_failed(self, code: int, t: float, h: float) -> int:
+        """A compiled step's failure code settled as :meth:`do_step` would (a fallback runs
+        the step in Python)."""
+        return self._settle(self._step.finish(code, t, h))
 
     def _save(self):
         return self.sim.get_state(), self._halted
@@ -210,13 +234,26 @@ class _LawSlave(_ArraySlave):
             code = self._step.step(t, h)
             if code == 0:
                 return 0
-            self._step.check(code, t, h)  # an internal failure raises
+            return self.native_step_failed(code, t, h)
+        return self._python_step(t, h)
+
+    def _python_step(self, t: float, h: float) -> int:
         try:
             self._advance(t, h)
         except ValueError as exc:
             self._problem = f"at t = {t!r}: {exc}"
             return FMI2_ERROR
         return 0
+
+    def native_calls(self) -> CompiledCalls | None:
+        """The law's compiled step for the master's native loop (None: stepped in Python)."""
+        return None if self._step is None else self._compiled_calls(self._step)
+
+    def native_step_failed(self, code: int, t: float, h: float) -> int:
+        """A step the compiled law left to Python (nothing changed): the Python step; an
+        internal failure raises."""
+        self._step.check(code, t, h)
+        return self._python_step(t, h)
 
     def _save(self):
         return self.law.get_state()
