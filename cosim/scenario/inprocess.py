@@ -7,7 +7,8 @@ The FMUs wrap the same objects (``fmu_src/``): :class:`PlantSlave` steps a
 :class:`TopDriveSlave` a :class:`controller.TopDriveController` exactly as the FMU adapters do
 (same times, same step sizes, outputs taken after each step, a failed plant step discarded with
 the plant's own message; the plant is the model the plant FMU builds: the scene's, or the 3D
-model for a scene the default plant FMU runs), so the master
+model for a scene the default plant FMU runs) and through the same compiled steps
+(:mod:`plant.compiled_step`, :mod:`controller.compiled`, called here through ctypes), so the master
 (:class:`cosim.master.execution.Execution`, its algorithms, delay lines and observers) gives
 the same numbers with either, bit for bit (``tests/test_sweep.py``), while the in-process
 slaves save the FMI boundary. Parameters stay typed (:class:`plant.model.DrillstringModel`,
@@ -31,7 +32,7 @@ from drillcosim.controller import (
     TopDriveControllerParams,
 )
 from drillcosim.cosim.master.errors import FMI2_DISCARD, FMI2_ERROR, CosimError
-from drillcosim.cosim.master.slave import Slave
+from drillcosim.cosim.master.slave import CompiledCalls, Slave
 from drillcosim.cosim.master.system import ParameterValue, _did_you_mean
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.signals import (
@@ -129,6 +130,13 @@ class _ArraySlave(Slave):
         self.u[:], self.y[:] = u, y
         self.errored = False
 
+    def _compiled_calls(self, step: Any) -> CompiledCalls:
+        """The master's native loop view of ``step`` (a compiled step reading ``self.u`` and
+        writing ``self.y``, both kept in place): the bound inputs and outputs by slot."""
+        return CompiledCalls(step.function, step.context, self.u.ctypes.data,
+                             tuple(int(i) for i in self._in_idx), self.y.ctypes.data,
+                             tuple(int(i) for i in self._out_idx))
+
     def _save(self):  # pragma: no cover - each subclass has its own
         raise NotImplementedError
 
@@ -151,6 +159,9 @@ class PlantSlave(_ArraySlave):
         super().__init__(name, simulator.input_names, simulator.model.output_names)
         self.sim = simulator
         self._halted: str | None = None
+        # the plant FMU's compiled step on this slave's arrays (None: Python do_step)
+        self._step = simulator.compiled_step(self.u, np.arange(len(self.inputs)), self.y,
+                                             np.arange(len(self.outputs)))
 
     def instantiate(self, start_time: float, stop_time: float | None) -> None:
         """Start at ``start_time`` with the outputs of the initial state."""
@@ -164,17 +175,38 @@ class PlantSlave(_ArraySlave):
         if self._halted is not None:
             self._problem = f"the simulation diverged earlier ({self._halted})"
             return FMI2_DISCARD
-        sim = self.sim
-        sim.u[:] = self.u
-        res = sim.do_step(t, h)
+        if self._step is not None:
+            res = self._step.step(t, h)  # inputs from self.u, outputs into self.y
+        else:
+            sim = self.sim
+            sim.u[:] = self.u
+            res = sim.do_step(t, h)
+            if res.ok:
+                self.y[:] = sim.outputs()
+        return self._settle(res)
+
+    def _settle(self, res) -> int:
+        """The status of a step's :class:`~plant.simulator.StepResult` (its message kept)."""
         if not res.ok:
             self._problem = res.message
             if not res.quantity:
                 return FMI2_ERROR
             self._halted = res.message
             return FMI2_DISCARD
-        self.y[:] = sim.outputs()
         return 0
+
+    def native_calls(self) -> CompiledCalls | None:
+        """The compiled step for the master's native loop (None once diverged: every later
+        step is discarded in Python, as the FMU does)."""
+        if self._step is None or self._halted is not None:
+            return None
+        self._step.refresh()  # the method or operator may have changed in Python
+        return self._compiled_calls(self._step)
+
+    def native_step_failed(self, code: int, t: float, h: float) -> int:
+        """A compiled step's failure code settled as :meth:`do_step` would (a fallback runs
+        the step in Python)."""
+        return self._settle(self._step.finish(code, t, h))
 
     def _save(self):
         return self.sim.get_state(), self._halted
@@ -186,21 +218,42 @@ class PlantSlave(_ArraySlave):
 
 class _LawSlave(_ArraySlave):
     """A controller law as a slave: ``law`` (``reset``, ``get_state``, ``set_state``) stepped
-    by :meth:`_advance`; a ``ValueError`` of the law is the step's error, state unchanged."""
+    by its compiled step on this slave's arrays, as in the controller FMUs, else (or for a step
+    the compiled law leaves to Python) by :meth:`_advance`; a ``ValueError`` of the law is the
+    step's error, state unchanged."""
 
     law: Any
+    _step: Any = None
 
     def _advance(self, t: float, h: float) -> None:  # pragma: no cover - each law its own
         raise NotImplementedError
 
     def do_step(self, t: float, h: float) -> int:
         """The outputs at ``t + h`` from the inputs held over the step."""
+        if self._step is not None:
+            code = self._step.step(t, h)
+            if code == 0:
+                return 0
+            return self.native_step_failed(code, t, h)
+        return self._python_step(t, h)
+
+    def _python_step(self, t: float, h: float) -> int:
         try:
             self._advance(t, h)
         except ValueError as exc:
             self._problem = f"at t = {t!r}: {exc}"
             return FMI2_ERROR
         return 0
+
+    def native_calls(self) -> CompiledCalls | None:
+        """The law's compiled step for the master's native loop (None: stepped in Python)."""
+        return None if self._step is None else self._compiled_calls(self._step)
+
+    def native_step_failed(self, code: int, t: float, h: float) -> int:
+        """A step the compiled law left to Python (nothing changed): the Python step; an
+        internal failure raises."""
+        self._step.check(code, t, h)
+        return self._python_step(t, h)
 
     def _save(self):
         return self.law.get_state()
@@ -229,6 +282,7 @@ class ControllerSlave(_LawSlave):
         super().__init__(name, [strain(s, a) for s, a in pairs],
                          [actuator_force(s, a) for s, a in pairs])
         self.law = StrainController(params, len(sites))
+        self._step = self.law.compiled_step(self.u, self.y)
 
     def instantiate(self, start_time: float, stop_time: float | None) -> None:
         """Zero force (the lag state) at the start."""
@@ -253,6 +307,7 @@ class TopDriveSlave(_LawSlave):
     def __init__(self, name: str, params: TopDriveControllerParams):
         super().__init__(name, ["top_rotary_speed", "top_torque"], [TOP_DRIVE_TORQUE])
         self.law = TopDriveController(params)
+        self._step = self.law.compiled_step(self.u, self.y)
 
     def instantiate(self, start_time: float, stop_time: float | None) -> None:
         """Zero integral and torque at the start."""
