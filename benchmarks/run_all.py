@@ -296,13 +296,15 @@ def _fmu_and_master_sections(quick: bool) -> list[str]:
     red = _script(["benchmarks/bench_reduced.py", "--stop-time", "3" if quick else "10"], 900)
     fld = _script(["benchmarks/bench_field.py", *(["--quick"] if quick else [])], 1800)
     rms = "" if quick else _script(["benchmarks/bench_rms_sensitivity.py", "--members", "160",
-                                    "--divisors", "1,2", "--no-step-table"], 3600)
+                                    "--divisors", "1,2", "--no-step-table",
+                                    "--fixed", "kutta3@0.00025"], 5400)
     ctl = _script(["benchmarks/bench_controller_fmus.py", "--steps", steps, "--stop-time",
                    "1" if quick else "2"], 900)
+    fixed = _script(["benchmarks/bench_fixed_step.py", *(["--quick"] if quick else [])], 1800)
     ext = _script(["benchmarks/bench_extensions.py", "--skip", "off", *(["--quick"] if quick
                                                                         else [])], 1800)
     ext = "\n## Physics extensions (benchmarks/bench_extensions.py)\n\n" + ext
-    return [red, fld, rms, ext, fm, fb, "",
+    return [red, fld, rms, fixed, ext, fm, fb, "",
             "## Master overhead on tiny FMUs (benchmarks/bench_master_overhead.py)", "",
             f"Command: `python benchmarks/bench_master_overhead.py --steps {steps}` (target: "
             "our master within 1.3x of a hand-written raw fmpy loop).", "", *table, "", ctl]

@@ -50,7 +50,7 @@ def run_record(model, method, t0, h, n_out, max_dt, breakpoints, y, p, ip, fp, u
             advance_rk4_span(model, t, t + h, max_dt, breakpoints, y, p, ip, fp, u, wR, wF, wM,
                              k1, k2, k3, k4, yt)
         code, i, val = check_state(full3d, n, y, limits[0], limits[1], limits[2], limits[3],
-                                   strain_factor, wR)
+                                   strain_factor, wR, p, ip)
         if full3d:
             outputs3d(t + h, y, p, ip, fp, u, wR, zbit_ref, out)
         else:
