@@ -101,7 +101,8 @@ B_K1 = 23  # curvature of the hole axis at the body, local x component [1/m]
 B_K2 = 24  # ... local y component [1/m]
 B_P = 25  # 3 values: reference point of the body's local frame (inertial) [m]
 B_R = 28  # 9 values: reference frame of the body (local -> inertial, row-major) [1]
-NB = 40  # (37 used; a multiple of 8)
+J_SF = 37  # outer-wall strain per radian of relative bending angle at the joint [1/m]
+NB = 40  # (38 used; a multiple of 8)
 
 # columns of the contact-point table in ``fp`` (after the load table; one row a point)
 CP_BODY = 0  # 0-based body index

@@ -541,6 +541,10 @@ class DrillstringModel:
                 p[o + lay.J_LEN] = tab.joint_length[k]
                 p[o + lay.J_RG] = act.gauge_radius or ro[k]
                 p[o + lay.J_ARM] = 2.0 * (act.radius or ro[k])
+                # the divergence guard's strain per radian: outer radius (the thinner body's)
+                # over the joint's length (the uniform pipe: the pipe's radius / dx)
+                p[o + lay.J_SF] = (0.5 * prm.pipe.outer_diameter / self.derived.dx if uniform
+                                   else min(ro[k], ro[k + 1]) / tab.joint_length[k])
         if self.lay is not None:
             lz = self.lay
             p[lay.TD_R: lay.TD_R + 9] = lz.top_frame.ravel()
@@ -847,16 +851,6 @@ class DrillstringModel:
         ncp = int(self.ip[kern.IP_NCP])
         o = self.ip[kern.IP_NS] + lay.NLD * self.ip[kern.IP_NL]
         return self.fp[o + lay.CP_BODY: o + lay.NCP * ncp: lay.NCP].astype(np.int64)
-
-    @property
-    def strain_factor(self) -> float:
-        """Largest gauge radius / joint length [1/m] of the string: turns the relative bending
-        angle across a joint into the outer-wall strain (the divergence guard's bound)."""
-        if self.params.uniform:
-            return 0.5 * self.params.pipe.outer_diameter / self.derived.dx
-        tab = self.bodies
-        ro = np.minimum(tab.outer_radius[:-1], tab.outer_radius[1:])
-        return float(np.max(ro / tab.joint_length))
 
     def stable_step(self) -> float:
         """Largest stable RK4 step [s] for this model (from :attr:`max_eigenvalue`)."""
