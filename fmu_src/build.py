@@ -326,6 +326,14 @@ REGISTRY: tuple[FmuRecipe, ...] = (
                  "plant/closed_loop.py"),
     ),
     FmuRecipe(
+        name="StateSpaceController",
+        script="fmu_src/state_space_controller_fmu.py",
+        vendored=(("controller", "_dcs_controller_0_1_0"),
+                  ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
+        resource_files=(("fmu_src/state_space_default.json", "state_space.json"),),
+        requires=("numpy", "numba"),
+    ),
+    FmuRecipe(
         name="TopDriveController",
         script="fmu_src/top_drive_controller_fmu.py",
         vendored=(("controller", "_dcs_controller_0_1_0"),
