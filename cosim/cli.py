@@ -4,7 +4,8 @@ Sub-commands: ``modes`` (modal analysis next to the analytic values and the pape
 ``scenes`` (list the shipped scenes), ``build`` (write the FMUs), ``run`` (co-simulate a scene
 or an SSP file: results.csv, summary.json, plots), ``ssp`` (write a scene's system as an SSP
 file), ``sweep`` (gain x delay x step stability/benefit table), ``calibrate`` (the paper's
-open quantities calibrated against its figures, and its experiments).
+open quantities calibrated against its figures, and its experiments), ``design`` (an LQG or
+Smith-predictor lateral controller designed on the linearized plant, written into a scene).
 Bad input ends with a one-line message on stderr and exit
 code 2, never a traceback (a plant/controller pair that does not fit: one line per problem);
 a run that diverges ends with a one-line report and exit code 1. Warnings of the project
@@ -210,6 +211,29 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_design(args: argparse.Namespace) -> int:
+    from drillcosim.cosim.study.control_design import LqgWeights, design_controller, write_scene
+
+    joints = None
+    if args.joints:
+        try:
+            joints = [int(j) for j in args.joints.split(",")]
+        except ValueError:
+            raise UsageError(f"--joints {args.joints!r}: comma-separated joint numbers") from None
+    options = {"force_limit": args.force_limit}
+    if args.kind == "lqg":
+        options["weights"] = LqgWeights(args.deflection_scale, args.force_scale,
+                                        args.force_noise, args.strain_noise)
+    else:
+        options["gain"] = args.gain
+    d = design_controller(args.kind, args.scene, per_span=args.sites, joints=joints,
+                          delay=args.delay, step=args.step, **options)
+    scene, matrices = write_scene(d, args.out)
+    print(d.summary())
+    print(f"wrote {scene} and {matrices}")
+    return 0
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     import importlib.util
     from pathlib import Path
@@ -343,6 +367,32 @@ def _parser() -> argparse.ArgumentParser:
                    help="report: folder of the PNGs and CSVs (default OUT/report)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_calibrate)
+    p = sub.add_parser("design", help="design a lateral controller (LQG, or the Smith predictor "
+                       "around the P law) on a scene's linearized plant; write it into a scene")
+    p.add_argument("kind", choices=("lqg", "predictor"))
+    p.add_argument("scene", help="scene name or TOML file designed on (and extended)")
+    p.add_argument("--sites", type=int, metavar="N", help="actuator sites per span, evenly "
+                   "spread (default: the scene's joints)")
+    p.add_argument("--joints", metavar="J,J,...", help="explicit actuator joints")
+    p.add_argument("--delay", type=float, metavar="S", help="actuator delay designed for [s] "
+                   "(default: the scene's)")
+    p.add_argument("--step", type=float, metavar="S", help="communication step = sample "
+                   "period [s] (default: the scene's)")
+    p.add_argument("--gain", type=float, default=1e8, metavar="K",
+                   help="predictor: P-law gain [N/strain] (default 1e8)")
+    p.add_argument("--deflection-scale", type=float, default=1e-3, metavar="M",
+                   help="lqg: lateral displacement scale of the cost [m] (default 1e-3)")
+    p.add_argument("--force-scale", type=float, default=1e4, metavar="N",
+                   help="lqg: force scale of the cost [N] (default 1e4)")
+    p.add_argument("--force-noise", type=float, default=1.0, metavar="N",
+                   help="lqg: std of the unknown lateral force per body and axis [N] (default 1)")
+    p.add_argument("--strain-noise", type=float, default=1e-7, metavar="E",
+                   help="lqg: std of the strain noise [1] (default 1e-7)")
+    p.add_argument("--force-limit", type=float, default=math.inf, metavar="N",
+                   help="saturation |force| <= N [N] (default: none)")
+    p.add_argument("--out", required=True, metavar="SCENE.toml",
+                   help="the scene to write; the matrices go to SCENE.json beside it")
+    p.set_defaults(func=_cmd_design)
     return ap
 
 

@@ -1,0 +1,166 @@
+"""The linearized, sampled plant a controller is designed on and judged against.
+
+The stability module's model (:mod:`cosim.study.stability`) with two channels more: the
+plant is :func:`plant.linearize.linearize`'s (top-drive frame, where the loop is linear
+time-invariant) and is reduced by :func:`cosim.study.stability.reduce_loop` to the modes the
+loop and the two extra channels see; it is sampled exactly (ZOH) over the communication step
+by :func:`cosim.study.stability.discretize` and closed with the master's loop timing
+(:func:`cosim.study.stability.loop_weights`). The extra channels:
+
+* ``Cd`` (performance): the lateral displacements X', Y' of every body [m] (top-drive frame);
+* ``Bw`` (disturbance): a lateral force on every body [N], in X' and Y' (the unknown loads:
+  unbalance, wall contact, the bit), entering the body's velocity as F / m.
+
+Signals (as the plant FMU names them): inputs ``actuator<s>_force_<C|E>`` [N], outputs
+``strain<s>_<C|E>`` [1], site by site, gauge C then E.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from drillcosim.cosim.study.stability import discretize, loop_weights, reduce_loop
+
+__all__ = ["LoopPlant", "augment", "site_signals"]
+
+
+def site_signals(n_sites: int) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(strains, forces): the plant's output and input names of ``n_sites`` sites."""
+    ch = [(s, a) for s in range(1, n_sites + 1) for a in ("C", "E")]
+    return (tuple(f"strain{s}_{a}" for s, a in ch),
+            tuple(f"actuator{s}_force_{a}" for s, a in ch))
+
+
+@dataclass
+class LoopPlant:
+    """Continuous reduced plant ``dx/dt = A x + B u + Bw w``, strains ``s = C x``, lateral
+    displacements ``d = Cd x``, with the loop timing of a scene.
+
+    Attributes
+    ----------
+    A : numpy.ndarray, shape (N, N)  [1/s]
+    B : numpy.ndarray, shape (N, M)  actuator forces [N] -> state rates
+    C : numpy.ndarray, shape (M, N)  strains [1]
+    Bw : numpy.ndarray, shape (N, 2 n)  lateral body forces [N] -> state rates
+    Cd : numpy.ndarray, shape (2 n, N)  lateral displacements [m]
+    dropped : numpy.ndarray  continuous eigenvalues [1/s] of the modes no channel sees
+    joints : tuple of int  the actuator joints (sites top to bottom)
+    algorithm, order, coupling, sensor_delay : the scene's loop timing (``[cosim]``)
+    source : str  the scene it came from
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    Bw: np.ndarray
+    Cd: np.ndarray
+    dropped: np.ndarray
+    joints: tuple[int, ...]
+    algorithm: str = "gauss_seidel"
+    order: tuple[str, ...] = ("plant", "controller")
+    coupling: str = "zoh"
+    sensor_delay: float = 0.0
+    source: str = ""
+    _cache: dict[tuple[float, bool], tuple[np.ndarray, np.ndarray]] = field(
+        default_factory=dict, repr=False)
+
+    @classmethod
+    def from_scene(cls, scene: Any, joints: Sequence[int] | None = None,
+                   overrides: Mapping[str, Any] | None = None) -> LoopPlant:
+        """Linearize a scene's plant (name, path or loaded :class:`plant.scene.Scene`).
+
+        Parameters
+        ----------
+        scene : str or Scene
+        joints : sequence of int, optional
+            Actuator joints (default: the scene's ``[actuators] joints``).
+        overrides : mapping, optional
+            Nested overrides for :func:`plant.scene.load_scene`.
+        """
+        from drillcosim.cosim.scenario.scene_system import cosim_settings
+        from drillcosim.plant.linearize import linearize
+        from drillcosim.plant.scene import load_scene
+
+        if hasattr(scene, "plant"):
+            if joints is not None or overrides:
+                raise ValueError("joints/overrides need a scene name or path, not a loaded Scene")
+            sc = scene
+        else:
+            ov = {k: dict(v) if isinstance(v, Mapping) else v
+                  for k, v in (overrides or {}).items()}
+            if joints is not None:
+                ov.setdefault("actuators", {})["joints"] = [int(j) for j in joints]
+            sc = load_scene(scene, overrides=ov or None)
+        if sc.model != "full3d" and not sc.plant.actuator_joints:
+            raise ValueError(f"scene {sc.name!r}: a lateral controller needs the full3d model "
+                             "with actuator sites")
+        st = cosim_settings(sc)
+        lin = linearize(sc.plant, "full3d")
+        model = lin.model
+        n, N = model.n, lin.A.shape[0]
+        Cd = np.zeros((2 * n, N))
+        Bw = np.zeros((N, 2 * n))
+        for i in range(n):
+            for k in (0, 1):
+                Cd[2 * i + k, 3 * i + k] = 1.0
+                Bw[6 * n + 3 * i + k, 2 * i + k] = 1.0 / model.derived.mass
+        m, p = lin.B.shape[1], lin.C.shape[0]
+        Ar, Bx, Cx, dropped = reduce_loop(lin.A, np.hstack([lin.B, Bw]),
+                                          np.vstack([lin.C, Cd]))
+        return cls(Ar, Bx[:, :m], Cx[:p], Bx[:, m:], Cx[p:], dropped,
+                   tuple(sc.plant.actuator_joints), st.algorithm, tuple(st.order),
+                   st.coupling, st.sensor_delay, str(sc.source))
+
+    @property
+    def n_sites(self) -> int:
+        return self.B.shape[1] // 2
+
+    @property
+    def signals(self) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """(strain names, force names), the controller's inputs and outputs."""
+        return site_signals(self.n_sites)
+
+    def discrete(self, step: float, disturbance: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """``(Ad, Bd)`` over one step [s] (``Bd`` of the disturbance with ``disturbance``)."""
+        key = (float(step), disturbance)
+        if key not in self._cache:
+            self._cache[key] = discretize(self.A, self.Bw if disturbance else self.B, step)
+        return self._cache[key]
+
+    def weights(self, delay: float, step: float) -> dict[int, float]:
+        """``W_l`` of ``u_k = sum_l W_l G_{k-l}`` for actuator delay ``delay`` [s]."""
+        return loop_weights(delay / step, self.sensor_delay / step, self.algorithm, self.order,
+                            self.coupling)
+
+
+def augment(Ad: np.ndarray, Bd: np.ndarray, weights: Mapping[int, float]
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """The sampled plant with the controller outputs' delay line in the state.
+
+    ``z_k = [x_k, G_{k-1}, ..., G_{k-D}]``, input ``G_k`` (the controller's output of sample
+    k), ``x_{k+1} = Ad x_k + Bd sum_l W_l G_{k-l}``; as
+    :func:`cosim.study.stability.closed_loop_matrix` builds it for the P law.
+
+    Returns
+    -------
+    Az : numpy.ndarray, shape (N + D M, N + D M)
+    Bz : numpy.ndarray, shape (N + D M, M)
+    """
+    n, m = Bd.shape
+    d = max([j for j, w in weights.items() if w != 0.0] + [0])
+    size = n + d * m
+    Az = np.zeros((size, size))
+    Bz = np.zeros((size, m))
+    Az[:n, :n] = Ad
+    Bz[:n] = weights.get(0, 0.0) * Bd
+    for j in range(1, d + 1):
+        Az[:n, n + (j - 1) * m:n + j * m] = weights.get(j, 0.0) * Bd
+    if d:
+        Bz[n:n + m] = np.eye(m)
+        for j in range(1, d):
+            Az[n + j * m:n + (j + 1) * m, n + (j - 1) * m:n + j * m] = np.eye(m)
+    return Az, Bz
