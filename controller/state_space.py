@@ -54,6 +54,7 @@ HEADER = 6
 STEP_OK = 0
 STEP_BAD_INPUT = 1      # a non-finite input
 STEP_BAD_STEP = 2       # h not a non-negative finite integer multiple of the sample period
+_MAX_FLOAT = 1.7976931348623157e308
 #: Relative tolerance of "h is an integer multiple of the sample period".
 MULTIPLE_RTOL = 1e-9
 
@@ -395,7 +396,7 @@ def advance(ws: np.ndarray, h: float) -> int:
     ihi = ilo + p
     for j in range(m):
         v = ws[iy + j]
-        if not (v - v == 0.0):      # NaN or +-inf
+        if not abs(v) <= _MAX_FLOAT:     # NaN or +-inf
             return STEP_BAD_INPUT
     for _ in range(k):
         for i in range(p):

@@ -100,7 +100,7 @@ def _compiled_step() -> Any:
 
     @cfunc(types.int32(types.voidptr, types.float64, types.float64), nopython=True)
     def step(context, t, h):  # pragma: no cover - runs compiled
-        if not (t - t == 0.0):
+        if not abs(t) <= 1.7976931348623157e308:     # NaN or +-inf
             return 3
         size = carray(context, HEADER, dtype=np.float64)[0]
         return kernel(carray(context, int(size), dtype=np.float64), h)
