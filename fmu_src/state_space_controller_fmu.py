@@ -160,6 +160,9 @@ class StateSpaceController(LawSlave):
         except ValueError as exc:
             self._load_error = str(exc)
             self._error(f"fmi2Instantiate: {self._load_error}")
+            # the wrapper takes no status from construction (the instance is made): the line
+            # above is the message, fmi2ExitInitializationMode and every doStep the fmi2Error
+            self._fmi2_status = None
         if self._base is not None:
             self._law = StateSpaceLaw(self._base)
             ws = self._law.workspace
