@@ -20,9 +20,9 @@ output after a communication step ``[t, t + h]`` is computed from the inputs set
 The workspace
 -------------
 The numbers of a controller live in one float64 array (:class:`Workspace`), so that a compiled
-step can take a single pointer (``fmu_src/wrapper``, "Compiled step"): a header, the inputs,
-the outputs, the state, a scratch state, ``A``, ``B``, ``C``, ``D`` (row-major), the lower and
-the upper limits. :func:`advance` is the step on that array in the subset of Python that numba
+step can take a single pointer (``fmu_src/wrapper``, "Compiled step"): a header, the state and
+the inputs side by side, the outputs, a scratch vector, the matrix ``[[C, D], [A, B]]``
+(row-major), the lower and the upper limits. :func:`advance` is the step on that array in the subset of Python that numba
 compiles in nopython mode (loops, no allocation, no exceptions: it returns a status code);
 :meth:`StateSpaceController.step` is the numpy reference of the same law.
 
@@ -322,33 +322,41 @@ def load_state_space(path: str | Path) -> StateSpaceParams:
 class Workspace:
     """The numbers of a controller in one float64 array (see the module docstring).
 
+    Layout after the header: the state ``x`` (n) and the inputs ``y`` (m) side by side (the
+    vector ``w = [x; y]``), the outputs (p), a scratch vector (p + n), the matrix
+    ``M = [[C, D], [A, B]]`` (row-major, (p + n) x (n + m)), the lower and upper limits (p):
+    one sample is ``v = M w``, ``u = clip(v[:p])``, ``x = v[p:]``.
+
     Attributes
     ----------
     array : numpy.ndarray, shape (size,)
         The whole workspace; everything below is a view of it.
+    state : numpy.ndarray, shape (n,)
     inputs : numpy.ndarray, shape (m,)
     outputs : numpy.ndarray, shape (p,)
-    state : numpy.ndarray, shape (n,)
+    matrix : numpy.ndarray, shape (p + n, n + m)
     A, B, C, D : numpy.ndarray
-        Row-major views, shapes (n, n), (n, m), (p, n), (p, m).
+        Views of ``matrix``, shapes (n, n), (n, m), (p, n), (p, m).
     lower, upper : numpy.ndarray, shape (p,)
     """
 
     def __init__(self, params: StateSpaceParams) -> None:
         n, m, p = params.n_states, len(params.inputs), len(params.outputs)
-        sizes = {"inputs": m, "outputs": p, "state": n, "scratch": n, "A": n * n, "B": n * m,
-                 "C": p * n, "D": p * m, "lower": p, "upper": p}
+        sizes = {"state": n, "inputs": m, "outputs": p, "scratch": p + n,
+                 "matrix": (p + n) * (n + m), "lower": p, "upper": p}
         total = HEADER + sum(sizes.values())
         self.array = np.zeros(total)
         self.array[[_SIZE, _NX, _NY, _NU, _TS]] = (total, n, m, p, params.sample_period)
-        shapes = {"A": (n, n), "B": (n, m), "C": (p, n), "D": (p, m)}
         at = HEADER
         for name, size in sizes.items():
             view = self.array[at:at + size]
-            setattr(self, name, view.reshape(shapes[name]) if name in shapes else view)
+            setattr(self, name, view.reshape(p + n, n + m) if name == "matrix" else view)
             at += size
+        mat = self.matrix
+        self.C, self.D, self.A, self.B = mat[:p, :n], mat[:p, n:], mat[p:, :n], mat[p:, n:]
         for name in ("A", "B", "C", "D", "lower", "upper"):
             getattr(self, name)[...] = getattr(params, name)
+        self.vector = self.array[HEADER:HEADER + n + m]   # w = [x; y]
 
     @property
     def samples(self) -> int:
@@ -384,39 +392,30 @@ def advance(ws: np.ndarray, h: float) -> int:
     k = int(k_float + 0.5)
     if abs(k_float - k) > MULTIPLE_RTOL * max(1.0, k_float):
         return STEP_BAD_STEP
-    iy = HEADER
+    iw = HEADER                 # w = [x; y]
+    iy = iw + n
     iu = iy + m
-    ix = iu + p
-    iz = ix + n
-    ia = iz + n
-    ib = ia + n * n
-    ic = ib + n * m
-    idd = ic + p * n
-    ilo = idd + p * m
+    iv = iu + p
+    im = iv + p + n
+    ilo = im + (p + n) * (n + m)
     ihi = ilo + p
+    cols = n + m
     for j in range(m):
-        v = ws[iy + j]
-        if not abs(v) <= _MAX_FLOAT:     # NaN or +-inf
+        if not abs(ws[iy + j]) <= _MAX_FLOAT:     # NaN or +-inf
             return STEP_BAD_INPUT
     for _ in range(k):
-        for i in range(p):
+        for r in range(p + n):                      # v = M w
             acc = 0.0
-            for j in range(n):
-                acc += ws[ic + i * n + j] * ws[ix + j]
-            for j in range(m):
-                acc += ws[idd + i * m + j] * ws[iy + j]
+            for j in range(cols):
+                acc += ws[im + r * cols + j] * ws[iw + j]
+            ws[iv + r] = acc
+        for i in range(p):
             lo = ws[ilo + i]
             hi = ws[ihi + i]
-            ws[iu + i] = lo if acc < lo else (hi if acc > hi else acc)
+            v = ws[iv + i]
+            ws[iu + i] = lo if v < lo else (hi if v > hi else v)
         for i in range(n):
-            acc = 0.0
-            for j in range(n):
-                acc += ws[ia + i * n + j] * ws[ix + j]
-            for j in range(m):
-                acc += ws[ib + i * m + j] * ws[iy + j]
-            ws[iz + i] = acc
-        for i in range(n):
-            ws[ix + i] = ws[iz + i]
+            ws[iw + i] = ws[iv + p + i]
         ws[_COUNT] += 1.0
     return STEP_OK
 
@@ -524,8 +523,10 @@ class StateSpaceController:
             names = ", ".join(self._params.input_names[i] for i in bad)
             raise ValueError(f"non-finite input(s) {names}: {yy[bad].tolist()}")
         ws.inputs[:] = yy
+        p = ws.outputs.size
         for _ in range(k):
-            ws.outputs[:] = np.clip(ws.C @ ws.state + ws.D @ ws.inputs, ws.lower, ws.upper)
-            ws.state[:] = ws.A @ ws.state + ws.B @ ws.inputs
+            v = ws.matrix @ ws.vector
+            ws.outputs[:] = np.clip(v[:p], ws.lower, ws.upper)
+            ws.state[:] = v[p:]
             ws.array[_COUNT] += 1.0
         return ws.outputs.copy()

@@ -97,8 +97,10 @@ def test_bad_step_or_input_changes_nothing():
     law.workspace.inputs[:] = 1.0
     assert ss.advance(law.workspace.array, 0.7 * TS) == ss.STEP_BAD_STEP
     assert ss.advance(law.workspace.array, math.nan) == ss.STEP_BAD_STEP
-    np.testing.assert_array_equal(law.workspace.array[ss.HEADER + 4:],
-                                  before[ss.HEADER + 4:])
+    ws = law.workspace
+    n = ws.state.size
+    np.testing.assert_array_equal(ws.array[:ss.HEADER + n], before[:ss.HEADER + n])
+    np.testing.assert_array_equal(ws.array[ss.HEADER + n + 4:], before[ss.HEADER + n + 4:])
 
 
 @pytest.mark.parametrize("change, message", [
