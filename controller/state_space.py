@@ -23,8 +23,8 @@ The numbers of a controller live in one float64 array (:class:`Workspace`), so t
 step can take a single pointer (``fmu_src/wrapper``, "Compiled step"): a header, the state and
 the inputs side by side, the outputs, a scratch vector, the matrix ``[[C, D], [A, B]]``
 (row-major), the lower and the upper limits. :func:`advance` is the step on that array in the
-subset of Python that numba compiles in nopython mode (loops, no allocation, no exceptions: it returns a status code);
-:meth:`StateSpaceController.step` is the numpy reference of the same law.
+subset of Python that numba compiles in nopython mode (loops, no allocation, no exceptions: it
+returns a status code); :meth:`StateSpaceController.step` is the numpy reference of the same law.
 
 Only numpy and the standard library are imported (the package is vendored into FMUs).
 """
