@@ -23,8 +23,9 @@ The numbers of a controller live in one float64 array (:class:`Workspace`), so t
 step can take a single pointer (``fmu_src/wrapper``, "Compiled step"): a header, the state and
 the inputs side by side, the outputs, a scratch vector, the matrix ``[[C, D], [A, B]]``
 (row-major), the lower and the upper limits. :func:`advance` is the step on that array in the
-subset of Python that numba compiles in nopython mode (loops, no allocation, no exceptions: it
-returns a status code); :meth:`StateSpaceController.step` is the numpy reference of the same law.
+subset of Python that numba compiles in nopython mode (views, ``np.dot`` into a preallocated
+vector, loops; no allocation, no exceptions: it returns a status code);
+:meth:`StateSpaceController.step` is the numpy reference of the same law.
 
 Only numpy and the standard library are imported (the package is vendored into FMUs).
 """
@@ -403,19 +404,17 @@ def advance(ws: np.ndarray, h: float) -> int:
     for j in range(m):
         if not abs(ws[iy + j]) <= _MAX_FLOAT:     # NaN or +-inf
             return STEP_BAD_INPUT
+    mat = ws[im:im + (p + n) * cols].reshape((p + n, cols))
+    w = ws[iw:iw + cols]
+    v = ws[iv:iv + p + n]
     for _ in range(k):
-        for r in range(p + n):                      # v = M w
-            acc = 0.0
-            for j in range(cols):
-                acc += ws[im + r * cols + j] * ws[iw + j]
-            ws[iv + r] = acc
+        np.dot(mat, w, v)                           # v = M w (BLAS, no allocation)
         for i in range(p):
             lo = ws[ilo + i]
             hi = ws[ihi + i]
-            v = ws[iv + i]
-            ws[iu + i] = lo if v < lo else (hi if v > hi else v)
+            ws[iu + i] = lo if v[i] < lo else (hi if v[i] > hi else v[i])
         for i in range(n):
-            ws[iw + i] = ws[iv + p + i]
+            ws[iw + i] = v[p + i]
         ws[_COUNT] += 1.0
     return STEP_OK
 
@@ -525,7 +524,7 @@ class StateSpaceController:
         ws.inputs[:] = yy
         p = ws.outputs.size
         for _ in range(k):
-            v = ws.matrix @ ws.vector
+            v = ws.matrix @ ws.vector           # as advance: one matrix-vector product
             ws.outputs[:] = np.clip(v[:p], ws.lower, ws.upper)
             ws.state[:] = v[p:]
             ws.array[_COUNT] += 1.0
