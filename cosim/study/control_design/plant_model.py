@@ -95,9 +95,10 @@ class LoopPlant:
             if joints is not None:
                 ov.setdefault("actuators", {})["joints"] = [int(j) for j in joints]
             sc = load_scene(scene, overrides=ov or None)
-        if sc.model != "full3d" and not sc.plant.actuator_joints:
-            raise ValueError(f"scene {sc.name!r}: a lateral controller needs the full3d model "
-                             "with actuator sites")
+        if sc.model != "full3d" or not sc.plant.actuator_joints:
+            raise ValueError(f"scene {sc.name!r} (model {sc.model}, actuator joints "
+                             f"{list(sc.plant.actuator_joints)}): a lateral controller needs the "
+                             "full3d model with actuator sites")
         st = cosim_settings(sc)
         lin = linearize(sc.plant, "full3d")
         model = lin.model
