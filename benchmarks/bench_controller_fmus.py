@@ -10,7 +10,9 @@
    compared (they must be equal bit for bit).
 
 ``StrainController.fmu`` is the pythonfmu adapter run by our native C wrapper (an embedded
-Python interpreter); ``StrainControllerC.fmu`` is the same law in C99. Both are built fresh
+Python interpreter), whose doStep calls the law's compiled step without entering Python (and,
+as a third configuration, the same FMU with it switched off, ``DRILLCOSIM_COMPILED_STEP=0``:
+``do_step`` in Python); ``StrainControllerC.fmu`` is the same law in C99. Both are built fresh
 into a temporary folder. Configurations run ``--repeat`` times interleaved; the best is
 reported (shared, noisy machine). Prints a markdown section (for BENCHMARKS.md).
 """
@@ -36,13 +38,26 @@ from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
 from drillcosim.cosim.master.master import Master  # noqa: E402
-from drillcosim.cosim.scenario.scene_system import scene_system  # noqa: E402
+from drillcosim.cosim.scenario.build import build_system  # noqa: E402
+from drillcosim.cosim.scenario.config import load_config  # noqa: E402
 from drillcosim.fmu_src.build import REGISTRY, build_one  # noqa: E402
 from drillcosim.fmu_src.build_c import build_c_controller  # noqa: E402
-from drillcosim.plant.scene import load_scene  # noqa: E402
 
 INPUTS = ["strain1_C", "strain1_E", "strain2_C", "strain2_E"]
 OUTPUTS = ["actuator1_force_C", "actuator1_force_E", "actuator2_force_C", "actuator2_force_E"]
+
+
+class _Compiled:
+    """``DRILLCOSIM_COMPILED_STEP`` set for a block (the FMUs read it at initialization)."""
+
+    def __init__(self, on: bool) -> None:
+        self.on = on
+
+    def __enter__(self) -> None:
+        os.environ["DRILLCOSIM_COMPILED_STEP"] = "1" if self.on else "0"
+
+    def __exit__(self, *exc) -> None:
+        os.environ.pop("DRILLCOSIM_COMPILED_STEP", None)
 
 
 class ControllerLoop:
@@ -91,7 +106,8 @@ class ControllerLoop:
 
 def closed_loop(plant: Path, controller: Path, stop: float) -> tuple[float, np.ndarray, int]:
     """(wall [s], structured result, base steps) of paper_closed_loop through our master."""
-    ss = scene_system(load_scene("paper_closed_loop"), plant_fmu=plant, controller_fmu=controller)
+    config = load_config("paper_closed_loop", plant_fmu=plant, controller_fmu=controller)
+    ss = build_system(config, "fmu")
     res = Master(ss.system).simulate(stop, ss.outputs)
     return res.wall_time, res.data, round(stop / ss.system.base_step)
 
@@ -105,11 +121,18 @@ def main(argv: list[str] | None = None) -> int:
     work = Path(tempfile.mkdtemp(prefix="bench_ctl_"))
     try:
         spec = {s.name: s for s in REGISTRY}
-        fmus = {"Python (StrainController.fmu)": build_one(spec["StrainController"], work),
-                "C99 (StrainControllerC.fmu)": build_c_controller(work)}
+        py_fmu = build_one(spec["StrainController"], work)
+        fmus = {"Python (StrainController.fmu)": py_fmu,
+                "C99 (StrainControllerC.fmu)": build_c_controller(work),
+                "Python, compiled steps off (DRILLCOSIM_COMPILED_STEP=0; in the closed loop the "
+                "plant's too)": py_fmu}
+        compiled = {label: "off" not in label for label in fmus}
         plant = build_one(spec["DrillstringPlant"], work)
         strains = np.random.default_rng(1).normal(scale=3e-6, size=(args.steps, 4))
-        loops = {label: ControllerLoop(path) for label, path in fmus.items()}
+        loops = {}
+        for label, path in fmus.items():
+            with _Compiled(compiled[label]):
+                loops[label] = ControllerLoop(path)
         for loop in loops.values():  # warm-up (first calls, caches)
             loop.run(strains[:500], 1e-3)
         alone: dict[str, float] = {label: np.inf for label in fmus}
@@ -127,10 +150,11 @@ def main(argv: list[str] | None = None) -> int:
         n_steps = 0
         for _ in range(args.repeat):
             for label, path in fmus.items():
-                wall, data[label], n_steps = closed_loop(plant, path, args.stop_time)
+                with _Compiled(compiled[label]):
+                    wall, data[label], n_steps = closed_loop(plant, path, args.stop_time)
                 loop_wall[label] = min(loop_wall[label], wall)
-        py, c = data.values()
-        same_loop = all(np.array_equal(py[n], c[n]) for n in py.dtype.names)
+        py, *others = data.values()
+        same_loop = all(np.array_equal(py[n], o[n]) for o in others for n in py.dtype.names)
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
@@ -152,14 +176,17 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"| {label} | {1e6 * alone[label] / args.steps:.2f} | "
                      f"{1e6 * loop_wall[label] / n_steps:.1f} |")
     ratio = alone[labels[0]] / alone[labels[1]]
-    saved = 1e6 * (loop_wall[labels[0]] - loop_wall[labels[1]]) / n_steps
+    ratio_off = alone[labels[2]] / alone[labels[1]]
+    loop_ratio = loop_wall[labels[0]] / loop_wall[labels[1]]
     lines += [
         "",
-        f"The C controller costs 1/{ratio:.0f} of the Python one per step alone "
-        f"({args.steps} steps of 1 ms, lag 5 ms); in paper_closed_loop ({args.stop_time:g} s, "
-        f"{n_steps} steps of 0.25 ms, Gauss-Seidel) it saves {saved:.1f} us per base step, the "
-        f"plant FMU dominating the rest. Same forces alone: {'yes' if same_alone else 'NO'}; "
-        f"closed-loop results equal bit for bit: {'yes' if same_loop else 'NO'}.",
+        f"Per step alone ({args.steps} steps of 1 ms, lag 5 ms) the Python controller FMU costs "
+        f"{ratio:.2f}x the C one with its compiled step ({ratio_off:.2f}x with it off); in "
+        f"paper_closed_loop ({args.stop_time:g} s, {n_steps} steps of 0.25 ms, Gauss-Seidel, "
+        f"the plant FMU included) the whole loop with the Python controller costs "
+        f"{loop_ratio:.2f}x the loop with the C one. Same forces alone: "
+        f"{'yes' if same_alone else 'NO'}; closed-loop results equal bit for bit: "
+        f"{'yes' if same_loop else 'NO'}.",
         "",
     ]
     print("\n".join(lines))

@@ -20,6 +20,11 @@ All in one process, candidates interleaved, best of ``--repeat`` (the machine is
 5. Cold start of the plant FMU in a fresh process after first use: instantiate (imports),
    initialize (model build, numba cache loads), first doStep, best of 3; next to the plant alone
    in a fresh process (imports, model + simulator, first step): the FMU layer's share.
+6. Per 0.25 ms step of ``paper_closed_loop``'s plant (best of ``--repeat`` x 4000 steps): the
+   integrator span alone (one compiled call for all steps: the physics floor), the compiled step
+   in process (ctypes), the plant FMU through raw ctypes calls (setReal of the inputs, doStep,
+   getReal of every output) with its compiled step and with it switched off
+   (``DRILLCOSIM_COMPILED_STEP=0``: ``do_step`` in Python).
 """
 
 from __future__ import annotations
@@ -41,7 +46,8 @@ from fmpy import extract, read_model_description, simulate_fmu  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
 from drillcosim.cosim.master.execution import Execution  # noqa: E402
-from drillcosim.cosim.scenario.scene_system import scene_system  # noqa: E402
+from drillcosim.cosim.scenario.build import build_system  # noqa: E402
+from drillcosim.cosim.scenario.config import load_config  # noqa: E402
 from drillcosim.fmu_src.build import build_all  # noqa: E402
 from drillcosim.plant.model import DrillstringModel  # noqa: E402
 from drillcosim.plant.scene import load_scene  # noqa: E402
@@ -158,9 +164,95 @@ def per_call(fmu: Path, n: int = 20000, repeat: int = 5) -> dict[str, float]:
     return out
 
 
+def _raw_loop(fmu: Path, compiled: bool, n: int, h: float) -> float:
+    """us per step of setReal(inputs) + doStep + getReal(outputs) through raw ctypes calls."""
+    import ctypes
+
+    os.environ["DRILLCOSIM_COMPILED_STEP"] = "1" if compiled else "0"
+    try:
+        md = read_model_description(str(fmu))
+        unzip = extract(str(fmu))
+        s = FMU2Slave(guid=md.guid, unzipDirectory=unzip,
+                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName="bench")
+        s.instantiate()
+        vr = {v.name: v.valueReference for v in md.modelVariables}
+        s.setString([vr["scene"]], ["paper_closed_loop"])
+        s.setupExperiment(startTime=0.0)
+        s.enterInitializationMode()
+        s.exitInitializationMode()
+    finally:
+        os.environ.pop("DRILLCOSIM_COMPILED_STEP", None)
+    outs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
+    ins = [v.valueReference for v in md.modelVariables if v.causality == "input"]
+    vo, yo = (ctypes.c_uint * len(outs))(*outs), (ctypes.c_double * len(outs))()
+    vi, ui = (ctypes.c_uint * len(ins))(*ins), (ctypes.c_double * len(ins))(*[10.0] * len(ins))
+    c, dll = s.component, s.dll
+    get, put, do_step = dll.fmi2GetReal, dll.fmi2SetReal, dll.fmi2DoStep
+    do_step(c, 0.0, h, 1)  # the first step of a step size picks the method (in Python)
+    t0 = time.perf_counter()
+    for k in range(1, n + 1):
+        put(c, vi, len(ins), ui)
+        do_step(c, k * h, h, 1)
+        get(c, vo, len(outs), yo)
+    wall = time.perf_counter() - t0
+    s.terminate()
+    s.freeInstance()
+    shutil.rmtree(unzip, ignore_errors=True)
+    return wall / n * 1e6
+
+
+def closed_loop_plant_step(fmu: Path, n: int = 4000, repeat: int = 5) -> dict[str, float]:
+    """us per 0.25 ms step of paper_closed_loop's plant, each layer best of ``repeat``."""
+    h = 2.5e-4
+    sc = load_scene("paper_closed_loop")
+    model = DrillstringModel(sc.plant, sc.model)
+    method = model.method_for_step(h)
+
+    def span(meth: str) -> float:
+        y = model.initial_state()
+        model.advance(0.0, y, 2, h, method=meth)  # compiled before timing
+        t0 = time.perf_counter()
+        model.advance(0.0, y, n, h, method=meth)
+        return (time.perf_counter() - t0) / n * 1e6
+
+    def span_per_call(meth: str) -> float:
+        y = model.initial_state()
+        u = np.full(model.n_inputs, 10.0)
+        t0 = time.perf_counter()
+        for k in range(n):
+            model.advance(k * h, y, 1, h, u, meth)
+        return (time.perf_counter() - t0) / n * 1e6
+
+    def in_process() -> float:
+        sim = PlantSimulator(DrillstringModel(sc.plant, sc.model))
+        inp, out = np.full(sim.u.size, 10.0), np.zeros(len(model.output_names))
+        step = sim.compiled_step(inp, np.arange(inp.size), out, np.arange(out.size))
+        step.step(0.0, h)
+        t0 = time.perf_counter()
+        for k in range(1, n + 1):
+            step.step(k * h, h)
+        return (time.perf_counter() - t0) / n * 1e6
+
+    parts = {f"integrator span alone ({method}, one compiled call for all steps)":
+             lambda: span(method),
+             "integrator span alone (rk4: the method before)": lambda: span("rk4"),
+             f"integrator span, one call per step from Python ({method}; numba's dispatch "
+             "included, as the span of the issue's 2.1x)": lambda: span_per_call(method),
+             "compiled step in process (ctypes; checks, outputs)": in_process,
+             "plant FMU, compiled step: setReal + doStep + getReal (raw ctypes)":
+             lambda: _raw_loop(fmu, True, n, h),
+             "plant FMU, Python do_step (DRILLCOSIM_COMPILED_STEP=0), same calls":
+             lambda: _raw_loop(fmu, False, n, h)}
+    best = dict.fromkeys(parts, float("inf"))
+    for _ in range(repeat):
+        for name, fn in parts.items():
+            best[name] = min(best[name], fn())
+    return best
+
+
 def closed_loop(fmu_dir: Path, stop: float) -> tuple[float, float]:
     """(wall, CPU) [s] of ``paper_closed_loop`` through Execution (0.25 ms, no recording)."""
-    ss = scene_system(load_scene("paper_closed_loop"), fmu_dir)
+    ss = build_system(load_config("paper_closed_loop"), "fmu", fmu_dir=fmu_dir)
     with Execution(ss.system) as ex:
         ex.initialize()
         return timed(ex.simulate_until, stop)
@@ -248,6 +340,7 @@ def main(argv: list[str] | None = None) -> int:
     cold = {f"plant FMU, {name}": cold_start(d / "DrillstringPlant.fmu")
             for name, d in dirs.items()}
     cold["plant alone (imports, model + simulator, first do_step)"] = cold_start(None)
+    step_parts = closed_loop_plant_step(plant, repeat=args.repeat)
     shutil.rmtree(fmu_dir, ignore_errors=True)
 
     n_cl = args.closed_stop_time / 2.5e-4
@@ -298,6 +391,11 @@ def main(argv: list[str] | None = None) -> int:
               "first doStep [s] | total [s] |", "|---|---:|---:|---:|---:|"]
     for name, (a, b, c) in cold.items():
         lines.append(f"| {name} | {a:.3f} | {b:.3f} | {c:.3f} | {a + b + c:.3f} |")
+    floor = next(iter(step_parts.values()))
+    lines += ["", f"Per 0.25 ms step of paper_closed_loop's plant (this build, best of "
+              f"{args.repeat} x 4000 steps):", "", "| layer | us per step | / the span alone |",
+              "|---|---:|---:|"]
+    lines += [f"| {k} | {v:.2f} | {v / floor:.2f} |" for k, v in step_parts.items()]
     text = "\n".join(lines) + "\n"
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(text)

@@ -30,7 +30,8 @@ from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
 from drillcosim.cosim.master.master import Master  # noqa: E402
-from drillcosim.cosim.scenario.scene_system import scene_system  # noqa: E402
+from drillcosim.cosim.scenario.build import build_system  # noqa: E402
+from drillcosim.cosim.scenario.config import load_config  # noqa: E402
 from drillcosim.fmu_src.build import build_all  # noqa: E402
 from drillcosim.plant.model import DrillstringModel  # noqa: E402
 from drillcosim.plant.scene import load_scene  # noqa: E402
@@ -83,8 +84,7 @@ def plant_fmu(fmu: Path, stop: float, h: float = 1e-3) -> tuple[float, float]:
 def master_run(scene: str, stop: float, fmu_dir: Path, overrides: dict | None = None) -> float:
     """Wall time [s] of the master's stepping loop (Master.simulate), 1 ms output interval."""
     ov = overrides or {}
-    sc = load_scene(scene, overrides=ov)
-    ss = scene_system(sc, fmu_dir)
+    ss = build_system(load_config(scene, ov), "fmu", fmu_dir=fmu_dir)
     outputs = ["plant.body11_radial_deflection", "plant.strain1_C", "controller.actuator1_force_C"]
     res = Master(ss.system).simulate(stop_time=stop, outputs=outputs, output_interval=1e-3)
     if res.diverged is not None:
@@ -96,9 +96,9 @@ MEM_SCRIPT = """
 import resource, sys
 sys.path.insert(0, {root!r})
 from drillcosim.cosim.master.master import Master
-from drillcosim.cosim.scenario.scene_system import scene_system
-from drillcosim.plant.scene import load_scene
-ss = scene_system(load_scene('paper_closed_loop'), {fmu_dir!r})
+from drillcosim.cosim.scenario.build import build_system
+from drillcosim.cosim.scenario.config import load_config
+ss = build_system(load_config('paper_closed_loop'), 'fmu', fmu_dir={fmu_dir!r})
 Master(ss.system).simulate(stop_time={stop}, outputs=['plant.body11_radial_deflection'],
                             output_interval=1e-3, csv_path={csv!r})
 print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)

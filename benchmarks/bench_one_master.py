@@ -19,6 +19,13 @@
    plant's compiled RK4 span, the plant's Python step with its checks and outputs, the
    controller law, the two FMUs' doStep through the master's slave objects. From these the
    real-time factor the whole run could reach if everything but a given part cost nothing.
+5. The master's own budget per 0.25 ms step (:func:`master_budget`): two tiny FMUs whose
+   doStep never enters Python (the test FMU ``mt_compiled``: a numba step called by our C
+   wrapper, Real buffers), wired like the closed loop (Gauss-Seidel, one delayed connection,
+   a recorder every 4 steps): each FMI call from Python (ctypes, as the Python loop makes
+   it), the recorder's row, the whole step in the Python loop and in the native loop (chunks
+   in C, :mod:`cosim.master.native`); and ``paper_closed_loop`` through its FMUs in both
+   loops.
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+H_LOOP = 0.00025          #: the closed loop's base step [s]
 
 #: Run in a fresh interpreter: the path of ``drillcosim run`` up to its first step, timed.
 _STARTUP = r"""
@@ -42,14 +50,14 @@ import time
 T0 = time.perf_counter()
 marks = {}
 from drillcosim.cosim import cli                       # the console script's module
-from drillcosim.cosim.scenario import run as run_module
-marks["import cli + scenario.run (numpy, fmpy, the master)"] = time.perf_counter()
-from drillcosim.plant.scene import load_scene
-marks["import plant.scene (numba, scipy, the plant model)"] = time.perf_counter()
-sc = load_scene("paper_closed_loop", overrides={"cosim": {"stop_time": 0.00025}})
+from drillcosim.cosim.scenario import simulate as simulate_module
+marks["import cli + scenario.simulate (numpy, fmpy, the master)"] = time.perf_counter()
+from drillcosim.cosim.scenario.config import load_config
+marks["import scenario.config (numba, scipy, the plant model)"] = time.perf_counter()
+config = load_config("paper_closed_loop", {"cosim.stop_time": 0.00025})
 marks["load the scene"] = time.perf_counter()
-from drillcosim.cosim.scenario.scene_system import scene_system
-ss = scene_system(sc)
+from drillcosim.cosim.scenario.build import build_system
+ss = build_system(config, "fmu")
 marks["build the system (FMU staleness check)"] = time.perf_counter()
 from drillcosim.cosim.master.execution import Execution
 ex = Execution(ss.system, read_outputs=ss.outputs)
@@ -68,22 +76,36 @@ json.dump(out, sys.stdout)
 """
 
 
-def closed_loop(stop: float, engine: str) -> float:
-    """Wall time [s] of the stepping loop of paper_closed_loop for ``stop`` s."""
+def _with_loop(loop: str | None):
+    """Set ``DRILLCOSIM_MASTER_LOOP`` (None: leave it) and return the previous value."""
+    from drillcosim.cosim.master.native.runner import LOOP_ENV
+
+    old = os.environ.get(LOOP_ENV)
+    if loop is not None:
+        os.environ[LOOP_ENV] = loop
+    return old
+
+
+def closed_loop(stop: float, engine: str, loop: str | None = None) -> float:
+    """Wall time [s] of the stepping loop of paper_closed_loop for ``stop`` s (``loop``:
+    ``"python"`` or ``"auto"`` for the master's loop; None: as the environment says)."""
     from drillcosim.cosim.master.execution import Execution
     from drillcosim.cosim.master.recorder import Recorder
-    from drillcosim.cosim.scenario.inprocess import inprocess_slaves
-    from drillcosim.cosim.scenario.scene_system import scene_system
-    from drillcosim.plant.scene import load_scene
+    from drillcosim.cosim.scenario.build import build_system
+    from drillcosim.cosim.scenario.config import load_config
 
-    ss = scene_system(load_scene("paper_closed_loop", overrides={"cosim": {"stop_time": stop}}))
-    slaves = inprocess_slaves(ss) if engine == "in-process" else None
-    with Execution(ss.system, read_outputs=ss.outputs, slaves=slaves) as ex:
-        ex.add_observer(Recorder(ss.outputs, ss.settings.output_ticks))
-        ex.initialize()
-        t0 = time.perf_counter()
-        ex.simulate_until(stop)
-        return time.perf_counter() - t0
+    ss = build_system(load_config("paper_closed_loop", {"cosim.stop_time": stop}),
+                      "inprocess" if engine == "in-process" else "fmu")
+    old = _with_loop(loop)
+    try:
+        with Execution(ss.system, read_outputs=ss.outputs, slaves=ss.slaves) as ex:
+            ex.add_observer(Recorder(ss.outputs, ss.config.cosim.output_ticks))
+            ex.initialize()
+            t0 = time.perf_counter()
+            ex.simulate_until(stop)
+            return time.perf_counter() - t0
+    finally:
+        _with_loop(old) if old is not None else os.environ.pop("DRILLCOSIM_MASTER_LOOP", None)
 
 
 def startup() -> dict[str, float]:
@@ -117,12 +139,11 @@ def _mean_us(f, n: int = 4000) -> float:
 def step_parts(h: float = 0.00025) -> dict[str, float]:
     """Microseconds per 0.25 ms step of each part of the closed loop, timed alone."""
     from drillcosim.cosim.master.slave import FmuSlave
-    from drillcosim.cosim.scenario.inprocess import inprocess_slaves
-    from drillcosim.cosim.scenario.scene_system import scene_system
-    from drillcosim.plant.scene import load_scene
+    from drillcosim.cosim.scenario.build import build_system
+    from drillcosim.cosim.scenario.config import load_config
 
-    ss = scene_system(load_scene("paper_closed_loop"))
-    local = inprocess_slaves(ss)
+    ss = build_system(load_config("paper_closed_loop"), "fmu")
+    local = build_system(ss.config, "inprocess").slaves
     sim, law = local["plant"].sim, local["controller"].law
     model = sim.model
     sim.time = 0.0
@@ -172,6 +193,96 @@ def step_parts(h: float = 0.00025) -> dict[str, float]:
     return parts
 
 
+def _tiny_system(fmu: Path):
+    """Two compiled tiny FMUs wired like the closed loop: a -> b direct, b -> a delayed 2 H."""
+    from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec
+
+    return SystemSpec([FmuSpec("a", fmu), FmuSpec("b", fmu)],
+                      [Connection("a.x", "b.u"), Connection("b.x", "a.u", delay=2 * H_LOOP)],
+                      H_LOOP, "gauss_seidel", ("b", "a"))
+
+
+def _tiny_loop_us(fmu: Path, loop: str, steps: int, record: bool) -> float:
+    """Microseconds per step of the tiny system in the master's ``loop``."""
+    from drillcosim.cosim.master.execution import Execution
+    from drillcosim.cosim.master.recorder import Recorder
+
+    outputs = ["a.x", "b.x", "a.n_compiled", "b.n_compiled"]
+    old = _with_loop(loop)
+    try:
+        with Execution(_tiny_system(fmu), read_outputs=outputs) as ex:
+            if record:
+                ex.add_observer(Recorder(outputs, 4))
+            ex.initialize()
+            t0 = time.perf_counter()
+            ex.simulate_until(steps * H_LOOP)
+            wall = time.perf_counter() - t0
+            assert ex.get_real("a.n_compiled") == steps, "the tiny FMU stepped in Python"
+            return wall / steps * 1e6
+    finally:
+        _with_loop(old) if old is not None else os.environ.pop("DRILLCOSIM_MASTER_LOOP", None)
+
+
+def master_budget(steps: int = 40000, repeat: int = 3, stop: float = 2.0) -> dict[str, float]:
+    """Microseconds per 0.25 ms step of the master's own work (see the module docstring, 5)."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from drillcosim.cosim.master.recorder import Recorder
+    from drillcosim.cosim.master.slave import FmuSlave
+    from drillcosim.cosim.master.system import FmuSpec
+    from support.master_fmus.build import build_fmu
+
+    fmu = build_fmu("mt_compiled")
+    slave = FmuSlave(FmuSpec("a", fmu))
+    slave.instantiate(0.0, None)
+    y = (ctypes.c_double * 3)()
+    u = (ctypes.c_double * 1)()
+    slave.bind(["x", "n_compiled", "n_python"], y, 0, ["u"], u)
+    clock = {"t": 0.0}
+
+    def do_step():
+        slave.do_step(clock["t"], H_LOOP)
+        clock["t"] += H_LOOP
+
+    out: dict[str, float] = {}
+    out["fmi2SetReal from Python (ctypes, 1 input)"] = min(
+        _mean_us(slave.write_inputs, 20000) for _ in range(repeat))
+    out["fmi2DoStep from Python (ctypes; compiled step, no Python inside)"] = min(
+        _mean_us(do_step, 20000) for _ in range(repeat))
+    out["fmi2GetReal from Python (ctypes, 3 outputs)"] = min(
+        _mean_us(slave.read_outputs, 20000) for _ in range(repeat))
+    slave.close()
+
+    class _Ex:       # what Recorder.on_step reads
+        tick, time = 0, 0.0
+    rec = Recorder(["a.x", "b.x", "a.n", "b.n"], 1)
+    rec._y, rec._fast, rec._slow = y, [0, 1, 2, 0], {}
+    out["recorder row in Python (4 variables; per row, the loop records every 4th step)"] = min(
+        _mean_us(lambda: rec.on_step(_Ex), 20000) for _ in range(repeat))
+    for loop in ("python", "auto"):
+        name = "Python loop" if loop == "python" else "native loop (chunks in C)"
+        for record in (False, True):
+            key = f"whole step, 2 compiled FMUs, {name}" + (", recorder every 4th" if record
+                                                          else "")
+            out[key] = min(_tiny_loop_us(fmu, loop, steps, record) for _ in range(repeat))
+    closed_loop(0.01, "fmu")
+    for loop in ("python", "auto"):
+        name = "Python loop" if loop == "python" else "native loop"
+        out[f"paper_closed_loop through its FMUs, {name} ({stop:g} s)"] = min(
+            closed_loop(stop, "fmu", loop) for _ in range(repeat)) / (stop / H_LOOP) * 1e6
+    return out
+
+
+def budget_lines(budget: dict[str, float], command: str) -> list[str]:
+    """The markdown budget table."""
+    lines = ["## The master's own cost per 0.25 ms step (benchmarks/bench_one_master.py "
+             "--budget)", "", f"Command: `{command}`; {platform.platform()}, "
+             f"{os.cpu_count()} cores, Python {platform.python_version()}, "
+             f"{datetime.datetime.now():%Y-%m-%d %H:%M}; best of the repeats; load average at "
+             f"the end {os.getloadavg()[0]:.1f}.", "", "| part | us per step |", "|---|---:|"]
+    lines += [f"| {k} | {v:.2f} |" for k, v in budget.items()]
+    return lines + [""]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--stop-time", type=float, default=10.0, help="simulated time [s]")
@@ -179,11 +290,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--whole-stop-time", type=float, default=30.0,
                     help="simulated time [s] of the whole `drillcosim run` processes")
     ap.add_argument("--out", help="write the markdown section here (default: print)")
+    ap.add_argument("--budget", action="store_true",
+                    help="only the master's budget per step (section 5)")
     args = ap.parse_args(argv)
+    if args.budget:
+        budget = master_budget(repeat=args.repeat, stop=args.stop_time)
+        budget.update(step_parts())
+        text = "\n".join(budget_lines(budget,
+                                       "python benchmarks/bench_one_master.py --budget "
+                                       f"--repeat {args.repeat} --stop-time {args.stop_time:g}"))
+        if args.out:
+            Path(args.out).write_text(text)
+        print(text)
+        return 0
     closed_loop(0.01, "fmu")          # build/compile/load caches once, outside the timing
     walls: dict[str, list[float]] = {"fmu": [], "in-process": []}
     starts: list[dict[str, float]] = []
-    from drillcosim.cosim.scenario.scene_system import default_fmu_dir
+    from drillcosim.cosim.scenario.scene_fmus import default_fmu_dir
     c_controller = default_fmu_dir() / "StrainControllerC.fmu"
     wholes: dict[str, tuple[str, ...]] = {
         "with plots": (), "`--no-plots`": ("--no-plots",),

@@ -2,6 +2,7 @@
 
     python benchmarks/bench_rms_sensitivity.py [--members 12] [--eps 1e-6] [--seed 2024]
                                                [--dopri-members 0] [--no-step-table]
+                                               [--fixed METHOD@STEP,...]
 
 Scene ``paper_open_loop`` (full 3D, 30 bodies), 30 s simulated, 1 ms outputs, inputs zero.
 Statistic of one run: the RMS over the 30 s of ``body11_radial_deflection`` and
@@ -23,6 +24,8 @@ Reference: RK4 at ``max_step = h*/8`` (0.05 ms internal steps at 1 ms outputs). 
 as h^4, so its discretisation error is ~2000x below the default step's (0.333 ms); it costs ~7 s
 a run, against ~30 s for DOPRI5 at rtol 1e-10, so more members fit the budget. ``--dopri-members
 N`` adds DOPRI5 (rtol 1e-10, atol 1e-13) as a check candidate on the first N members.
+``--fixed kutta3@0.25e-3,rk4@0.25e-3`` adds candidates with a given method and internal step
+(the integrator at a communication step, ``bench_fixed_step.py``).
 
 Statistics: per candidate the ensemble mean RMS and its standard error, and the relative bias
 (candidate mean - reference mean) / reference mean with a 95 % confidence interval from the
@@ -77,7 +80,7 @@ class Spec:
 
     key: str
     label: str
-    method: str = "rk4"
+    method: str = "auto"  # PlantSimulator's: RK4 on this scene at 1 ms outputs
     max_step: float | None = None
     internal_ms: float = math.nan
 
@@ -134,7 +137,7 @@ def run_one(spec: Spec, dy: np.ndarray | None) -> tuple[np.ndarray | None, float
     if spec.method == "dopri5":
         sim = PlantSimulator(m, method="dopri5", rtol=DOPRI_RTOL, atol=DOPRI_ATOL)
     else:
-        sim = PlantSimulator(m, max_step=spec.max_step)
+        sim = PlantSimulator(m, max_step=spec.max_step, method=spec.method)
     if dy is not None:
         sim.y += dy
     t0 = time.perf_counter()
@@ -161,27 +164,30 @@ def at_wall(rec: np.ndarray, clearance: float) -> np.ndarray:
     return np.abs(rec[-n_tail:]).min(axis=0) > 0.5 * clearance
 
 
-def specs(h_star: float, dopri: bool, divisors: Sequence[int] = CAND_DIVS
-          ) -> tuple[Spec, list[Spec]]:
-    """The reference and the candidates."""
+def specs(h_star: float, dopri: bool, divisors: Sequence[int] = CAND_DIVS,
+          fixed: Sequence[tuple[str, float]] = ()) -> tuple[Spec, list[Spec]]:
+    """The reference and the candidates (``fixed``: (method, internal step [s]) pairs)."""
     ref = Spec("ref", f"RK4 h*/{REF_DIV} (reference)", max_step=h_star / REF_DIV,
                internal_ms=internal_step(h_star / REF_DIV) * 1e3)
     cands = [Spec("auto" if d == 1 else f"h/{d}",
                   "RK4 auto step h* (default)" if d == 1 else f"RK4 h*/{d}",
                   max_step=None if d == 1 else h_star / d,
                   internal_ms=internal_step(h_star / d) * 1e3) for d in divisors]
+    cands += [Spec(f"{meth}@{step:g}", f"{meth} at {step * 1e3:g} ms", method=meth,
+                   max_step=step, internal_ms=internal_step(step) * 1e3) for meth, step in fixed]
     if dopri:
         cands.append(Spec("dopri5", f"DOPRI5 rtol {DOPRI_RTOL:g} (check)", method="dopri5"))
     return ref, cands
 
 
 def run_ensemble(members: int, eps: float, seed: int, dopri_members: int,
-                 divisors: Sequence[int] = CAND_DIVS) -> tuple[Ensemble, list[Ensemble]]:
+                 divisors: Sequence[int] = CAND_DIVS, fixed: Sequence[tuple[str, float]] = ()
+                 ) -> tuple[Ensemble, list[Ensemble]]:
     """Run every member: the reference, then each candidate from the same perturbed state."""
     m0 = make_model()
     h_star = m0.stable_step()
     clearance = m0.params.contact.clearance
-    ref_spec, cand_specs = specs(h_star, dopri_members > 0, divisors)
+    ref_spec, cand_specs = specs(h_star, dopri_members > 0, divisors, fixed)
 
     def empty(sp: Spec) -> Ensemble:
         return Ensemble(sp, np.full((members, len(SIGNALS)), np.nan), np.full(members, np.nan),
@@ -335,7 +341,8 @@ def step_table() -> list[str]:
 
 
 def report(members: int = 12, eps: float = 1e-6, seed: int = 2024, dopri_members: int = 0,
-           with_step_table: bool = True, divisors: Sequence[int] = CAND_DIVS) -> list[str]:
+           with_step_table: bool = True, divisors: Sequence[int] = CAND_DIVS,
+           fixed: Sequence[tuple[str, float]] = ()) -> list[str]:
     """Markdown section: ensemble bias of the 30 s RMS radial deflection per candidate step.
 
     Parameters
@@ -350,6 +357,8 @@ def report(members: int = 12, eps: float = 1e-6, seed: int = 2024, dopri_members
         Run DOPRI5 rtol 1e-10 on the first this many members as a check of the reference.
     with_step_table : bool
         Append the former single-run table (~15 s).
+    fixed : sequence of (str, float)
+        Further candidates: (method, internal step [s]).
 
     Returns
     -------
@@ -360,7 +369,7 @@ def report(members: int = 12, eps: float = 1e-6, seed: int = 2024, dopri_members
         raise ValueError(f"members = {members} is not allowed: need >= 2 for a standard error")
     t_start = time.perf_counter()
     run_one(Spec("warm", "warm", max_step=None), None)  # JIT compile outside the timed runs
-    ref, cands = run_ensemble(members, eps, seed, min(dopri_members, members), divisors)
+    ref, cands = run_ensemble(members, eps, seed, min(dopri_members, members), divisors, fixed)
     old = step_table() if with_step_table else []
     cmd = f"python benchmarks/bench_rms_sensitivity.py --members {members} --eps {eps:g} --seed {seed}"
     if dopri_members:
@@ -369,6 +378,8 @@ def report(members: int = 12, eps: float = 1e-6, seed: int = 2024, dopri_members
         cmd += f" --divisors {','.join(map(str, divisors))}"
     if not with_step_table:
         cmd += " --no-step-table"
+    if fixed:
+        cmd += " --fixed " + ",".join(f"{m}@{st:g}" for m, st in fixed)
     h_star = make_model().stable_step()
     clear = make_model().params.contact.clearance
     L = ["## RMS radial deflection over 30 s: ensemble (benchmarks/bench_rms_sensitivity.py)", "",
@@ -517,7 +528,17 @@ def main(argv: Sequence[str] | None = None) -> int:
                          "default 1,2,4)")
     ap.add_argument("--no-step-table", action="store_true",
                     help="skip the former single-run table (~15 s)")
+    ap.add_argument("--fixed", default="",
+                    help="further candidates METHOD@STEP (internal step in s), comma-separated, "
+                         "e.g. kutta3@0.25e-3,rk4@0.25e-3")
     args = ap.parse_args(argv)
+    fixed = []
+    for item in filter(None, args.fixed.split(",")):
+        meth, _, step = item.partition("@")
+        try:
+            fixed.append((meth, float(step)))
+        except ValueError:
+            ap.error(f"--fixed {item!r}: METHOD@STEP expected (e.g. kutta3@0.25e-3)")
     try:
         divs = tuple(int(d) for d in args.divisors.split(","))
         if not divs or min(divs) < 1:
@@ -525,7 +546,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError:
         ap.error(f"--divisors {args.divisors!r}: comma-separated integers >= 1 expected")
     print("\n".join(report(args.members, args.eps, args.seed, args.dopri_members,
-                           not args.no_step_table, divs)))
+                           not args.no_step_table, divs, fixed)))
     return 0
 
 

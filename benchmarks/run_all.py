@@ -295,13 +295,15 @@ def _fmu_and_master_sections(quick: bool) -> list[str]:
     table = [ln for ln in mo.splitlines() if ln.startswith("|") or " steps of " in ln]
     red = _script(["benchmarks/bench_reduced.py", "--stop-time", "3" if quick else "10"], 900)
     rms = "" if quick else _script(["benchmarks/bench_rms_sensitivity.py", "--members", "160",
-                                    "--divisors", "1,2", "--no-step-table"], 3600)
+                                    "--divisors", "1,2", "--no-step-table",
+                                    "--fixed", "kutta3@0.00025"], 5400)
     ctl = _script(["benchmarks/bench_controller_fmus.py", "--steps", steps, "--stop-time",
                    "1" if quick else "2"], 900)
+    fixed = _script(["benchmarks/bench_fixed_step.py", *(["--quick"] if quick else [])], 1800)
     ext = _script(["benchmarks/bench_extensions.py", "--skip", "off", *(["--quick"] if quick
                                                                         else [])], 1800)
     ext = "\n## Physics extensions (benchmarks/bench_extensions.py)\n\n" + ext
-    return [red, rms, ext, fm, fb, "",
+    return [red, rms, fixed, ext, fm, fb, "",
             "## Master overhead on tiny FMUs (benchmarks/bench_master_overhead.py)", "",
             f"Command: `python benchmarks/bench_master_overhead.py --steps {steps}` (target: "
             "our master within 1.3x of a hand-written raw fmpy loop).", "", *table, "", ctl]

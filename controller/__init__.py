@@ -1,7 +1,8 @@
 """drillcosim controller package: pure controller laws (no FMI code): the strain feedback of
 the bending actuators, a generic discrete state-space law and the top-drive speed controller.
 
-All imports inside this package are relative and it depends on numpy only: the
+All imports inside this package are relative and it depends on numpy only (the compiled
+steps, ``compiled.py``, use numba where it is installed; nothing imports them otherwise): the
 FMU build vendors a copy of it under a versioned name (``_dcs_controller_<ver>``)
 into the controller FMU, so that copy can never shadow, or be shadowed by, a
 ``controller`` package imported by the host process.

@@ -47,9 +47,11 @@ and ``F(t + dt) = u`` for ``T = 0``. The command is zero while
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
+from .acceleration import compiled_law
 from .params import ControllerParams
 
 __all__ = ["AXES", "CHANNELS", "N_CHANNELS", "SWITCH_TIME_RTOL", "StrainController", "channels"]
@@ -102,8 +104,8 @@ class StrainController:
         self._params = ControllerParams()
         self.params = ControllerParams() if params is None else params
         self._force = np.zeros(self.n_channels)
-        self._decay_dt = math.nan  # dt for which self._decay is valid
-        self._decay = 0.0
+        #: [dt, exp(-dt / T)]: the lag's decay factor and the step [s] it is valid for
+        self._decay = np.array([math.nan, 0.0])
 
     # ------------------------------------------------------------------ params
     def _check_params(self, params: object) -> None:
@@ -125,7 +127,8 @@ class StrainController:
         self._check_params(params)
         self._params = params
         self._matrix = np.array(params.gain_matrix, dtype=float) if params.gain_matrix else None
-        self._decay_dt = math.nan
+        if hasattr(self, "_decay"):
+            self._decay[0] = math.nan
 
     # ------------------------------------------------------------------- state
     def reset(self) -> None:
@@ -213,10 +216,16 @@ class StrainController:
         if not self.is_active(t):
             return np.zeros(self.n_channels)
         p = self._params
-        if self._matrix is None:
+        M = self._matrix
+        if M is None:
             u = p.gain * eps
-        else:  # rows of eps.reshape(n, 2) are sites, columns the axes C, E
-            u = p.gain * (self._matrix @ eps.reshape(self.n_sites, len(AXES))).ravel()
+        else:  # rows of X are sites, columns the axes C, E; the sum over j in order (no BLAS,
+            # whose summation order is its own: the compiled step gives the same bits)
+            X = eps.reshape(self.n_sites, len(AXES))
+            acc = M[:, :1] * X[0]
+            for j in range(1, self.n_sites):
+                acc = acc + M[:, j:j + 1] * X[j]
+            u = p.gain * acc.ravel()
         return np.clip(u, p.lower_limit, p.upper_limit)
 
     def step(self, t: float, dt: float, strains: np.ndarray) -> np.ndarray:
@@ -249,12 +258,25 @@ class StrainController:
         if tau == 0.0:
             self._force[:] = u
         else:
-            if dt != self._decay_dt:
-                self._decay = math.exp(-dt / tau)
-                self._decay_dt = dt
+            decay = self._decay
+            if dt != decay[0]:
+                decay[:] = dt, math.exp(-dt / tau)
             # exact solution of tau dF/dt = u - F with u held over the step
-            self._force[:] = u + (self._force - u) * self._decay
+            self._force[:] = u + (self._force - u) * decay[1]
         return self._force.copy()
+
+    def compiled_step(self, inputs: np.ndarray, outputs: np.ndarray) -> Any:
+        """This law's compiled step (:class:`controller.compiled.CompiledLaw`) reading the
+        strains from ``inputs`` and writing the forces into ``outputs`` (float64 buffers, shape
+        (2 n_sites,)); None without numba or with compiled steps switched off."""
+        def pack() -> tuple[object, list[np.ndarray]]:
+            p = self._params
+            params = np.array([p.gain, p.lower_limit, p.upper_limit, p.switch_on_time,
+                               float(p.enabled), p.lag_time_constant, SWITCH_TIME_RTOL])
+            matrix = self._matrix if self._matrix is not None else np.zeros((0, 0))
+            return p, [params, matrix, self._decay, self._force, inputs, outputs]
+
+        return compiled_law("strain_step", pack)
 
     def _check_strains(self, strains: np.ndarray) -> np.ndarray:
         eps = np.asarray(strains, dtype=float)

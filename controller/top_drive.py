@@ -45,9 +45,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from .acceleration import compiled_law
 from .params import _check_real
 
 __all__ = ["TopDriveController", "TopDriveControllerParams"]
@@ -199,3 +201,15 @@ class TopDriveController:
         motor = p.p_gain * error + p.i_gain * x + p.torque_feedback * torque
         self._state[:] = (x, motor)
         return float(motor)
+
+    def compiled_step(self, inputs: np.ndarray, outputs: np.ndarray) -> Any:
+        """This law's compiled step (:class:`controller.compiled.CompiledLaw`) reading
+        ``[speed, torque]`` from ``inputs`` (shape (2,)) and writing the motor torque into
+        ``outputs`` (shape (1,)); None without numba or with compiled steps switched off."""
+        def pack() -> tuple[object, list[np.ndarray]]:
+            p = self._params
+            params = np.array([p.target_speed, p.p_gain, p.i_gain, p.torque_feedback,
+                               p.ramp_time, float(p.enabled)])
+            return p, [params, self._state, inputs, outputs]
+
+        return compiled_law("top_drive_step", pack)

@@ -1,15 +1,19 @@
-"""The ``drillcosim`` command line.
+"""The ``drillcosim`` command line: argument parsing on top of the public API
+(:mod:`drillcosim.api`; the same run through either gives the same numbers).
 
 Sub-commands: ``modes`` (modal analysis next to the analytic values and the paper's Table 1),
-``scenes`` (list the shipped scenes), ``build`` (write the FMUs), ``run`` (co-simulate a scene
-or an SSP file: results.csv, summary.json, plots), ``ssp`` (write a scene's system as an SSP
-file), ``sweep`` (gain x delay x step stability/benefit table), ``calibrate`` (the paper's
-open quantities calibrated against its figures, and its experiments), ``design`` (an LQG or
-Smith-predictor lateral controller designed on the linearized plant, written into a scene).
-Bad input ends with a one-line message on stderr and exit
-code 2, never a traceback (a plant/controller pair that does not fit: one line per problem);
-a run that diverges ends with a one-line report and exit code 1. Warnings of the project
-(e.g. plant inputs no controller output feeds) are printed as one line each.
+``scenes`` (list the shipped scenes), ``schema`` (the scene file schema), ``build`` (write the
+FMUs), ``run`` (co-simulate a scene or an SSP file: results.csv, summary.json, plots), ``ssp``
+(write a scene's system as an SSP file), ``sweep`` (gain x delay x step stability/benefit
+table), ``calibrate`` (the paper's study: calibration, experiments, conclusion, report),
+``design`` (an LQG or Smith-predictor lateral controller designed on the linearized plant,
+written into a scene).
+
+Exit codes: 0 done; 1 a run that stopped early (divergence: a one-line report) or failed; 2 bad
+input (:class:`cosim.master.errors.UserError`: a scene, a key, a value, FMUs that do not fit,
+an unwritable folder), reported in one line without a traceback (FMUs that do not fit: one line
+per problem). Any other exception is an internal error: it keeps its traceback (exit code 1).
+Warnings of the project (e.g. plant inputs no controller output feeds) are one line each.
 """
 
 from __future__ import annotations
@@ -25,95 +29,83 @@ from pathlib import Path
 
 __all__ = ["main"]
 
+EXIT_OK = 0
+EXIT_FAILED = 1
 EXIT_USAGE = 2
 
 
-class UsageError(Exception):
-    """Bad input from the user: reported in one line, exit code 2."""
+def _user_errors() -> tuple[type[BaseException], ...]:
+    from drillcosim.cosim.master.errors import UserError
+
+    return (UserError,)
+
+
+def _progress(args: argparse.Namespace) -> bool | None:
+    return False if getattr(args, "no_progress", False) else None
 
 
 def _cmd_modes(args: argparse.Namespace) -> int:
-    from drillcosim.plant.modal import PAPER_TABLE1, analytic_reference, operating_modes
-    from drillcosim.plant.model import DrillstringModel
-    from drillcosim.plant.scene import load_scene
+    from drillcosim.api import modes
 
-    scene = load_scene(args.scene)
-    kind = args.model or scene.model
-    model = DrillstringModel(scene.plant, kind)
-    fm = {}
-    for md in operating_modes(scene.plant, kind):
-        fm.setdefault(md.kind, md)
-    ref = analytic_reference(model)
+    table = modes(args.scene, model=args.model)
+    fm = table["modes"]
     if args.json:
-        out = {k: {"frequency_rad_s": fm[k].frequency_rad_s, "damping_ratio": fm[k].damping_ratio}
-               for k in ("axial", "torsional", "lateral") if k in fm}
+        out = {k: {"frequency_rad_s": m["frequency_rad_s"], "damping_ratio": m["damping_ratio"]}
+               for k, m in fm.items()}
         print(json.dumps(out, indent=2))
-        return 0
-    spin = scene.plant.top_drive.rotary_speed
-    print(f"scene {scene.name} ({kind}, n = {model.n}): first natural frequencies, linearized "
-          "about the static equilibrium" + (f" spinning at {spin:g} rad/s (inertial-frame "
-                                             "frequencies)" if spin else " at rest"))
+        return EXIT_OK
+    spin = table["spin_rad_s"]
+    print(f"scene {table['scene']} ({table['model']}, n = {table['n']}): first natural "
+          "frequencies, linearized about the static equilibrium"
+          + (f" spinning at {spin:g} rad/s (inertial-frame frequencies)" if spin else " at rest"))
     hdr = (f"{'mode':<10} {'ours [rad/s]':>13} {'analytic':>10} {'paper calc.':>12} "
            f"{'paper meas.':>12} {'zeta ours':>10} {'zeta paper':>11}")
     print(hdr)
     print("-" * len(hdr))
-    for k in ("axial", "torsional", "lateral"):
-        if k not in fm:
-            continue
-        m = fm[k]
-        p = PAPER_TABLE1[k]
-        a = ref[k]
+    for k, m in fm.items():
+        a = m["analytic_rad_s"]
         a_s = f"{a:10.4g}" if not math.isnan(a) else f"{'-':>10}"
-        print(f"{k:<10} {m.frequency_rad_s:13.4f} {a_s} {p['calculated']:12.4g} "
-              f"{p['measured']:12.4g} {100 * m.damping_ratio:9.2f}% "
-              f"{100 * p['damping_ratio']:10.1f}%")
+        print(f"{k:<10} {m['frequency_rad_s']:13.4f} {a_s} {m['paper_calculated_rad_s']:12.4g} "
+              f"{m['paper_measured_rad_s']:12.4g} {100 * m['damping_ratio']:9.2f}% "
+              f"{100 * m['paper_damping_ratio']:10.1f}%")
     print("analytic: rod pi c / (2 L) fixed-free (pi c / L when the bit is held axially); lateral: "
           "pinned multi-span Euler-Bernoulli beam over the top pin and stabilizers, no axial load")
-    return 0
-
-
-def scene_schema() -> str:
-    """The whole scene schema (plant tables, then [controller] and [cosim]) as markdown."""
-    from drillcosim.cosim.scenario.scene_system import cosim_schema_markdown
-    from drillcosim.plant.scene import schema_markdown
-
-    return schema_markdown() + "\n" + cosim_schema_markdown()
+    return EXIT_OK
 
 
 def _cmd_schema(args: argparse.Namespace) -> int:
+    from drillcosim.cosim.scenario.schema import scene_schema
+
     print(scene_schema(), end="")
-    return 0
+    return EXIT_OK
 
 
 def _cmd_scenes(args: argparse.Namespace) -> int:
-    from drillcosim.plant.scene import list_scenes, load_scene
+    from drillcosim.api import list_scenes, load_scene
 
     for name in list_scenes():
-        sc = load_scene(name)
-        print(f"{name:<28} {sc.model:<16} {sc.description}")
-    return 0
+        config = load_scene(name)
+        print(f"{name:<28} {config.scene.model:<16} {config.scene.description}")
+    return EXIT_OK
 
 
 def _cmd_build(args: argparse.Namespace) -> int:
-    from drillcosim.fmu_src.build import build_all, build_one, default_out
-    from drillcosim.fmu_src.build_c import build_c_controller
+    from drillcosim.api import build_fmus, load_scene
+    from drillcosim.cosim.scenario.build import scene_recipes
 
-    out = args.out or default_out()
     if args.scene:
-        from drillcosim.cosim.scenario.scene_system import scene_recipes
-        from drillcosim.plant.scene import load_scene
-
-        for instance, recipe in scene_recipes(load_scene(args.scene)).items():
-            kind = "built for the scene" if recipe.base else "the default build"
-            print(f"built {build_one(recipe, out)} ({instance}: {kind})")
-        return 0
-    build_all(out)  # prints "built <path>" per FMU
+        recipes = scene_recipes(load_scene(args.scene))
+        for instance, path in build_fmus(args.out, scene=args.scene).items():
+            kind = "built for the scene" if recipes[instance].base else "the default build"
+            print(f"built {path} ({instance}: {kind})")
+        return EXIT_OK
     try:
-        print(f"built {build_c_controller(out)}")
+        built = build_fmus(args.out)  # prints "built <path>" per Python FMU
     except RuntimeError as exc:  # the C controller needs only a C compiler
         print(f"drillcosim build: StrainControllerC.fmu not built: {exc}", file=sys.stderr)
-        return 1
-    return 0
+        return EXIT_FAILED
+    print(f"built {built['StrainControllerC']}")
+    return EXIT_OK
 
 
 def _is_ssp(target: str) -> bool:
@@ -122,52 +114,71 @@ def _is_ssp(target: str) -> bool:
                                                        (path / "SystemStructure.ssd").is_file())
 
 
-def _simulate_ssp(args: argparse.Namespace):
+def _parse_set(items: Sequence[str]) -> dict:
+    from drillcosim.cosim.scenario.config import parse_set
+
+    return parse_set(items)
+
+
+def _run_ssp(args: argparse.Namespace) -> int:
+    from drillcosim.cosim.master.errors import UserError
     from drillcosim.cosim.scenario.ssp_run import simulate_ssp
 
     scene_only = [flag for flag, value in (("--delay", args.delay), ("--gain", args.gain),
                                            ("--set", args.set), ("--fmu-dir", args.fmu_dir),
                                            ("--plant-fmu", args.plant_fmu),
-                                           ("--controller-fmu", args.controller_fmu))
+                                           ("--controller-fmu", args.controller_fmu),
+                                           ("--engine", args.engine != "fmu"))
                   if value]
     if scene_only:
-        raise UsageError(f"{args.scene} is an SSP file: it takes --step, --stop-time and "
-                         f"--out, not {', '.join(scene_only)} (options of scenes)")
-    return simulate_ssp(args.scene, stop_time=args.stop_time, step=args.step, out_dir=args.out,
-                   progress=False if args.no_progress else None)
+        raise UserError(f"{args.scene} is an SSP file: it takes --step, --stop-time and "
+                        f"--out, not {', '.join(scene_only)} (options of scenes)")
+    outcome = simulate_ssp(args.scene, stop_time=args.stop_time, step=args.step,
+                           out_dir=args.out, progress=_progress(args))
+    print(outcome.message, file=sys.stdout if outcome.completed else sys.stderr)
+    return EXIT_OK if outcome.completed else EXIT_FAILED
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from drillcosim.api import simulate
     from drillcosim.cosim.master.errors import FMI2_ERROR, CosimError
-    from drillcosim.cosim.scenario.run import simulate_scene
 
-    try:
-        if _is_ssp(args.scene):
-            outcome = _simulate_ssp(args)
-        else:
-            outcome = simulate_scene(args.scene, stop_time=args.stop_time, step=args.step,
-                                     delay=args.delay, gain=args.gain, sets=args.set,
-                                     out_dir=args.out, fmu_dir=args.fmu_dir,
-                                     progress=False if args.no_progress else None,
-                                     plots=not args.no_plots, plant_fmu=args.plant_fmu,
-                                     controller_fmu=args.controller_fmu)
-    except CosimError as exc:  # failed before the first step: earlier files are kept
-        if exc.call == "fmi2ExitInitializationMode" and exc.status == FMI2_ERROR:
-            # the FMU rejected its parameters (its message names them): bad input
-            print(f"drillcosim run: error: {exc}", file=sys.stderr)
-            return EXIT_USAGE
-        print(f"drillcosim run: failed: {exc}", file=sys.stderr)
-        return 1
-    print(outcome.message, file=sys.stderr if outcome.exit_code else sys.stdout)
-    return outcome.exit_code
+    if _is_ssp(args.scene):
+        return _run_ssp(args)
+    from drillcosim.cosim.scenario.plot_workers import PlotWorkers
+
+    out = Path(args.out) if args.out is not None else Path("out") / Path(args.scene).stem
+    # the figures' worker processes import matplotlib while the run steps
+    with PlotWorkers(0 if args.no_plots else None) as workers:
+        try:
+            result = simulate(args.scene, stop_time=args.stop_time, step=args.step,
+                              delay=args.delay, gain=args.gain, overrides=_parse_set(args.set),
+                              engine=args.engine, progress=_progress(args),
+                              fmu_dir=args.fmu_dir, plant_fmu=args.plant_fmu,
+                              controller_fmu=args.controller_fmu, csv_path=out / "results.csv")
+        except CosimError as exc:  # failed before the first step: earlier files are kept
+            if exc.call == "fmi2ExitInitializationMode" and exc.status == FMI2_ERROR:
+                # the FMU rejected its parameters (its message names them): bad input
+                print(f"drillcosim run: error: {exc}", file=sys.stderr)
+                return EXIT_USAGE
+            print(f"drillcosim run: failed: {exc}", file=sys.stderr)
+            return EXIT_FAILED
+        files = result.save(out, plots=not args.no_plots, workers=workers)
+    message = result.message(out, files)
+    print(message, file=sys.stdout if result.completed else sys.stderr)
+    return EXIT_OK if result.completed else EXIT_FAILED
 
 
 def _cmd_ssp(args: argparse.Namespace) -> int:
+    from drillcosim.api import load_scene
     from drillcosim.cosim.scenario.ssp_run import write_scene_ssp
 
-    written = write_scene_ssp(args.scene, args.out, step=args.step, stop_time=args.stop_time,
-                              sets=args.set, fmu_dir=args.fmu_dir, plant_fmu=args.plant_fmu,
-                              controller_fmu=args.controller_fmu,
+    over = _parse_set(args.set)
+    over.update({k: v for k, v in (("cosim.step", args.step), ("cosim.stop_time", args.stop_time))
+                 if v is not None})
+    config = load_scene(args.scene, overrides=over, plant_fmu=args.plant_fmu,
+                        controller_fmu=args.controller_fmu)
+    written = write_scene_ssp(config, args.out, fmu_dir=args.fmu_dir,
                               omit_unsupported=args.omit_unsupported)
     exp = written.export
     if exp.omitted:
@@ -175,22 +186,29 @@ def _cmd_ssp(args: argparse.Namespace) -> int:
               file=sys.stderr)
     print(f"wrote {exp.path} (system '{written.scene}'; Ecos: ecos simulate --path {exp.path} "
           f"--parameterSet {written.scene} ...)")
-    return 0
+    return EXIT_OK
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    from drillcosim.cosim.scenario.run import parse_set
-    from drillcosim.cosim.study.sweep import execute_sweep, judging_note, sweep_from_args
+    from drillcosim.api import sweep
+    from drillcosim.cosim.study.grid import parse_list
+    from drillcosim.cosim.study.sweep import judging_note, sweep_spec
 
-    spec = sweep_from_args(args.scene, args.gain, args.delay, args.step, args.stop_time,
-                           args.engine, parse_set(args.set), gain_key=args.gain_key)
+    over = _parse_set(args.set)
+    lists = {"gains": parse_list(args.gain, "--gain", minimum=0.0),
+             "delays": parse_list(args.delay, "--delay", minimum=0.0),
+             "steps": parse_list(args.step, "--step", positive=True)}
+    spec = sweep_spec(args.scene, **lists, stop_time=args.stop_time, engine=args.engine,
+                      overrides=over, gain_key=args.gain_key)
     note = judging_note(spec)
     if note:
         print(f"drillcosim sweep: note: {note}", file=sys.stderr)
-    out = args.out or f"out/sweep_{spec.scene.rsplit('/', 1)[-1].removesuffix('.toml')}"
-    res = execute_sweep(spec, out, workers=args.workers, scheduler=args.scheduler,
-                        progress=False if args.no_progress else None,
-                        retry_errors=args.retry_errors)
+    out = args.out or f"out/sweep_{Path(args.scene).stem}"
+    frame = sweep(args.scene, **lists, stop_time=spec.stop_time, gain_key=spec.gain_key,
+                  overrides=over, engine=args.engine, out=out, workers=args.workers,
+                  scheduler=args.scheduler, progress=_progress(args),
+                  retry_errors=args.retry_errors)
+    res = frame.attrs["outcome"]
     print(f"ran {res.n_run} of {res.n_points} points ({res.n_skipped} already done) in "
           f"{res.wall_time:.1f} s")
     print(res.summary())
@@ -199,19 +217,30 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
         for path in plot_maps(res.folder, predict=not args.no_prediction):
             print(path)
-    return 0
+    return EXIT_OK
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from drillcosim.cosim.study.calibration_report import calibrate
+    from drillcosim.cosim.study.paper.stages import calibrate
 
     print(calibrate(args.stage, args.out, members=args.members, workers=args.workers,
-                    scheduler=args.scheduler, progress=False if args.no_progress else None,
+                    scheduler=args.scheduler, progress=_progress(args),
                     figures=args.figures), end="")
-    return 0
+    return EXIT_OK
+
+
+def _cmd_doctor(args: argparse.Namespace) -> int:
+    from drillcosim.cosim.master.errors import UserError
+    from drillcosim.fmu_src.wrapper.doctor import NotAnFmuError, doctor_command
+
+    try:
+        return doctor_command(args.fmu)
+    except NotAnFmuError as exc:
+        raise UserError(str(exc)) from None
 
 
 def _cmd_design(args: argparse.Namespace) -> int:
+    from drillcosim.cosim.master.errors import UserError
     from drillcosim.cosim.study.control_design import LqgWeights, design_controller, write_scene
 
     joints = None
@@ -219,7 +248,7 @@ def _cmd_design(args: argparse.Namespace) -> int:
         try:
             joints = [int(j) for j in args.joints.split(",")]
         except ValueError:
-            raise UsageError(f"--joints {args.joints!r}: comma-separated joint numbers") from None
+            raise UserError(f"--joints {args.joints!r}: comma-separated joint numbers") from None
     options = {"force_limit": args.force_limit}
     if args.kind == "lqg":
         options["weights"] = LqgWeights(args.deflection_scale, args.force_scale,
@@ -236,11 +265,12 @@ def _cmd_design(args: argparse.Namespace) -> int:
 
 def _cmd_bench(args: argparse.Namespace) -> int:
     import importlib.util
-    from pathlib import Path
+
+    from drillcosim.cosim.master.errors import UserError
 
     path = Path(__file__).resolve().parents[1] / "benchmarks" / "run_all.py"
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: the benchmarks need a source checkout")
+        raise UserError(f"{path}: the benchmarks need a source checkout")
     spec = importlib.util.spec_from_file_location("drillcosim_bench_run_all", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
@@ -255,6 +285,13 @@ def _add_fmu_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--controller-fmu", metavar="FMU", help="a controller FMU file (any maker) "
                    "instead of StrainController.fmu, e.g. StrainControllerC.fmu; checked "
                    "against the plant by name")
+
+
+def _add_engine_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu",
+                   help="fmu: plant + controller FMUs in the master (default); inprocess: the "
+                        "same models as in-process slaves of the same master (no FMI boundary, "
+                        "same numbers)")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -297,6 +334,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="override a scene key, e.g. cosim.sensor_delay=0.002 (value in TOML "
                         "syntax; repeatable)")
     p.add_argument("--out", metavar="DIR", help="output folder (default out/<scene>)")
+    _add_engine_option(p)
     _add_fmu_options(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
@@ -329,10 +367,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="communication steps [s] (default 2.5e-4)")
     p.add_argument("--stop-time", type=float, metavar="S",
                    help="stop time [s] (default: the scene's)")
-    p.add_argument("--engine", choices=("fmu", "python"), default="fmu",
-                   help="fmu: plant + controller FMUs in the master (default); python: the same "
-                        "models as in-process slaves of the same master (no FMI boundary, same "
-                        "numbers)")
+    _add_engine_option(p)
     p.add_argument("--workers", type=int, metavar="N",
                    help="local worker processes (default: all cores; 0: in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS",
@@ -393,6 +428,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="SCENE.toml",
                    help="the scene to write; the matrices go to SCENE.json beside it")
     p.set_defaults(func=_cmd_design)
+    p = sub.add_parser("doctor", help="which Python an FMU would run in on this machine, and why")
+    p.add_argument("fmu", nargs="?", help="an FMU built by drillcosim (default: the built "
+                   "DrillstringPlant.fmu); exit 0 if a host without Python finds one, 1 if not")
+    p.set_defaults(func=_cmd_doctor)
     return ap
 
 
@@ -411,12 +450,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     warnings.showwarning = one_line
     try:
         return int(args.func(args) or 0)
-    except (UsageError, ValueError, FileNotFoundError, PermissionError) as exc:
+    except _user_errors() as exc:
         print(f"drillcosim {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except OSError as exc:  # read-only folder: bad input (2); disk full, I/O error: failure (1)
         print(f"drillcosim {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE if exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM) else 1
+        return EXIT_USAGE if exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM) else \
+            EXIT_FAILED
     except KeyboardInterrupt:
         print(f"drillcosim {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -16,6 +16,19 @@ and the adapter imports it by that name. This needs all intra-package imports
 to be relative (tested). At build time the copies are staged in a temporary
 folder that is put first on ``sys.path`` so pythonfmu can import the adapter.
 
+Builds isolated from each other
+-------------------------------
+A Python host imports a module name once (``sys.modules``): two FMUs that ship different code
+under one name would both run the code of the one loaded first. So the names in the source
+(``_dcs_plant_0_1_0``, ``_dcs_pythonfmu_0_7_0``, the slave module ``_dcs_<script>_<version>``)
+are canonical names only: the build hashes everything it stages (every vendored file, the
+slave module(s), ``resources/``; :func:`build_hash`) and ships each module as
+``<canonical name>_<hash>`` (:data:`BUILD_HASH_LENGTH` hex digits), rewriting the names in
+every shipped ``.py`` file. Two builds that differ in any byte run their own code in one
+process, in either load order; instances of one build (or of byte-identical builds) share
+their modules. ``resources/dcs_build.json`` records the hash and the names
+(:func:`shipped_modules`).
+
 Each FMU is built in a fresh Python subprocess (pythonfmu imports and
 instantiates the adapter and leaves entries on ``sys.path``; the calling process
 stays clean) inside a temporary folder next to the target, and moved into place
@@ -32,8 +45,9 @@ listed gets no ``dependencies`` attribute, meaning "depends on all"), and
 FMI wrapper
 -----------
 pythonfmu's prebuilt C++ binary ``binaries/linux64/<name>.so`` is replaced by our C wrapper
-(:mod:`fmu_src.wrapper`, compiled here against the running Python: needs a C compiler, ``$CC``
-or ``gcc``), which returns fmi2Error for exceptions and for statuses the adapter reports,
+(:mod:`fmu_src.wrapper`, compiled here against the stable ABI of CPython 3.10: one binary for
+CPython 3.10 to 3.13, stated at the end of the modelDescription's ``description``; needs a C
+compiler, ``$CC`` or ``gcc``), which returns fmi2Error for exceptions and for statuses the adapter reports,
 survives exceptions, finds a Python in hosts without one and moves Real inputs/outputs without
 Python calls; pythonfmu's other binaries (win64) are dropped: they could report no error.
 Without a C compiler the build stops with a one-line message.
@@ -83,6 +97,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
+from drillcosim._toolchain import user_cache
+
 __all__ = [
     "DEFAULT_OUT",
     "REGISTRY",
@@ -91,8 +107,10 @@ __all__ = [
     "FmuRecipe",
     "build_all",
     "build_one",
+    "build_hash",
     "finalize_model_description",
     "main",
+    "shipped_modules",
     "stale",
 ]
 
@@ -107,15 +125,6 @@ def _checkout() -> bool:
         return 'name = "drillcosim"' in (ROOT / "pyproject.toml").read_text()
     except OSError:
         return False
-
-
-def user_cache() -> Path:
-    """Per-user cache folder: ``$DRILLCOSIM_CACHE``, else ``$XDG_CACHE_HOME/drillcosim``."""
-    env = os.environ.get("DRILLCOSIM_CACHE")
-    if env:
-        return Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "drillcosim"
 
 
 def default_out() -> Path:
@@ -141,6 +150,17 @@ DEFAULT_OUT = default_out()
 #: adapters import it under this unique, versioned name instead, and the build replaces
 #: ``resources/pythonfmu/`` by it.
 PYTHONFMU_VENDORED = "_dcs_pythonfmu_0_7_0"
+
+#: A TOML reader for Python 3.10 hosts, which have no ``tomllib``: a vendored package that does
+#: ``import tomli as ...`` (plant/scene.py below 3.11) gets this copy instead, so the FMU needs
+#: no ``tomli`` in the host. Staged from the builder's ``tomli`` if installed, else from the
+#: standard library's ``tomllib`` (tomli's code, pure Python, runs on 3.10: tested).
+TOML_VENDORED = "_dcs_tomli"
+
+#: Hex digits of the build hash appended to every shipped module name (see the module docstring).
+BUILD_HASH_LENGTH = 12
+#: The record of a build's hash and module names inside the FMU.
+BUILD_INFO = "resources/dcs_build.json"
 
 #: SI base-unit exponents of the units the FMUs may declare (FMI 2.0 BaseUnit).
 UNIT_DEFINITIONS: dict[str, dict[str, int]] = {
@@ -323,7 +343,7 @@ REGISTRY: tuple[FmuRecipe, ...] = (
         # the numpy reference rhs (tests, benchmarks), the linear/modal analysis and the
         # continuous-time closed loop (study layer): the FMU never imports them (tested)
         exclude=("plant/numpy_rhs.py", "plant/linearize.py", "plant/modal.py",
-                 "plant/closed_loop.py"),
+                 "plant/equilibrium.py", "plant/closed_loop.py"),
     ),
     FmuRecipe(
         name="StateSpaceController",
@@ -348,6 +368,7 @@ def finalize_model_description(
     xml: bytes,
     units: Mapping[str, str],
     direct_feedthrough: Mapping[str, Sequence[str]] | None = None,
+    runtime_note: str = "",
 ) -> bytes:
     """Add units, unit definitions and output dependencies to a modelDescription.
 
@@ -360,6 +381,8 @@ def finalize_model_description(
     direct_feedthrough : mapping of str to sequence of str, optional
         Output name -> names of the inputs it depends on directly. Outputs not
         in the mapping (or all, if None) get no ``dependencies`` attribute.
+    runtime_note : str
+        Appended to the model's ``description`` (e.g. the Python versions it runs in).
 
     Returns
     -------
@@ -372,6 +395,9 @@ def finalize_model_description(
         Unknown variable or unit names, or a dependency that is not an input.
     """
     root = ET.fromstring(xml)
+    if runtime_note:
+        text = root.get("description", "").rstrip()
+        root.set("description", f"{text} {runtime_note}".strip())
     variables = root.find("ModelVariables")
     if variables is None:
         raise ValueError("modelDescription.xml has no <ModelVariables>")
@@ -501,12 +527,74 @@ def _stage_resources(recipe: FmuRecipe, dest: Path) -> list[Path]:
     return sorted(dest.iterdir())
 
 
+def build_hash(folders: Sequence[Path]) -> str:
+    """Hash of every file under ``folders`` (names relative to each folder's parent, bytes;
+    caches left out): :data:`BUILD_HASH_LENGTH` hex digits of SHA-256."""
+    digest = hashlib.sha256()
+    for folder in folders:
+        for path in sorted(p for p in folder.rglob("*") if p.is_file()):
+            if "__pycache__" in path.parts or path.suffix == ".pyc":
+                continue
+            digest.update(path.relative_to(folder.parent).as_posix().encode() + b"\0")
+            digest.update(path.read_bytes() + b"\0")
+    return digest.hexdigest()[:BUILD_HASH_LENGTH]
+
+
+def _rename_modules(staging: Path, names: Mapping[str, str]) -> None:
+    """Ship every canonical module name of ``staging`` under its build name: the package
+    folders and module files are renamed and the names rewritten in every ``.py`` file (whole
+    identifiers only: imports, and the adapters' ``VENDORED_*`` constants)."""
+    pattern = re.compile(r"\b(" + "|".join(map(re.escape, sorted(names, key=len, reverse=True)))
+                         + r")\b")
+    for path in staging.rglob("*.py"):
+        text = path.read_text(encoding="utf-8")
+        new = pattern.sub(lambda m: names[m.group(1)], text)
+        if new != text:
+            path.write_text(new, encoding="utf-8")
+    for old, new in names.items():
+        for src, dst in ((staging / old, staging / new),
+                         (staging / f"{old}.py", staging / f"{new}.py")):
+            if src.exists():
+                src.rename(dst)
+
+
+def _vendor_toml_reader(staging: Path) -> bool:
+    """If a staged module imports ``tomli``, ship a TOML reader as :data:`TOML_VENDORED` and
+    point those imports at it; whether it did."""
+    pattern = re.compile(r"^(\s*)import tomli as ", re.M)
+    users = [p for p in staging.rglob("*.py") if pattern.search(p.read_text(encoding="utf-8"))]
+    if users:
+        import importlib.util
+
+        spec = importlib.util.find_spec("tomli") or importlib.util.find_spec("tomllib")
+        if spec is None or spec.origin is None:
+            raise RuntimeError("the FMU needs a TOML reader for Python 3.10: install tomli")
+        shutil.copytree(Path(spec.origin).parent, staging / TOML_VENDORED,
+                        ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.typed"))
+        for path in users:
+            text = path.read_text(encoding="utf-8")
+            path.write_text(pattern.sub(rf"\1import {TOML_VENDORED} as ", text), encoding="utf-8")
+    return bool(users)
+
+
+def shipped_modules(fmu: Path | str) -> dict[str, str]:
+    """Canonical module name -> the name an FMU of ours ships it under (its build record).
+
+    Raises
+    ------
+    KeyError
+        The FMU has no build record (not built by this build, or before isolated builds).
+    """
+    with zipfile.ZipFile(fmu) as zf:
+        return dict(json.loads(zf.read(BUILD_INFO))["modules"])
+
+
 def _build_in_this_process(recipe: FmuRecipe, workdir: Path) -> Path:
     """Build one FMU into ``workdir/out`` (run in a dedicated subprocess)."""
     import pythonfmu
     from pythonfmu import FmuBuilder
 
-    from drillcosim.fmu_src.wrapper import compile_wrapper, install_native_wrapper
+    from drillcosim.fmu_src.wrapper import compile_wrapper, install_native_wrapper, python_range
 
     staging = workdir / "vendor"
     staging.mkdir(parents=True)
@@ -516,32 +604,48 @@ def _build_in_this_process(recipe: FmuRecipe, workdir: Path) -> Path:
                            f"{PYTHONFMU_VENDORED} (install the pinned version)")
     # the wrapper first: without a compiler nothing else is worth doing
     library = compile_wrapper(workdir / "dcs_fmi2_native.so")
-    # pythonfmu under its vendored name: shipped (runtime), and aliased here so the adapter's
-    # classes derive from the very Fmi2Slave the builder checks for
-    vend_pfmu = staging / PYTHONFMU_VENDORED
-    vend_pfmu.mkdir()
-    for src in Path(pythonfmu.__file__).parent.glob("*.py"):
-        shutil.copy2(src, vend_pfmu / src.name)
-    for name, module in list(sys.modules.items()):
-        if name == "pythonfmu" or name.startswith("pythonfmu."):
-            sys.modules[PYTHONFMU_VENDORED + name[len("pythonfmu"):]] = module
-    project_files: list[Path] = [vend_pfmu]
-    for package, vname in recipe.vendored:
-        _vendor(recipe, package, staging / vname)
-        project_files.append(staging / vname)
-    project_files += _stage_resources(recipe, workdir / "resources")
-
     source = recipe.script_path.read_text()
     if re.search(r"^\s*(from|import)\s+pythonfmu\b", source, re.M):
         raise RuntimeError(f"{recipe.script_path}: import pythonfmu as {PYTHONFMU_VENDORED} "
                            f"(the FMU ships it under that name only)")
-    script = staging / f"{recipe.slave_module}.py"
+
+    # stage under the canonical names: pythonfmu, the vendored packages, the slave module(s)
+    vend_pfmu = staging / PYTHONFMU_VENDORED
+    vend_pfmu.mkdir()
+    for src in Path(pythonfmu.__file__).parent.glob("*.py"):
+        shutil.copy2(src, vend_pfmu / src.name)
+    for package, vname in recipe.vendored:
+        _vendor(recipe, package, staging / vname)
+    canonical = [PYTHONFMU_VENDORED, *(vname for _, vname in recipe.vendored),
+                 recipe.slave_module]
+    if _vendor_toml_reader(staging):
+        canonical.append(TOML_VENDORED)
     if recipe.base:  # the adapter under its own module name, the variant as the slave module
         shutil.copy2(recipe.script_path, staging / f"{recipe.script_module}.py")
-        project_files.append(staging / f"{recipe.script_module}.py")
-        script.write_text(recipe.variant_source())
+        (staging / f"{recipe.slave_module}.py").write_text(recipe.variant_source())
+        canonical.append(recipe.script_module)
     else:
-        shutil.copy2(recipe.script_path, script)
+        shutil.copy2(recipe.script_path, staging / f"{recipe.slave_module}.py")
+    resource_entries = _stage_resources(recipe, workdir / "resources")
+
+    # isolated builds: every module under <canonical>_<hash of all that is shipped>
+    digest = build_hash([staging, workdir / "resources"])
+    names = {name: f"{name}_{digest}" for name in canonical}
+    _rename_modules(staging, names)
+    low, high = python_range()
+    info = workdir / "info" / Path(BUILD_INFO).name
+    info.parent.mkdir()
+    info.write_text(json.dumps({"build": digest, "modules": names,
+                                "cpython": f"3.{low}-3.{high}"}, indent=1) + "\n")
+    project_files = [*sorted(staging.iterdir()), *resource_entries, info]
+
+    # pythonfmu aliased under its shipped name, so the adapter's classes derive from the very
+    # Fmi2Slave the builder checks for
+    for name, module in list(sys.modules.items()):
+        if name == "pythonfmu" or name.startswith("pythonfmu."):
+            sys.modules[names[PYTHONFMU_VENDORED] + name[len("pythonfmu"):]] = module
+    script = staging / f"{names[recipe.slave_module]}.py"
+    project_files.remove(script)
     sys.path.insert(0, str(staging))  # so pythonfmu can import the adapter at build time
     fmu = FmuBuilder.build_FMU(script, dest=workdir / "out",
                                project_files=project_files, **dict(recipe.options))
@@ -550,23 +654,25 @@ def _build_in_this_process(recipe: FmuRecipe, workdir: Path) -> Path:
         raise RuntimeError(f"pythonfmu built {fmu.name}, expected {recipe.name}.fmu: the "
                            f"adapter class must be named {recipe.name}")
 
-    cls = getattr(sys.modules[recipe.slave_module], recipe.name)
+    cls = getattr(sys.modules[names[recipe.slave_module]], recipe.name)
     with zipfile.ZipFile(fmu) as zf:
-        names = set(zf.namelist())
+        members = set(zf.namelist())
         xml = zf.read("modelDescription.xml")
-    xml = finalize_model_description(xml, getattr(cls, "VARIABLE_UNITS", {}),
-                                     getattr(cls, "DIRECT_FEEDTHROUGH", None))
+    xml = finalize_model_description(
+        xml, getattr(cls, "VARIABLE_UNITS", {}), getattr(cls, "DIRECT_FEEDTHROUGH", None),
+        runtime_note=f"[Runs in CPython 3.{low} to 3.{high}: one binary, see "
+                     f"{BUILD_INFO} and drillcosim's docs/interop.md.]")
     _rewrite_zip_member(fmu, "modelDescription.xml", xml)
-    # the generic resources/pythonfmu/ copy goes: the adapter imports PYTHONFMU_VENDORED
+    # the generic resources/pythonfmu/ copy goes: the adapter imports the vendored name
     _drop_zip_members(fmu, "resources/pythonfmu/")
-    names = {n for n in names if not n.startswith("resources/pythonfmu/")}
-    if f"resources/{PYTHONFMU_VENDORED}/fmi2slave.py" not in names:
-        raise RuntimeError(f"{fmu.name}: resources/{PYTHONFMU_VENDORED}/ missing")
-
-    for package, vname in recipe.vendored:
-        if f"resources/{vname}/__init__.py" not in names:
-            raise RuntimeError(f"{fmu.name}: resources/{vname}/ missing")
-        if any(n.startswith(f"resources/{package}/") for n in names):
+    members = {n for n in members if not n.startswith("resources/pythonfmu/")}
+    expected_members = [f"resources/{names[PYTHONFMU_VENDORED]}/fmi2slave.py", BUILD_INFO]
+    expected_members += [f"resources/{names[vname]}/__init__.py" for _, vname in recipe.vendored]
+    for member in expected_members:
+        if member not in members:
+            raise RuntimeError(f"{fmu.name}: {member} missing")
+    for package, _ in recipe.vendored:
+        if any(n.startswith(f"resources/{Path(package).name}/") for n in members):
             raise RuntimeError(f"{fmu.name}: unversioned resources/{package}/ would shadow")
     install_native_wrapper(fmu, recipe.name, library, recipe.requires)
     return fmu
@@ -653,20 +759,20 @@ def build_all(out_dir: Path | str = DEFAULT_OUT,
 def stale(fmu: Path | str, recipe: FmuRecipe) -> bool:
     """Whether ``fmu`` must be (re)built from ``recipe``.
 
-    True if it is missing or unreadable, was made by an earlier build (pythonfmu's binary, or
-    our wrapper before ``resources/python_requires.txt``), was made from another recipe
-    (another slave module: e.g. a variant for another layout under the same name), or is
-    older than any file it is made of (:meth:`FmuRecipe.sources`).
+    True if it is missing or unreadable, was made by an earlier build (pythonfmu's binary, our
+    wrapper before ``resources/python_requires.txt``, or before isolated builds), was made
+    from another recipe (another slave module: e.g. a variant for another layout under the
+    same name), or is older than any file it is made of (:meth:`FmuRecipe.sources`).
     """
     fmu = Path(fmu)
     try:
         with zipfile.ZipFile(fmu) as zf:
-            if "resources/python_requires.txt" not in zf.namelist():
+            if not {"resources/python_requires.txt", BUILD_INFO} <= set(zf.namelist()):
                 return True
-            if zf.read("resources/slavemodule.txt").decode().strip() != recipe.slave_module:
-                return True
+        if recipe.slave_module not in shipped_modules(fmu):
+            return True
         mtime = fmu.stat().st_mtime
-    except (OSError, KeyError, zipfile.BadZipFile):
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
         return True
     return any(p.stat().st_mtime > mtime for p in recipe.sources() if p.is_file())
 

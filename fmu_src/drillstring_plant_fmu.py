@@ -2,23 +2,23 @@
 
 This file is the FMU's slave module. It holds no physics: ``exitInitializationMode``
 builds ``Scene -> PlantParams -> DrillstringModel -> PlantSimulator`` from the
-vendored copy of the ``plant`` package, and ``doStep`` sets the inputs, calls
-``PlantSimulator.do_step`` and writes the outputs. The build (``fmu_src/build.py``)
+vendored copy of the ``plant`` package, and ``doStep`` runs the simulator's compiled
+step (``plant.compiled_step``: the C wrapper calls it without entering Python; it reads
+the inputs and writes the outputs in the shared buffers) or, as the reference and for
+what the compiled step leaves to Python (the first step of a step size, a diverged
+instance, ``DRILLCOSIM_COMPILED_STEP=0``), ``do_step``: it sets the inputs, calls
+``PlantSimulator.do_step`` and writes the outputs; both give the same bits. The build (``fmu_src/build.py``)
 ships ``plant/`` as ``resources/_dcs_plant_0_1_0/`` and the shipped scenes as
 ``resources/scenes/*.toml``. The FMU needs numpy, scipy and numba in the Python it runs in.
 
 Numba cache in a stable place
 -----------------------------
-The kernels are compiled with ``numba.njit(cache=True)``; numba keys its cache by
-the source path, and fmpy (like most importers) unzips every FMU into a new
-temporary folder, which would recompile (~10 s) on every use. At import, the
-vendored package is therefore copied once to a per-user folder named by its
-content hash, ``$DRILLCOSIM_CACHE/_dcs_plant_0_1_0-<sha256[:16]>/`` (default
-``$XDG_CACHE_HOME/drillcosim`` or ``~/.cache/drillcosim``), and imported from
-there. The copy is made in a temporary folder beside it and renamed with
-``os.replace`` (atomic; a concurrent creator that wins the race is accepted).
-If the folder cannot be written, the package is imported from ``resources/``
-(correct, only slower to start) and a warning is logged at instantiation.
+The kernels and the compiled step are numba functions with ``cache=True``; numba keys its
+cache by the source path, and fmpy (like most importers) unzips every FMU into a new temporary
+folder. At import the vendored package is therefore copied once to a per-user folder named by
+its content hash and imported from there (``slave_support.vendored``: ``$DRILLCOSIM_CACHE``,
+default ``~/.cache/drillcosim``); if that folder cannot be written, a warning is logged at
+instantiation and every new unzip folder recompiles.
 
 The wrapper imports this module once per process (``sys.modules``) and the first
 instance's unzip folder may be deleted while later instances run: module-level code
@@ -42,9 +42,11 @@ parameters (all variability fixed: set before ``fmi2ExitInitializationMode``):
     ``scene`` (String, default "paper_open_loop"): a shipped scene name or a path
     to a scene TOML file (its ``extends`` names resolve among the shipped scenes);
     ``model`` (String "auto" | "full3d" | "axial_torsional", default "full3d":
-    "auto" keeps the scene's model); ``max_internal_step`` [s] (0 = automatic: the
-    model's stable RK4 step, or one exponential Euler step a communication step for a
-    linear time-invariant axial-torsional scene; larger values may diverge); and every scalar field of
+    "auto" keeps the scene's model); ``max_internal_step`` [s] (0 = automatic: per
+    communication step the method and stable step of ``DrillstringModel.method_for_step``,
+    or one exponential Euler step a communication step for a linear time-invariant
+    axial-torsional scene; a value > 0 means RK4 at that step bound, and larger values may
+    diverge); and every scalar field of
     ``PlantParams`` flattened as ``section.field`` (``pipe.n_segments``,
     ``contact.stiffness``, ``gravity``, ...), Real/Integer/Boolean with the unit
     and description of the field metadata and start = the ``PlantParams`` default.
@@ -102,8 +104,9 @@ Error handling (the wrapper's status protocol, see ``fmu_src/slave_support``)
 * an unexpected exception -> fmi2Error, the instance stays usable. Never fmi2Fatal.
 
 The inputs and outputs live in the shared buffers ``self.inputs`` / ``self.outputs``: in
-step mode the wrapper moves them without Python, and a doStep is one Python call that
-integrates and writes the outputs in place.
+step mode the wrapper moves them without Python, and a doStep is one call of the compiled
+step (:meth:`_fmi2_compiled_step`; its failure codes come back to
+:meth:`_fmi2_compiled_step_failed`, which reports the status and message ``do_step`` gives).
 
 FMU state: ``_get_fmu_state`` / ``_set_fmu_state`` add the simulator's time, state
 vector and held inputs (JSON-safe floats, so serialisation is bit-exact) to
@@ -114,13 +117,8 @@ from the instance's rebuilds the model first.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import importlib
 import math
-import os
-import shutil
 import sys
-import tempfile
 import traceback
 from dataclasses import MISSING, fields
 from pathlib import Path
@@ -140,6 +138,7 @@ from _dcs_pythonfmu_0_7_0 import (
 )
 from _dcs_pythonfmu_0_7_0.enums import Fmi2Status
 from _dcs_slave_support_0_1_0 import DcsSlave
+from _dcs_slave_support_0_1_0.vendored import import_vendored
 
 #: Name under which the build vendors ``plant/`` into this FMU's resources.
 VENDORED_PLANT = "_dcs_plant_0_1_0"
@@ -149,108 +148,18 @@ MODEL_CHOICES: tuple[str, ...] = ("auto", "full3d", "axial_torsional")
 INPUTS: tuple[str, ...] = (
     "actuator1_force_C", "actuator1_force_E", "actuator2_force_C", "actuator2_force_E")
 
-_COMPLETE = "COMPLETE"  # marker written last into a stable copy
 _SIM_KEY = "__dcs_plant_sim__"
-#: Internal step [s] of every (PlantParams, model kind, max_internal_step) built in this
-#: process: the automatic one costs an eigenvalue problem (~50 ms for 30 bodies) that a second
-#: instance with the same parameters (a sweep, a re-run) need not repeat. A pure function of
-#: the key, so results are unchanged.
-_STABLE_STEPS: dict[tuple[Any, ...], float] = {}
 _MODE_KEY = "__dcs_mode__"
 _ERRORS_KEY = "__dcs_errors__"
 
 
-# ------------------------------------------------------------ vendored package
-def _package_source() -> Path:
-    """Folder of the vendored ``plant`` copy: ``resources/`` in the FMU, staging at build."""
-    here = Path(__file__).resolve().parent / VENDORED_PLANT
-    if (here / "__init__.py").is_file():
-        return here
-    for entry in sys.path:  # build time: the build puts its staging folder on sys.path
-        cand = Path(entry or ".") / VENDORED_PLANT
-        if (cand / "__init__.py").is_file():
-            return cand.resolve()
-    raise ImportError(f"vendored package {VENDORED_PLANT} not found beside {__file__}")
-
-
-def _content_hash(src: Path) -> str:
-    """SHA-256 (hex) over the relative paths and bytes of the package's ``.py`` files."""
-    digest = hashlib.sha256()
-    for path in sorted(src.rglob("*.py")):
-        if "__pycache__" in path.parts:
-            continue
-        digest.update(path.relative_to(src).as_posix().encode() + b"\0")
-        digest.update(path.read_bytes() + b"\0")
-    return digest.hexdigest()
-
-
-def cache_root() -> Path:
-    """Per-user folder of the stable package copies: $DRILLCOSIM_CACHE or ~/.cache/drillcosim."""
-    env = os.environ.get("DRILLCOSIM_CACHE")
-    if env:
-        return Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "drillcosim"
-
-
-def stable_copy(src: Path) -> Path:
-    """Copy the package once to ``cache_root()/<name>-<hash>/<name>/``; return the parent.
-
-    Atomic: the copy is built in a temporary folder and renamed with ``os.replace``;
-    if another process created the folder first, its (complete) copy is used.
-
-    Raises
-    ------
-    OSError
-        If the cache folder cannot be created or written.
-    """
-    final = cache_root() / f"{VENDORED_PLANT}-{_content_hash(src)[:16]}"
-    if (final / _COMPLETE).is_file():
-        return final
-    final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}-", dir=final.parent))
-    try:
-        shutil.copytree(src, tmp / VENDORED_PLANT,
-                        ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
-        (tmp / _COMPLETE).write_text(str(src) + "\n")
-        try:
-            os.replace(tmp, final)
-        except OSError:
-            if not (final / _COMPLETE).is_file():  # not a lost race: a real problem
-                raise
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return final
-
-
-def _import_plant() -> tuple[Any, str]:
-    """Import the vendored package from its stable copy; return (package, warning)."""
-    warning = ""
-    if VENDORED_PLANT not in sys.modules:
-        src = _package_source()
-        try:
-            base = stable_copy(src)
-        except OSError as exc:
-            base = src.parent
-            warning = (f"cannot write the numba cache folder {cache_root()} ({exc}); "
-                       f"importing {VENDORED_PLANT} from {src.parent}: every new unzip "
-                       f"folder recompiles the kernels (set $DRILLCOSIM_CACHE)")
-        sys.path.insert(0, str(base))
-        try:
-            importlib.import_module(VENDORED_PLANT)
-            for sub in ("params", "scene", "model", "simulator", "observables"):
-                importlib.import_module(f"{VENDORED_PLANT}.{sub}")
-        finally:
-            sys.path.remove(str(base))  # submodules resolve through the package's __path__
-    return sys.modules[VENDORED_PLANT], warning
-
-
-_PLANT, _IMPORT_WARNING = _import_plant()
+_PLANT, _IMPORT_WARNING = import_vendored(
+    VENDORED_PLANT, __file__, ("params", "scene", "model", "simulator", "signals"))
 _params_mod = sys.modules[f"{VENDORED_PLANT}.params"]
 _scene_mod = sys.modules[f"{VENDORED_PLANT}.scene"]
 _model_mod = sys.modules[f"{VENDORED_PLANT}.model"]
 _sim_mod = sys.modules[f"{VENDORED_PLANT}.simulator"]
-_obs_mod = sys.modules[f"{VENDORED_PLANT}.observables"]
+_signals_mod = sys.modules[f"{VENDORED_PLANT}.signals"]
 
 
 def scenes_folder(resources: str | None = None) -> Path:
@@ -312,7 +221,8 @@ def _declared_outputs() -> list[tuple[str, str, str]]:
     ``PlantParams`` defaults (a test checks), so no scene file is read here.
     """
     plant = _params_mod.PlantParams()
-    return _obs_mod.output_names(True, list(plant.contact_bodies), len(plant.actuator_joints))
+    return _signals_mod.plant_outputs(True, list(plant.contact_bodies),
+                                      len(plant.actuator_joints))
 
 
 PARAMETERS = _parameter_table()
@@ -428,6 +338,8 @@ class DrillstringPlant(DcsSlave):
         self._built_key: tuple[Any, ...] | None = None
         self._init_error: str | None = None  # invalid parameters: every doStep refused
         self._halted: str | None = None  # divergence, until a state is restored
+        self._step: Any = None  # the compiled step of self._step_sim (None: none)
+        self._step_sim: Any = None
         self._scenes = scenes_folder(self.resources)
 
         cont, fixed = Fmi2Variability.continuous, Fmi2Variability.fixed
@@ -449,8 +361,9 @@ class DrillstringPlant(DcsSlave):
                          "(the scene's choice)")))
         self.register_variable(_Real(
             "max_internal_step", causality=param, variability=fixed,
-            description=("Upper bound of the internal step; 0 = automatic (RK4 at the model's "
-                         "stable step, or one exact exponential step for a linear "
+            description=("Upper bound of the internal step; 0 = automatic (per communication "
+                         "step the method with the fewest right-hand sides at its stable step, "
+                         "RK4 or Kutta's 3rd order, or one exact exponential step for a linear "
                          "time-invariant axial-torsional scene)")))
         for name, _sec, _field, default, unit, doc, integer in PARAMETERS:
             getter, setter = _accessors(self._values, name)
@@ -539,9 +452,7 @@ class DrillstringPlant(DcsSlave):
                 f"scene {self.scene!r} with model = {self.model!r} builds the {model.kind} model "
                 f"whose inputs are [{', '.join(acting)}]; this FMU's inputs are "
                 f"[{', '.join(declared)}]: {fix}")
-        key = (scene.plant, scene.model, step)
-        sim = _sim_mod.PlantSimulator(model, _STABLE_STEPS.get(key, None if step == 0.0 else step))
-        _STABLE_STEPS.setdefault(key, sim.max_step)
+        sim = _sim_mod.PlantSimulator(model, None if step == 0.0 else step)
         sim.time = float(self._start_time)
         self._out_index = np.array([model.output_names.index(n) for n in self.REAL_OUTPUTS])
         self._in_index = np.array([model.input_names.index(n) for n in declared],
@@ -599,7 +510,10 @@ class DrillstringPlant(DcsSlave):
         else:
             self._u.put(self._in_index, self.inputs)
             sim.set_inputs(self._u)
-        result = sim.do_step(t, h)
+        return self._outcome(sim.do_step(t, h), t, h)
+
+    def _outcome(self, result: Any, t: float, h: float) -> None:
+        """Outputs of a successful step; the status and message of a failed one."""
         if not result.ok:
             if not result.quantity:  # refused before integrating: state unchanged
                 return self._error(result.message)
@@ -609,6 +523,28 @@ class DrillstringPlant(DcsSlave):
                                Fmi2Status.discard)
         self._write_outputs()
         return None
+
+    # ------------------------------------------------------------ compiled step
+    def _fmi2_compiled_step(self) -> tuple[int, int] | None:
+        """The simulator's compiled step for the wrapper (``plant.compiled_step``), or None:
+        no valid model, diverged (every later doStep is discarded in Python), or none for the
+        method or switched off (``DRILLCOSIM_COMPILED_STEP=0``)."""
+        sim = self._sim
+        if sim is None or self._init_error is not None or self._halted is not None:
+            return None
+        if self._step_sim is not sim:
+            self._step_sim = sim
+            self._step = sim.compiled_step(self.inputs, self._in_index, self.outputs,
+                                           self._out_index)
+        step = self._step
+        if step is None:
+            return None
+        step.refresh()
+        return step.function, step.context
+
+    def _fmi2_compiled_step_failed(self, code: int, t: float, h: float) -> None:
+        """Status and message of a compiled step that returned ``code`` (as :meth:`do_step`)."""
+        return self._outcome(self._step.finish(code, t, h), t, h)
 
     # ----------------------------------------------------------------- access
     def _access_problem(self, vr: int, kind: type, call: str) -> str | None:

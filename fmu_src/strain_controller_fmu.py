@@ -5,7 +5,11 @@ inputs, calls the vendored copy of the ``controller`` package and writes the
 outputs. The build (``fmu_src/build.py``) ships ``controller/`` inside the FMU as
 ``resources/_dcs_controller_0_1_0/`` and imports it under that name, so the FMU
 runs in a Python that has only numpy, and it never shadows (nor is shadowed by) a
-``controller`` package imported by the host process.
+``controller`` package imported by the host process. Where numba is installed the
+package is imported from a stable per-user copy (``slave_support.vendored``), and where
+numba is loaded in the process (by the plant FMU, in the main job) the law's compiled step
+(``controller.compiled``) runs every doStep without entering Python
+(``slave_support.LawSlave``); ``DRILLCOSIM_COMPILED_STEP=0`` switches it off.
 
 Interface (value references follow the registration order below)
 -----------------------------------------------------------------
@@ -51,7 +55,8 @@ Error handling (the wrapper's status protocol, see ``fmu_src/slave_support``)
 * an unexpected exception -> fmi2Error, the instance stays usable. Never fmi2Fatal.
 
 The Real inputs and outputs live in the shared buffers ``self.inputs`` / ``self.outputs``:
-in step mode the wrapper moves them without Python, and ``fmi2DoStep`` is one Python call.
+in step mode the wrapper moves them without Python, and ``fmi2DoStep`` calls the law's
+compiled step (or, without numba, is one Python call); both give the same bits.
 
 FMU state (``fmi2Get/SetFMUstate``, serialisable): pythonfmu's default saves the
 registered variables only (here including the buffered inputs and outputs);
@@ -64,8 +69,6 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-from _dcs_controller_0_1_0 import MODES, ControllerParams
-from _dcs_controller_0_1_0 import StrainController as StrainLaw
 from _dcs_pythonfmu_0_7_0 import (
     Boolean,
     DefaultExperiment,
@@ -75,10 +78,19 @@ from _dcs_pythonfmu_0_7_0 import (
     Integer,
     Real,
 )
+from _dcs_pythonfmu_0_7_0.enums import Fmi2Status
 from _dcs_slave_support_0_1_0 import LawSlave
+from _dcs_slave_support_0_1_0.vendored import import_vendored
 
 #: Name under which the build vendors ``controller/`` into this FMU's resources.
 VENDORED_CONTROLLER = "_dcs_controller_0_1_0"
+# from a stable copy where numba can compile the law's step (its cache needs a fixed path)
+_CONTROLLER, _IMPORT_WARNING = import_vendored(VENDORED_CONTROLLER, __file__, only_with="numba")
+from _dcs_controller_0_1_0 import (  # noqa: E402 - imported above from its stable copy
+    MODES,
+    ControllerParams,
+)
+from _dcs_controller_0_1_0 import StrainController as StrainLaw  # noqa: E402
 
 
 def _io_names(n_sites: int) -> tuple[tuple[str, ...], tuple[str, ...]]:
@@ -202,6 +214,8 @@ class StrainController(LawSlave):
             description="false = open loop (zero force at all times)"))
         if self.GAIN_MATRIX is not None:
             self._register_matrix()
+        if _IMPORT_WARNING:
+            self.log(f"{self.instance_name}: {_IMPORT_WARNING}", status=Fmi2Status.warning)
 
     def _register_matrix(self) -> None:
         """The tunable relative gains ``gain_matrix_<i>_<j>`` [1], start = the layout's."""

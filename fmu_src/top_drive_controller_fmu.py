@@ -5,7 +5,9 @@ measured drive speed and top torque, calls the vendored copy of the ``controller
 (:class:`controller.TopDriveController`, shipped as ``resources/_dcs_controller_0_1_0/``)
 and writes the motor torque. It drives a plant FMU whose top drive is in mode ``"torque"``
 (``[top_drive] mode = "torque"``; ``drillcosim build --scene SCENE`` builds that plant with
-the input ``top_drive_torque``).
+the input ``top_drive_torque``). Where numba is loaded in the process (by the plant FMU),
+every doStep runs the law's compiled step (``controller.compiled``, ``slave_support.LawSlave``)
+without entering Python.
 
 Interface (value references follow the registration order below)
 -----------------------------------------------------------------
@@ -31,8 +33,6 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-from _dcs_controller_0_1_0 import TopDriveController as TopDriveLaw
-from _dcs_controller_0_1_0 import TopDriveControllerParams
 from _dcs_pythonfmu_0_7_0 import (
     Boolean,
     DefaultExperiment,
@@ -41,10 +41,18 @@ from _dcs_pythonfmu_0_7_0 import (
     Fmi2Variability,
     Real,
 )
+from _dcs_pythonfmu_0_7_0.enums import Fmi2Status
 from _dcs_slave_support_0_1_0 import LawSlave
+from _dcs_slave_support_0_1_0.vendored import import_vendored
 
 #: Name under which the build vendors ``controller/`` into this FMU's resources.
 VENDORED_CONTROLLER = "_dcs_controller_0_1_0"
+# from a stable copy where numba can compile the law's step (its cache needs a fixed path)
+_CONTROLLER, _IMPORT_WARNING = import_vendored(VENDORED_CONTROLLER, __file__, only_with="numba")
+from _dcs_controller_0_1_0 import (  # noqa: E402 - imported above from its stable copy
+    TopDriveController as TopDriveLaw,
+)
+from _dcs_controller_0_1_0 import TopDriveControllerParams  # noqa: E402
 
 INPUTS: tuple[str, ...] = ("top_rotary_speed", "top_torque")
 OUTPUTS: tuple[str, ...] = ("top_drive_torque",)
@@ -104,6 +112,8 @@ class TopDriveController(LawSlave):
         self.register_variable(Boolean("enabled", causality=param,
                                        variability=Fmi2Variability.fixed,
                                        description="false = zero motor torque at all times"))
+        if _IMPORT_WARNING:
+            self.log(f"{self.instance_name}: {_IMPORT_WARNING}", status=Fmi2Status.warning)
 
     def _params_from_variables(self) -> TopDriveControllerParams:
         """Validated parameters from the FMU variables (ValueError naming a bad one)."""

@@ -49,6 +49,7 @@ from .kernels import (
 from .layout import GAUGE_R, HALF
 from .model import DrillstringModel
 from .params import _check_range
+from .signals import site_channels, strain
 from .simulator import PlantSimulator, StepResult
 
 __all__ = ["INTERPOLATIONS", "StrainLaw", "ClosedLoopRun", "ClosedLoopSimulator"]
@@ -482,8 +483,8 @@ class ClosedLoopSimulator:
             up, um = u0.copy(), u0.copy()
             up[c], um[c] = 1.0, -1.0
             Bu[:, c] = 0.5 * (m.rhs(0.0, y0, up) - m.rhs(0.0, y0, um))
-        idx = [m.output_names.index(f"strain{s}_{a}") for s in range(1, m.n_sites + 1)
-               for a in "CE"]
+        idx = [m.output_names.index(strain(s, a))
+               for s, a in site_channels(range(1, m.n_sites + 1))]
         E = np.zeros((M, m.n_state))
         yp = y0.copy()
         for i in sorted(set(self._angle_indices())):

@@ -22,12 +22,15 @@ STRAIN = 5  # index: joint (below body index+1); value: bending strain [1]
 
 
 @njit(cache=True)
-def check_state(full3d, n, y, max_lateral, max_tilt, max_speed, max_strain, strain_factor, wR):
+def check_state(full3d, n, y, max_lateral, max_tilt, max_speed, max_strain, strain_factor, wR,
+                rotations_ready=False):
     """First violation in ``y`` (see the module docstring); wR is (n+1, 3, 3) scratch.
 
     ``strain_factor`` = gauge radius / dx turns a relative bending angle into strain. Every
     state must be finite; the speed limit applies to the bodies' velocity block (the auxiliary
     states after the ``12 n`` or ``4 n`` body states are checked for finiteness only).
+    ``rotations_ready``: ``wR[:n]`` already holds the bodies' rotation matrices of ``y`` (the
+    output kernel computed them with the same ``cardan``): not computed again.
     """
     N = y.size
     for i in range(N):
@@ -49,7 +52,8 @@ def check_state(full3d, n, y, max_lateral, max_tilt, max_speed, max_strain, stra
         ph = abs(y[oA + 3 * k + 2])
         if th > max_tilt or ph > max_tilt:
             return TILT, k, max(th, ph)
-        cardan(y[oA + 3 * k], y[oA + 3 * k + 1], y[oA + 3 * k + 2], wR[k])
+        if not rotations_ready:
+            cardan(y[oA + 3 * k], y[oA + 3 * k + 1], y[oA + 3 * k + 2], wR[k])
     Rrel = wR[n]
     for a in range(n - 1):
         relative_rotation(wR[a], wR[a + 1], Rrel)

@@ -11,6 +11,7 @@ must not straddle a switch time, which callers ensure with :func:`next_breakpoin
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -55,10 +56,52 @@ def advance_rk4(model, t0, y, n_steps, dt, p, ip, fp, u, wR, wF, wM, k1, k2, k3,
     return n_steps
 
 
+@njit(cache=_CACHE)
+def advance_erk(model, t0, y, n_steps, dt, A, b, c, K, yt, p, ip, fp, u, wR, wF, wM):
+    """An explicit Runge-Kutta method given by its Butcher tableau, in place.
+
+    ``A`` (s, s) strictly lower triangular, weights ``b`` (s,), nodes ``c`` (s,) (one of
+    :data:`METHODS`); ``K`` (>= s, N) stage scratch, ``yt`` scratch like ``y``. Stage ``i``:
+    ``K[i] = rhs(t + c_i dt, y + sum_j (dt a_ij) K[j])``; ``y1 = y + sum_i (dt b_i) K[i]``,
+    each sum term by term over whole rows (contiguous, vectorised loops). Returns the number of
+    completed steps like :func:`advance_rk4`.
+    """
+    N = y.size
+    S = b.size
+    for s in range(n_steps):
+        t = t0 + s * dt
+        set_load_modes(ip, fp, t + 0.5 * dt)
+        for st in range(S):
+            for i in range(N):
+                yt[i] = y[i]
+            for j in range(st):
+                a = dt * A[st, j]
+                if a != 0.0:
+                    kj = K[j]
+                    for i in range(N):
+                        yt[i] += a * kj[i]
+            rhs(model, t + c[st] * dt, yt, K[st], p, ip, fp, u, wR, wF, wM)
+        for j in range(S):
+            w = dt * b[j]
+            if w != 0.0:
+                kj = K[j]
+                for i in range(N):
+                    y[i] += w * kj[i]
+        if (s & 63) == 63 and not _all_finite(y):
+            return s
+    if not _all_finite(y):
+        return n_steps - 1
+    return n_steps
+
+
 # Stability limits |lambda dt| on the boundary of each method's region, used with a safety
 # factor by the automatic step choice (RK4: 2.785 on the negative real axis, 2.828 on the
 # imaginary axis; the minimum over the left half plane directions is ~2.6).
 RK4_STABILITY_RADIUS = 2.6
+# Every 3-stage, 3rd-order explicit Runge-Kutta method has the stability polynomial
+# 1 + z + z^2/2 + z^3/6: sqrt(3) = 1.732 on the imaginary axis (its minimum over the left half
+# plane directions), 2.51 on the negative real axis.
+RK3_STABILITY_RADIUS = 1.7
 # Velocity Verlet with the damping forces at the predicted velocity (lam = 1): with the
 # stiffness-proportional damping of the chain's highest (overdamped torsional) mode the step is
 # stable up to |lambda_max| dt ~ 0.79 (scalar mode analysis; measured on the n = 30 chain: stable at
@@ -466,3 +509,103 @@ def exponential_matrices(A, dt: float):
     P2 = np.ascontiguousarray(E[:N, 2 * N:] / dt)
     Q = np.ascontiguousarray(P2 @ eA)
     return P1, P2, Q
+
+
+# ---------------------------------------------------------------------------------------------
+# The table of fixed-step methods (data; tests/test_integrator_table.py checks its invariants:
+# order conditions of the tableaus, the order measured on a linear test problem, the stability
+# radii against each method's stability polynomial).
+
+KERNEL_RK4 = 0  # advance_rk4
+KERNEL_ERK = 1  # advance_erk with the method's tableau
+KERNEL_VERLET = 2  # advance_verlet
+KERNEL_EXPEULER = 3  # advance_expeuler
+KERNEL_ETD2 = 4  # advance_etd2
+
+
+@dataclass(frozen=True)
+class Method:
+    """A fixed-step integrator of :data:`METHODS`.
+
+    Attributes
+    ----------
+    name : str
+    kernel : int
+        Which compiled ``advance_*`` runs it (``KERNEL_*``).
+    stages : int
+        Right-hand side evaluations a step (the cost unit).
+    order : int
+        Classical order of convergence.
+    radius : float or None
+        Stability bound ``|lambda| dt`` of the automatic step (:func:`stable_step`), at most the
+        distance from 0 to the boundary of the stability region in every left-half-plane
+        direction; ``None``: no stability limit (exponential integrators); ``0``: the region
+        holds no segment of the imaginary axis, so no automatic step exists (give ``max_step``).
+    tableau : tuple of numpy.ndarray or None
+        ``(A, b, c)`` of an explicit Runge-Kutta method.
+    automatic : tuple of str
+        The model kinds for which it is a candidate of the automatic choice per communication
+        step (:meth:`plant.model.DrillstringModel.method_for_step`): it met the accuracy bar
+        of ``BENCHMARKS.md`` ("Integrator at the communication step",
+        ``benchmarks/bench_fixed_step.py``, which checks these marks) at its automatic step on
+        every smooth benchmark scene of that kind. Only methods with an automatic step
+        (``radius > 0``: an imaginary-axis interval, which the lightly damped modes need).
+    """
+
+    name: str
+    kernel: int
+    stages: int
+    order: int
+    radius: float | None
+    tableau: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    automatic: tuple[str, ...] = ()
+
+
+def _tableau(A, b, c) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return (np.array(A, dtype=float), np.array(b, dtype=float), np.array(c, dtype=float))
+
+
+#: The fixed-step methods by name. Explicit Runge-Kutta tableaus: Hairer, Norsett & Wanner,
+#: "Solving ODEs I", II.1 (Kutta 1901, Heun 1900, Ralston 1962); SSPRK3: Shu & Osher 1988.
+METHODS: dict[str, Method] = {m.name: m for m in (
+    Method("rk4", KERNEL_RK4, 4, 4, RK4_STABILITY_RADIUS,
+           _tableau([[0, 0, 0, 0], [0.5, 0, 0, 0], [0, 0.5, 0, 0], [0, 0, 1, 0]],
+                    [1 / 6, 1 / 3, 1 / 3, 1 / 6], [0, 0.5, 0.5, 1]),
+           automatic=("full3d", "axial_torsional")),
+    # Kutta's 3rd-order method: like RK4 it samples the forcing at t, t + h/2, t + h with
+    # Simpson's weights and satisfies the linear 4th-order condition b.A.c^2 = 1/12, so the
+    # prescribed bit motion of the 3D scenes is integrated to RK4's accuracy with 3 stages
+    # (BENCHMARKS.md); on the axial-torsional pulse scene it misses the bar (2.5e-4).
+    Method("kutta3", KERNEL_ERK, 3, 3, RK3_STABILITY_RADIUS,
+           _tableau([[0, 0, 0], [0.5, 0, 0], [-1, 2, 0]], [1 / 6, 2 / 3, 1 / 6], [0, 0.5, 1]),
+           automatic=("full3d",)),
+    Method("ralston3", KERNEL_ERK, 3, 3, RK3_STABILITY_RADIUS,
+           _tableau([[0, 0, 0], [0.5, 0, 0], [0, 0.75, 0]], [2 / 9, 1 / 3, 4 / 9],
+                    [0, 0.5, 0.75])),
+    Method("ssprk3", KERNEL_ERK, 3, 3, RK3_STABILITY_RADIUS,
+           _tableau([[0, 0, 0], [1, 0, 0], [0.25, 0.25, 0]], [1 / 6, 1 / 6, 2 / 3],
+                    [0, 1, 0.5])),
+    Method("heun2", KERNEL_ERK, 2, 2, 0.0, _tableau([[0, 0], [1, 0]], [0.5, 0.5], [0, 1])),
+    Method("ralston2", KERNEL_ERK, 2, 2, 0.0,
+           _tableau([[0, 0], [2 / 3, 0]], [0.25, 0.75], [0, 2 / 3])),
+    Method("verlet", KERNEL_VERLET, 1, 2, VERLET_STABILITY_RADIUS),
+    Method("expeuler", KERNEL_EXPEULER, 1, 1, None),
+    Method("etd2", KERNEL_ETD2, 2, 2, None),
+)}
+
+
+def stability_function(method: Method, z: np.ndarray) -> np.ndarray:
+    """``R(z)`` of an explicit Runge-Kutta method: ``y1 = R(lambda dt) y0`` on ``y' = lambda y``.
+
+    ``R(z) = 1 + z b^T (I - z A)^{-1} 1 = 1 + sum_k z^k b^T A^(k-1) 1`` (A nilpotent).
+    """
+    if method.tableau is None:
+        raise ValueError(f"method {method.name!r} has no Runge-Kutta tableau")
+    A, b, _c = method.tableau
+    z = np.asarray(z, dtype=complex)
+    out = np.ones_like(z)
+    v = np.ones(b.size)
+    for k in range(1, b.size + 1):
+        out = out + z**k * float(b @ v)
+        v = A @ v
+    return out

@@ -111,7 +111,7 @@ IP_TD = 6  # top-drive mode: TD_PRESCRIBED, TD_SPEED, TD_TORQUE
 IP_TDX = 7  # index of the top-drive angle in y (speed: + 1) or -1
 IP_BIT = 8  # bit mode (BIT_PRESCRIBED)
 IP_BITX = 9  # index of the bit's auxiliary state in y or -1
-IP_XOUT = 10  # 1: the outputs include the extensions' (observables.output_names(extended=True))
+IP_XOUT = 10  # 1: the outputs include the extensions' (signals.plant_outputs(extended=True))
 IP_HDR = 11
 
 # top-drive modes (params.TOP_DRIVE_MODES order)

@@ -22,10 +22,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .equilibrium import static_equilibrium
 from .kernels import top_drive
 from .layout import OMEGA0, T_RAMP
 from .model import DrillstringModel
 from .params import PlantParams
+from .signals import site_channels, strain
 
 __all__ = ["LinearModel", "operating_params", "linearize", "inertial_lateral_eigenvalue"]
 
@@ -113,8 +115,8 @@ def _rotating_rhs(model: DrillstringModel, t: float, xr: np.ndarray,
 def _strains(model: DrillstringModel, t: float, xr: np.ndarray) -> np.ndarray:
     alpha, _ = top_drive(t, model.p[OMEGA0], model.p[T_RAMP])
     out = model.outputs(t, _to_inertial(model, xr, alpha))
-    idx = [model.output_names.index(f"strain{s}_{a}")
-           for s in range(1, model.n_sites + 1) for a in "CE"]
+    idx = [model.output_names.index(strain(s, a))
+           for s, a in site_channels(range(1, model.n_sites + 1))]
     return out[idx].copy()
 
 
@@ -139,7 +141,6 @@ def linearize(params: PlantParams, kind: str = "full3d", spin: float | None = No
     -------
     LinearModel
     """
-    from .modal import static_equilibrium
 
     prm = operating_params(params)
     if spin is not None:

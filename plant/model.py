@@ -29,9 +29,14 @@ from . import kernels as kern
 from . import layout as lay
 from .beam_fe import pinned_beam_frequencies
 from .integrators import (
-    RK4_STABILITY_RADIUS,
-    VERLET_STABILITY_RADIUS,
+    KERNEL_ERK,
+    KERNEL_ETD2,
+    KERNEL_EXPEULER,
+    KERNEL_RK4,
+    KERNEL_VERLET,
+    METHODS,
     advance_dopri5,
+    advance_erk,
     advance_etd2,
     advance_expeuler,
     advance_rk4,
@@ -41,8 +46,16 @@ from .integrators import (
     exponential_matrices,
     stable_step,
 )
-from .observables import output_names, outputs3d, outputs_at
+from .observables import outputs3d, outputs_at
 from .params import BIT_MODELS, TOP_DRIVE_MODES, PlantParams
+from .signals import (
+    TOP_DRIVE_SPEED_COMMAND,
+    TOP_DRIVE_TORQUE,
+    actuator_force,
+    actuator_inputs,
+    plant_outputs,
+    site_channels,
+)
 
 __all__ = ["DrillstringModel", "FIXED_STEP_METHODS", "ModelKind", "extensions", "needs_lateral",
            "series"]
@@ -52,9 +65,14 @@ ModelKind = str  # "full3d" | "axial_torsional"
 _EXPM_CACHE_SIZE = 8
 MODEL_KINDS = ("full3d", "axial_torsional")
 # Fixed-step methods of :meth:`DrillstringModel.advance` and their stability radius |lambda dt|
-# (None: no stability limit; exponential integrators treat the linear part exactly).
-FIXED_STEP_METHODS = {"rk4": RK4_STABILITY_RADIUS, "verlet": VERLET_STABILITY_RADIUS,
-                      "expeuler": None, "etd2": None}
+# (None: no stability limit; exponential integrators treat the linear part exactly; 0: none
+# automatic). The table itself: :data:`plant.integrators.METHODS`.
+FIXED_STEP_METHODS = {name: m.radius for name, m in METHODS.items()}
+#: Spectral radius [1/s] (with margins) of every (parameters, model kind) built in this process:
+#: it costs an eigenvalue problem (~50 ms for 30 bodies) that another model of the same
+#: parameters (a second FMU instance, a sweep point, a re-run) need not repeat. A pure function
+#: of the key, so results are unchanged.
+_SPECTRAL_RADII: dict[tuple[PlantParams, str], float] = {}
 
 
 def series(k_boundary: float, k_half: float) -> float:
@@ -189,7 +207,7 @@ class DrillstringModel:
         DOFs (see :func:`needs_lateral`).
     extended_outputs : bool, optional
         List the outputs of the extensions beyond the paper (whirl speed and direction per
-        contact body, ...; :func:`plant.observables.output_names`). Default: when one of them
+        contact body, ...; :func:`plant.signals.plant_outputs`). Default: when one of them
         is active (:func:`extensions`), so that the paper's scenes keep the paper's interface.
     """
 
@@ -222,10 +240,12 @@ class DrillstringModel:
         self.wR = np.zeros((n + 1, 3, 3))
         self.wF = np.zeros((n, 3))
         self.wM = np.zeros((n, 3))
-        self._scratch = [np.zeros(self.n_state) for _ in range(5)]
+        #: integrator scratch, shape (5, n_state): stages k1..k4 and a trial state
+        self.work = np.zeros((5, self.n_state))
+        self._scratch = list(self.work)
         self.verlet_lambda = 1.0  # velocity predictor of the Verlet damping forces (0.5 .. 1)
-        names = output_names(kind == "full3d", list(self.contact_bodies), self.n_sites,
-                             extended=self.extended_outputs)
+        names = plant_outputs(kind == "full3d", list(self.contact_bodies), self.n_sites,
+                              extended=self.extended_outputs)
         self.input_names, self.input_units, self.input_docs = self._input_layout()
         self.n_inputs = len(self.input_names)
         #: the inputs that act on this model, in input order: the actuator forces only in the
@@ -260,7 +280,7 @@ class DrillstringModel:
 
     def _actuator_inputs(self) -> list[str]:
         """Names of the actuator force inputs, two per site (C, E)."""
-        return [f"actuator{s}_force_{a}" for s in range(1, self.n_sites + 1) for a in "CE"]
+        return actuator_inputs(self.n_sites)
 
     def _input_layout(self) -> tuple[list[str], dict[str, str], dict[str, str]]:
         """Names, units and descriptions of the entries of the input vector ``u``.
@@ -269,22 +289,22 @@ class DrillstringModel:
         (``top_drive_speed_command`` [rad/s]) and "torque" (``top_drive_torque`` [N m]).
         """
         names, units, docs = [], {}, {}
-        for nm in self._actuator_inputs():
-            s, a = nm[len("actuator"):].split("_force_")
+        for s, a in site_channels(range(1, self.n_sites + 1)):
+            nm = actuator_force(s, a)
             names.append(nm)
             units[nm] = "N"
             docs[nm] = (f"actuator force at {a} of site {s}, > 0 opposing a positive strain "
                         f"(a bending couple of arm {self.p[lay.ACT_ARM]:g} m)")
         mode = self.params.top_drive.mode
         if mode == "speed":
-            names.append("top_drive_speed_command")
-            units["top_drive_speed_command"] = "rad/s"
-            docs["top_drive_speed_command"] = ("rotary speed of the top drive (an ideal speed "
+            names.append(TOP_DRIVE_SPEED_COMMAND)
+            units[TOP_DRIVE_SPEED_COMMAND] = "rad/s"
+            docs[TOP_DRIVE_SPEED_COMMAND] = ("rotary speed of the top drive (an ideal speed "
                                                "source; replaces the prescribed ramp)")
         elif mode == "torque":
-            names.append("top_drive_torque")
-            units["top_drive_torque"] = "N m"
-            docs["top_drive_torque"] = ("motor torque on the top-drive rotor (inertia "
+            names.append(TOP_DRIVE_TORQUE)
+            units[TOP_DRIVE_TORQUE] = "N m"
+            docs[TOP_DRIVE_TORQUE] = ("motor torque on the top-drive rotor (inertia "
                                         f"{self.params.top_drive.inertia:g} kg m^2)")
         return names, units, docs
 
@@ -526,9 +546,13 @@ class DrillstringModel:
         """Spectral radius [1/s] of the Jacobian at the initial state, plus active-contact margin.
 
         Contact adds at most k_w/m to the squared frequency of one body; that margin is added so
-        that the step stays stable when the pipe touches the wellbore.
+        that the step stays stable when the pipe touches the wellbore. Computed once per
+        parameter set and model kind in a process.
         """
-        return self.spectral_radius_with_margins(self.initial_jacobian)
+        key = (self.params, self.kind)
+        if key not in _SPECTRAL_RADII:
+            _SPECTRAL_RADII[key] = self.spectral_radius_with_margins(self.initial_jacobian)
+        return _SPECTRAL_RADII[key]
 
     def spectral_radius_with_margins(self, J: np.ndarray) -> float:
         """Spectral radius [1/s] of ``J`` (a Jacobian of this model, possibly augmented) plus
@@ -548,28 +572,35 @@ class DrillstringModel:
                 u: np.ndarray | None = None, method: str = "rk4") -> int:
         """Integrate ``y`` in place over ``n_steps`` fixed steps of ``dt`` [s] from ``t0`` [s].
 
-        ``method``: ``"rk4"`` (default), ``"verlet"`` (velocity Verlet, 1 rhs a step),
-        ``"expeuler"`` / ``"etd2"`` (exponential integrators about the equilibrium Jacobian,
-        axial-torsional model only). Returns the number of completed steps before a non-finite
-        state (``n_steps`` if none). Step loads switch once a step (at its midpoint): a step
-        that straddles a switch time sees one value; :meth:`advance_span` and
-        ``PlantSimulator`` split the steps at :attr:`breakpoints`.
+        ``method``: a fixed-step method of :data:`plant.integrators.METHODS`: ``"rk4"``
+        (default), explicit Runge-Kutta methods of fewer stages (``"kutta3"``, ...),
+        ``"verlet"`` (velocity Verlet, 1 rhs a step), ``"expeuler"`` / ``"etd2"``
+        (exponential integrators about the equilibrium Jacobian, axial-torsional model only).
+        Returns the number of completed steps before a non-finite state (``n_steps`` if
+        none). Step loads switch once a step (at its midpoint): a step that straddles a
+        switch time sees one value; :meth:`advance_span` and ``PlantSimulator`` split the steps
+        at :attr:`breakpoints`.
         """
         k1, k2, k3, k4, yt = self._scratch
         uu = self.u if u is None else u
         a = (self.model_id, float(t0), y, int(n_steps), float(dt))
         w = (self.p, self.ip, self.fp, uu, self.wR, self.wF, self.wM)
-        if method == "rk4":
+        spec = METHODS.get(method)
+        kernel = spec.kernel if spec is not None else -1
+        if kernel == KERNEL_RK4:
             return int(advance_rk4(*a, *w, k1, k2, k3, k4, yt))
-        if method == "verlet":
+        if kernel == KERNEL_ERK:
+            A, b, c = spec.tableau
+            return int(advance_erk(*a, A, b, c, self.work[:4], yt, *w))
+        if kernel == KERNEL_VERLET:
             if self.n_state != self.n_body_state:
                 raise ValueError(f"method = 'verlet' needs a state of positions and velocities; "
                                  f"this model has the first-order states {self.aux_names}: use "
                                  "'rk4'")
             H = self.n_state // 2
             return int(advance_verlet(*a, self.verlet_lambda, *w, k1, k2, k3[:H], k4[:H]))
-        if method in ("expeuler", "etd2"):
-            if method == "expeuler":
+        if kernel in (KERNEL_EXPEULER, KERNEL_ETD2):
+            if kernel == KERNEL_EXPEULER:
                 return int(advance_expeuler(*a, *self.expeuler_operator(float(dt)), *w, k1, k2))
             P1, P2, Q = self.exponential_matrices(float(dt))
             return int(advance_etd2(*a, P1, P2, Q, *w, k1, k2, k3))
@@ -630,9 +661,39 @@ class DrillstringModel:
 
     @property
     def default_method(self) -> str:
-        """The fastest accurate integrator for this model (``BENCHMARKS.md``): exponential Euler
-        (one step a communication step) if :attr:`linear_time_invariant`, else RK4."""
-        return "expeuler" if self.linear_time_invariant else "rk4"
+        """The fastest accurate integrator for this model when the step size is not known:
+        :meth:`method_for_step` with ``h = None``."""
+        return self.method_for_step(None)
+
+    def method_for_step(self, h: float | None) -> str:
+        """The fastest accurate fixed-step method for communication steps of ``h`` [s].
+
+        Exponential Euler (exact, one step a communication step) if
+        :attr:`linear_time_invariant`. Else, among the methods of
+        :data:`plant.integrators.METHODS` marked ``automatic`` for this model kind (they met
+        the accuracy bar of ``BENCHMARKS.md`` at their automatic step), the fewest right-hand
+        side evaluations per communication step, ``stages * ceil(h / stable step)`` (per unit
+        time, ``stages / stable step``, for ``h = None``); ties go to fewer internal steps
+        (less work besides the right-hand sides), then to the higher order. For the paper's 3D
+        string at 0.25 ms (the closed loop) one step of Kutta's 3rd-order method beats one RK4
+        step; at 1 ms three RK4 steps tie with four 3-stage steps and RK4 is kept.
+        """
+        if self.linear_time_invariant:
+            return "expeuler"
+        best: tuple[tuple[float, float, int], str] | None = None
+        for spec in METHODS.values():
+            if self.kind not in spec.automatic or not spec.radius:
+                continue
+            dt = stable_step(self.max_eigenvalue, spec.radius)
+            if h is None:
+                key = (spec.stages / dt, 1.0 / dt, -spec.order)
+            else:
+                n_sub = max(1, math.ceil(h / dt - 1e-9))
+                key = (float(spec.stages * n_sub), float(n_sub), -spec.order)
+            if best is None or key < best[0]:
+                best = (key, spec.name)
+        assert best is not None, "no automatic method in the table"
+        return best[1]
 
     def advance_adaptive(self, t0: float, t1: float, y: np.ndarray, hstate: np.ndarray,
                          rtol: float = 1e-6, atol: float = 1e-9, u: np.ndarray | None = None,

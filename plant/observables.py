@@ -1,6 +1,7 @@
 """Compiled output and energy kernels (what sensors and users read from a state).
 
-``outputs3d`` / ``outputs_at`` fill ``out`` in the order given by :func:`output_names`; units are
+``outputs3d`` / ``outputs_at`` fill ``out`` in the order given by
+:func:`plant.signals.plant_outputs`; units are
 in :data:`OUTPUT_UNITS`. Energies use exactly the potentials of the right-hand sides, so that the
 undamped, unforced model conserves ``total_energy`` up to the integrator's error.
 """
@@ -60,79 +61,11 @@ from .layout import (
     KT_TO,
     MASS,
 )
+from .signals import SCALAR_OUTPUTS, WHIRL_MIN_RADIUS
 
 _CACHE = True
 
-# Scalars at the end of every output vector (both models), after the per-body/per-site blocks.
-SCALAR_OUTPUTS = (
-    ("bit_axial_force", "N", "compressive force between bit and rock (weight on bit)"),
-    ("bit_torque", "N m", "resisting torque at the bit"),
-    ("top_torque", "N m", "torque applied by the top drive"),
-    ("hook_load", "N", "axial tension in the top spring"),
-    ("top_rotary_speed", "rad/s", "rotary speed of the top drive"),
-    ("bit_rotary_speed", "rad/s", "spin rate of the bit segment"),
-    ("bit_axial_displacement", "m", "axial displacement of the bit end from its initial position"),
-    ("bit_twist", "rad", "bit rotation angle minus top-drive angle"),
-    ("total_energy", "J", "kinetic + elastic + gravity potential energy of the string"),
-)
 NSCAL = len(SCALAR_OUTPUTS)
-#: Scalars of the extensions (after :data:`SCALAR_OUTPUTS` when the outputs are extended).
-EXTENDED_SCALAR_OUTPUTS = (
-    ("rate_of_penetration", "m/s", "rate at which the hole bottom deepens (bit.model 'cutting')"),
-    ("drilled_depth", "m", "hole drilled since the start (bit.model 'cutting')"),
-    ("depth_of_cut", "m", "depth of cut per bit revolution d (bit.model 'cutting')"),
-    ("bit_on_bottom", "1", "1 while the bit presses on the rock, 0 off bottom (bit bounce)"),
-)
-#: Whirl below this radius [m] is not defined (the centre sits on the well axis): speed 0.
-WHIRL_MIN_RADIUS = 1e-6
-
-
-def output_names(full3d: bool, contact_bodies: list[int], n_sites: int,
-                 extended: bool = False) -> list[tuple[str, str, str]]:
-    """(name, unit, description) of each output of a model, in kernel order.
-
-    Parameters
-    ----------
-    full3d : bool
-        True for the 3D model (contact and strain outputs exist), False for axial-torsional.
-    contact_bodies : list of int
-        1-based contact bodies.
-    n_sites : int
-        Number of actuator sites.
-    extended : bool
-        Include the outputs of the extensions beyond the paper (``docs/physics.md``: whirl speed
-        and direction per contact body). The kernels always fill the extended list
-        (:class:`DrillstringModel` uses it); ``False`` gives the paper's interface (the default
-        plant FMU's outputs), a subset of it.
-    """
-    rows: list[tuple[str, str, str]] = []
-    if full3d:
-        for b in contact_bodies:
-            rows += [
-                (f"body{b}_X", "m", f"inertial X of the mass centre of body {b}"),
-                (f"body{b}_Y", "m", f"inertial Y of the mass centre of body {b}"),
-                (f"body{b}_radial_deflection", "m", f"radial deflection of body {b}"),
-                (f"body{b}_contact_force", "N", f"wellbore contact force on body {b}"),
-            ]
-            if extended:
-                rows += [
-                    (f"body{b}_whirl_speed", "rad/s",
-                     f"angular velocity of the mass centre of body {b} about the well axis "
-                     f"(> 0 in the top drive's positive sense; 0 within "
-                     f"{WHIRL_MIN_RADIUS:g} m of the axis)"),
-                    (f"body{b}_whirl_direction", "1",
-                     f"+1 forward whirl (with the spin of body {b}), -1 backward, 0 none"),
-                ]
-        for s in range(1, n_sites + 1):
-            rows += [
-                (f"strain{s}_C", "1", f"bending strain at gauge C of site {s}"),
-                (f"strain{s}_E", "1", f"bending strain at gauge E of site {s}"),
-                (f"actuator{s}_power", "W", f"power delivered by the actuators of site {s}"),
-            ]
-    rows += list(SCALAR_OUTPUTS)
-    if extended:
-        rows += list(EXTENDED_SCALAR_OUTPUTS)
-    return rows
 
 
 @njit(cache=_CACHE)

@@ -139,6 +139,28 @@ def fmus() -> dict[str, Path]:
 
 
 @pytest.fixture(scope="session")
+def host(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The plain C FMI host of the tests (``support/fmi2_host.c``), compiled once."""
+    import shutil
+
+    from support import c_host
+
+    if shutil.which("gcc") is None:
+        pytest.skip("no gcc")
+    return c_host.compile_host(tmp_path_factory.mktemp("c_host"))
+
+
+@pytest.fixture(scope="session")
+def bare_python(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A Python 3 of this version without numpy (a venv of this interpreter, no packages)."""
+    import venv
+
+    where = tmp_path_factory.mktemp("bare") / "venv"
+    venv.EnvBuilder(with_pip=False, symlinks=True).create(where)
+    return where / "bin" / "python3"
+
+
+@pytest.fixture(scope="session")
 def c_controller_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """``StrainControllerC.fmu`` (the C99 controller), built once per session, validated."""
     return _validated(build_c_controller(tmp_path_factory.mktemp("c_controller")))

@@ -31,9 +31,9 @@ from fmpy.validation import validate_fmu
 
 from drillcosim.controller import MODES, ControllerParams, StrainController
 from drillcosim.cosim.master.master import Master
-from drillcosim.cosim.scenario.scene_system import scene_system
+from drillcosim.cosim.scenario.build import build_system
+from drillcosim.cosim.scenario.config import load_config
 from drillcosim.fmu_src.build_c import SOURCE_DIR
-from drillcosim.plant.scene import load_scene
 from support.fmi_logging import RecordingInstance
 
 INPUTS = ["strain1_C", "strain1_E", "strain2_C", "strain2_E"]
@@ -214,18 +214,20 @@ def test_switch_on_counts_a_time_a_few_ulp_early_as_on(make) -> None:
 def test_closed_loop_equals_the_python_controller_exactly(project_fmus, c_controller_fmu) -> None:
     """Plant FMU + controller FMU through our master: the C controller changes no bit."""
     runs = {
-        "paper_closed_loop": (load_scene("paper_closed_loop"), 0.4),
+        "paper_closed_loop": ("paper_closed_loop", {}, 0.4),
         # multirate controller, lag, switch-on, push-only with a limit that is reached
-        "restricted_lag": (dataclasses.replace(
-            load_scene("paper_restricted_actuator", overrides={"controller": {
-                "lag_time_constant": 0.002, "switch_on_time": 0.05, "force_limit": 0.25}}),
-            cosim={"step": 2.5e-4, "controller_sample_period": 5e-4}), 0.4),
+        "restricted_lag": ("paper_restricted_actuator", {
+            "controller.lag_time_constant": 0.002, "controller.switch_on_time": 0.05,
+            "controller.force_limit": 0.25, "cosim.step": 2.5e-4,
+            "cosim.controller_sample_period": 5e-4, "cosim.algorithm": "jacobi",
+            "cosim.order": ["plant", "controller"]}, 0.4),
     }
-    for name, (sc, stop) in runs.items():
+    for name, (scene, over, stop) in runs.items():
         data = {}
         for ctrl in (project_fmus["StrainController"], c_controller_fmu):
-            ss = scene_system(sc, plant_fmu=project_fmus["DrillstringPlant"],
-                              controller_fmu=ctrl)
+            config = load_config(scene, over, plant_fmu=project_fmus["DrillstringPlant"],
+                                 controller_fmu=ctrl)
+            ss = build_system(config, "fmu")
             data[ctrl.stem] = Master(ss.system).simulate(stop, ss.outputs).data
         py, c = data["StrainController"], data["StrainControllerC"]
         assert py.dtype.names == c.dtype.names and len(py) == len(c) > 100

@@ -16,7 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drillcosim.cosim.study.calibration import (
+from drillcosim.cosim.scenario.config import load_config
+from drillcosim.cosim.study.ensemble import ensemble_stat, lateral_perturbation
+from drillcosim.cosim.study.paper.calibration import (
     RANGES,
     TARGETS,
     CalibrationTable,
@@ -28,20 +30,17 @@ from drillcosim.cosim.study.calibration import (
     rank,
     refine_sets,
 )
-from drillcosim.cosim.study.ensemble import ensemble_stat, lateral_perturbation
 from drillcosim.cosim.study.scene_stats import SceneTable, measure_scene
 from drillcosim.cosim.study.sweep import execute_points
 from drillcosim.plant import layout
 from drillcosim.plant.model import DrillstringModel
-from drillcosim.plant.scene import load_scene
 from drillcosim.plant.simulator import PlantSimulator
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _model(scene: str = "paper_open_loop", **over) -> DrillstringModel:
-    sc = load_scene(scene, overrides=over or None)
-    return DrillstringModel(sc.plant, "full3d")
+    return DrillstringModel(load_config(scene, over or None).scene.plant, "full3d")
 
 
 # -- ensemble ---------------------------------------------------------------------------------
@@ -159,14 +158,12 @@ def test_a_table_of_another_kind_is_refused(tmp_path):
 
 
 def test_member_zero_is_the_run_of_drillcosim_run(project_fmus, tmp_path):
-    """The scene path (FMUs, Master.simulate, summary.json) and the study path (in-process
-    slaves, Execution + Recorder, run_statistics) give the same numbers for member 0."""
-    from drillcosim.cosim.scenario.run import simulate_scene
+    """The scene path (the API's simulate: FMUs, Result.summary as summary.json has it) and the
+    study path (in-process engine, run_statistics) give the same numbers for member 0."""
+    from drillcosim import simulate
 
     fmu_dir = str(project_fmus["DrillstringPlant"].parent)
-    out = simulate_scene("paper_closed_loop", stop_time=0.5, out_dir=tmp_path,
-                         fmu_dir=fmu_dir, plots=False, progress=False)
-    s = out.summary
+    s = simulate("paper_closed_loop", stop_time=0.5, fmu_dir=fmu_dir).summary
     row = measure_scene("paper_closed_loop", 0.5)
     assert row["long_peak_m"] == s["spans"]["body11"]["peak_radial_deflection_m"]
     assert row["short_mean_m"] == s["spans"]["body26"]["steady_radial_deflection_mean_m"]
@@ -174,7 +171,7 @@ def test_member_zero_is_the_run_of_drillcosim_run(project_fmus, tmp_path):
     assert row["site2_mean_power_W"] == s["actuators"]["site2"]["steady_mean_power_W"]
     fmu_row = measure_scene("paper_closed_loop", 0.5, "fmu", fmu_dir=fmu_dir)
     assert fmu_row["site1_peak_power_W"] == row["site1_peak_power_W"]
-    with pytest.raises(ValueError, match="engine 'python'"):
+    with pytest.raises(ValueError, match="engine 'inprocess'"):
         measure_scene("paper_open_loop", 0.5, "fmu", member=1, fmu_dir=fmu_dir)
 
 

@@ -1,8 +1,8 @@
 """The conclusion study's pieces: N actuator sites per span in process, the calibrated scenes.
 
-Checked against independent things: the scene layer's own two-site system (bit for bit), the
-controller law written out channel by channel, the span geometry, and the committed
-calibration table (the calibrated scenes carry its best paper-consistent set).
+Checked against independent things: the plant and controller FMUs of the two-site layout (bit
+for bit), the controller law written out channel by channel, the span geometry, and the
+committed calibration table (the calibrated scenes carry its best paper-consistent set).
 """
 
 from __future__ import annotations
@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 
 from drillcosim.controller import ControllerParams
-from drillcosim.cosim.scenario.inprocess import ControllerSlave, inprocess_system
-from drillcosim.cosim.study.calibration import PlantChoice, best_set, objective
-from drillcosim.cosim.study.conclusion import site_joints, site_scene
-from drillcosim.cosim.study.point import PointOptions, point_scene, run_system, simulate_point
-from drillcosim.plant.scene import load_scene
+from drillcosim.cosim.scenario.config import load_config
+from drillcosim.cosim.scenario.inprocess import ControllerSlave
+from drillcosim.cosim.study.paper.calibration import PlantChoice, best_set, objective
+from drillcosim.cosim.study.paper.conclusion import site_config, site_joints
+from drillcosim.cosim.study.point import PointOptions, simulate_point
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPERIMENTS = ("open_loop", "closed_loop", "restricted_actuator", "switch_on_25s", "severe")
@@ -27,7 +27,7 @@ EXPERIMENTS = ("open_loop", "closed_loop", "restricted_actuator", "switch_on_25s
 
 @pytest.mark.parametrize("per_span", [1, 2, 3])
 def test_site_joints_spread_over_each_span(per_span):
-    plant = load_scene("paper_calibrated_closed_loop").plant
+    plant = load_config("paper_calibrated_closed_loop").scene.plant
     joints = site_joints(plant, per_span)
     assert len(joints) == 2 * per_span
     assert list(joints) == sorted(set(joints))
@@ -63,30 +63,29 @@ def test_controller_slave_serves_any_number_of_sites():
     assert slave.do_step(2e-3, 1e-3) != 0 and "strain" in slave.take_problem()
 
 
-def test_two_site_inprocess_system_is_the_scene_system_bit_for_bit(project_fmus):
-    """inprocess_system (built from the scene alone) and scene_system (wired from the FMU
-    files' interfaces), both with the in-process slaves: every recorded value is identical,
-    with an actuator delay on the connections."""
-    sc, over = point_scene("paper_calibrated_closed_loop", 1e9, 5e-4, 2.5e-4, 0.3, False, None)
-    ref, reason_ref = simulate_point(sc, over, PointOptions(), "python")
-    ss, slaves = inprocess_system(sc)
-    new, reason_new = run_system(ss, slaves, PointOptions())
+def test_two_site_in_process_point_is_the_fmu_point_bit_for_bit(project_fmus):
+    """The study's in-process engine on the calibrated two-site layout and the plant and
+    controller FMUs of that layout: every recorded value is identical, with an actuator delay
+    on the connections."""
+    config = site_config("paper_calibrated_closed_loop", 1, 1e9, 5e-4, 2.5e-4, 0.3)
+    fmu_dir = project_fmus["DrillstringPlant"].parent
+    ref, reason_ref = simulate_point(config, PointOptions(), "fmu", fmu_dir)
+    new, reason_new = simulate_point(config, PointOptions(), "inprocess")
     assert reason_ref == reason_new == ""
-    common = [n for n in new.dtype.names if n in ref.dtype.names]
-    assert len(common) >= 1 + 4 * 2 + 3 * 2 + 4   # time, 2 bodies, 2 sites, 4 forces
-    for n in common:
+    assert new.dtype.names == ref.dtype.names
+    assert len(new.dtype.names) >= 1 + 4 * 2 + 3 * 2 + 4   # time, 2 bodies, 2 sites, 4 forces
+    for n in new.dtype.names:
         np.testing.assert_array_equal(new[n], ref[n], err_msg=n)
     assert np.max(np.abs(new["controller.actuator1_force_C"])) > 0
 
 
 def test_six_sites_run_and_each_site_gets_its_own_force():
-    base = site_scene("paper_calibrated_closed_loop", 3, 1e9, 0.0, 2.5e-4, 0.2)
-    sc = load_scene("paper_calibrated_closed_loop", overrides={
-        "actuators": {"joints": list(base.plant.actuator_joints)},
-        "cosim": {"stop_time": 0.2, "output_interval": 2.5e-4}})   # every step recorded
-    assert len(sc.plant.actuator_joints) == 6
-    ss, slaves = inprocess_system(sc)
-    data, reason = run_system(ss, slaves, PointOptions())
+    base = site_config("paper_calibrated_closed_loop", 3, 1e9, 0.0, 2.5e-4, 0.2)
+    config = load_config("paper_calibrated_closed_loop", {
+        "actuators.joints": list(base.scene.plant.actuator_joints),
+        "cosim.stop_time": 0.2, "cosim.output_interval": 2.5e-4})   # every step recorded
+    assert config.n_sites == 6
+    data, reason = simulate_point(config, PointOptions(), "inprocess")
     assert reason == ""
     for s in range(1, 7):
         f = data[f"controller.actuator{s}_force_C"]
@@ -108,16 +107,16 @@ def test_calibrated_scenes_are_todays_with_the_confirmed_best_set():
         d.update(objective(d))
         table.append(d)
     best = best_set(table)
-    p = load_scene("paper_calibrated_open_loop").plant
+    p = load_config("paper_calibrated_open_loop").scene.plant
     assert best == PlantChoice(p.bit.weight_on_bit, p.top_drive.axial_stiffness,
                                p.damping.lateral_ratio, p.unbalance.body, p.gravity)
     for name in EXPERIMENTS:
         o = best.overrides()
         if name == "severe":
-            o["top_drive"]["axial_stiffness"] = 2e7
-        a, b = load_scene(f"paper_calibrated_{name}"), load_scene(f"paper_{name}", overrides=o)
-        assert (a.plant, a.controller, a.cosim, a.model) == (b.plant, b.controller, b.cosim,
-                                                              b.model), name
+            o["top_drive.axial_stiffness"] = 2e7
+        a, b = load_config(f"paper_calibrated_{name}"), load_config(f"paper_{name}", o)
+        assert (a.scene.plant, a.controller, a.top_drive, a.cosim, a.scene.model) == (
+            b.scene.plant, b.controller, b.top_drive, b.cosim, b.scene.model), name
 
 
 def _row(per_span, gain, delay, rms, status="ok", growth=0.0, noise=0.01, contact=0.0):
@@ -129,7 +128,7 @@ def _row(per_span, gain, delay, rms, status="ok", growth=0.0, noise=0.01, contac
 
 
 def test_conclusion_answer_needs_stability_in_both_and_the_benefit_against_both_references():
-    from drillcosim.cosim.study.conclusion_report import answer, conclusion_rows
+    from drillcosim.cosim.study.paper.conclusion_report import answer, conclusion_rows
 
     ref = _row(1, 0.0, 0.0, 0.010, contact=2.0)
     rows = [ref,
@@ -157,7 +156,7 @@ def test_conclusion_answer_needs_stability_in_both_and_the_benefit_against_both_
 def test_run_conclusion_resumes_and_writes_the_prediction_of_its_points(tmp_path):
     import json
 
-    from drillcosim.cosim.study.conclusion import SitePoint, run_conclusion
+    from drillcosim.cosim.study.paper.conclusion import SitePoint, run_conclusion
 
     pts = [SitePoint(1, 0.0, 0.0, stop_time=0.2), SitePoint(1, 1e9, 5e-4, stop_time=0.2)]
     rows = run_conclusion(tmp_path, workers=0, progress=False, points=pts)
@@ -174,7 +173,7 @@ def test_run_conclusion_resumes_and_writes_the_prediction_of_its_points(tmp_path
 
 
 def test_member_ensembles_average_the_completed_members_against_the_open_loop_ones():
-    from drillcosim.cosim.study.conclusion_report import member_ensembles
+    from drillcosim.cosim.study.paper.conclusion_report import member_ensembles
 
     rows = [dict(_row(1, 0.0, 0.0, v), member=float(k)) for k, v in enumerate((0.010, 0.014))]
     rows += [dict(_row(3, 1e8, 5e-4, v), member=float(k)) for k, v in enumerate((0.003, 0.003))]

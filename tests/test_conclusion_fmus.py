@@ -1,7 +1,7 @@
 """The conclusion study (docs/paper_comparison.md section 3) through FMUs built for its layouts.
 
-The study runs its 1, 2 and 3 sites per span with the in-process slaves of the master
-(:func:`cosim.scenario.inprocess.inprocess_system`). Here the same points run through the plant
+The study runs its 1, 2 and 3 sites per span with the in-process engine of the one builder
+(:func:`cosim.scenario.build.build_system`). Here the same points run through the plant
 and controller FMUs built for each layout (:mod:`cosim.scenario.scene_fmus`, both layouts in one
 FMU folder) and must give the same trajectories bit for bit: the FMI boundary, the variants'
 input/output routing and the master's timing change nothing.
@@ -12,11 +12,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drillcosim.cosim.scenario.inprocess import inprocess_system
-from drillcosim.cosim.scenario.scene_system import scene_system
-from drillcosim.cosim.study.conclusion import site_joints
-from drillcosim.cosim.study.point import PointOptions, run_system
-from drillcosim.plant.scene import load_scene
+from drillcosim.cosim.scenario.config import load_config
+from drillcosim.cosim.study.paper.conclusion import site_joints
+from drillcosim.cosim.study.point import PointOptions, simulate_point
 
 pytestmark = [pytest.mark.needs_cc]
 
@@ -31,7 +29,7 @@ def fmu_dir(tmp_path_factory):
 def _scene_file(folder, per_span: int):
     """The study's point as a scene file (an FMU built for a scene reads its layout from the
     scene file it names; overrides made in memory do not reach it)."""
-    joints = list(site_joints(load_scene(SCENE).plant, per_span))
+    joints = list(site_joints(load_config(SCENE).scene.plant, per_span))
     path = folder / f"conclusion_{per_span}_per_span.toml"
     # the answer's configuration: gain 1e8, 0.5 ms actuator delay, H = 0.25 ms
     path.write_text(f'extends = "{SCENE}"\n\n[actuators]\njoints = {joints}\n\n'
@@ -42,14 +40,12 @@ def _scene_file(folder, per_span: int):
 
 @pytest.mark.parametrize("per_span", [2, 3])
 def test_conclusion_point_through_scene_fmus_equals_in_process(per_span, fmu_dir) -> None:
-    sc = load_scene(_scene_file(fmu_dir, per_span))
+    config = load_config(_scene_file(fmu_dir, per_span))
     n_sites = 2 * per_span
-    assert len(sc.plant.actuator_joints) == n_sites
-    ss_in, slaves = inprocess_system(sc)
-    ss_fmu = scene_system(sc, fmu_dir)
+    assert config.n_sites == n_sites
     opts = PointOptions()
-    data_in, reason_in = run_system(ss_in, slaves, opts)
-    data_fmu, reason_fmu = run_system(ss_fmu, None, opts)
+    data_in, reason_in = simulate_point(config, opts, "inprocess")
+    data_fmu, reason_fmu = simulate_point(config, opts, "fmu", fmu_dir)
     assert reason_in == reason_fmu == ""
     common = [c for c in data_in.dtype.names if c in data_fmu.dtype.names]
     forces = [c for c in common if "actuator" in c and "force" in c]

@@ -19,6 +19,7 @@ from scipy.integrate import solve_ivp
 from threadpoolctl import threadpool_limits
 
 from drillcosim.controller import ControllerParams, StrainController
+from drillcosim.cosim.scenario.config import load_config
 from drillcosim.cosim.study.continuous import (
     ContinuousLoop,
     envelope_growth_rate,
@@ -321,7 +322,7 @@ def test_sampling_alone_destabilizes_what_the_continuous_loop_keeps_stable(loop,
 
 
 def test_law_from_scene_uses_the_controller_table():
-    law = law_from_scene(load_scene("paper_restricted_actuator"), delay=1e-4)
+    law = law_from_scene(load_config("paper_restricted_actuator"), delay=1e-4)
     assert (law.gain, law.lower_limit, law.upper_limit, law.delay) == (1e9, 0.0, 5000.0, 1e-4)
 
 
@@ -343,7 +344,7 @@ def test_lag_in_the_loop_matches_the_linear_prediction(loop):
     lagged = ContinuousLoop(loop.A, loop.B, loop.C, lag_time_constant=4e-4, dropped=loop.dropped)
     pred = lagged.roots(1e9, 0.0, count=60)
     pred = pred[(np.abs(pred.imag) > BAND[0]) & (np.abs(pred.imag) < BAND[1])]
-    sc = load_scene("paper_closed_loop", overrides={"controller": {"lag_time_constant": 4e-4}})
+    sc = load_config("paper_closed_loop", {"controller.lag_time_constant": 4e-4})
     sim = operating_point_simulator(sc, 1e9, 0.0)
     assert sim.law.lag_time_constant == 4e-4
     run = sim.run(4.0, 2.5e-4, ["strain1_C"])

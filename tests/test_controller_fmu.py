@@ -32,18 +32,24 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 from drillcosim import controller
-from drillcosim.fmu_src.build import REGISTRY
+from drillcosim.fmu_src.build import PYTHONFMU_VENDORED, REGISTRY, shipped_modules
 from support.fmi_logging import RecordingInstance, fmu_fixtures
 
 ROOT = Path(__file__).resolve().parents[1]
 SPEC = next(r for r in REGISTRY if r.name == "StrainController")
-VENDORED = dict(SPEC.vendored)["controller"]
+CANONICAL = dict(SPEC.vendored)["controller"]  # the name in the source
 INPUTS = ["strain1_C", "strain1_E", "strain2_C", "strain2_E"]
 OUTPUTS = ["actuator1_force_C", "actuator1_force_E", "actuator2_force_C", "actuator2_force_E"]
 OK, DISCARD, ERROR, FATAL = 0, 2, 3, 4
 
 
 fmu_path, md, vr, unzipdir = fmu_fixtures(SPEC)
+
+
+@pytest.fixture(scope="session")
+def shipped(fmu_path: Path) -> dict[str, str]:
+    """Canonical module name -> the name the session build ships it under (build hash)."""
+    return shipped_modules(fmu_path)
 
 
 class Instance(RecordingInstance):
@@ -117,11 +123,12 @@ def test_model_description_interface(md) -> None:
     assert all(u.dependencies == [] for u in md.outputs)
 
 
-def test_fmu_ships_only_the_versioned_vendored_package(fmu_path: Path) -> None:
+def test_fmu_ships_only_the_versioned_vendored_package(fmu_path: Path, shipped: dict[str, str]) -> None:
+    vendored_name = shipped[CANONICAL]
     import zipfile
 
     names = zipfile.ZipFile(fmu_path).namelist()
-    assert f"resources/{VENDORED}/__init__.py" in names
+    assert f"resources/{vendored_name}/__init__.py" in names
     assert not any(n.startswith("resources/controller/") for n in names)
     assert not any("__pycache__" in n for n in names)
 
@@ -202,7 +209,7 @@ CLEAN_SCRIPT = textwrap.dedent("""
     print(json.dumps({
         "force": force, "cold_start_s": t1 - t0,
         "vendored_file": sys.modules["%(vendored)s"].__file__, "unzipdir": str(d),
-        "pythonfmu_file": sys.modules["_dcs_pythonfmu_0_7_0"].__file__,
+        "pythonfmu_file": sys.modules["%(pythonfmu)s"].__file__,
         "generic_pythonfmu": "pythonfmu" in sys.modules,
         "controller_imported": "controller" in sys.modules,
     }))
@@ -224,10 +231,13 @@ def clean_site(tmp_path: Path) -> Path:
     return site
 
 
-def test_fmu_runs_in_a_clean_python_with_only_numpy(fmu_path: Path, tmp_path: Path) -> None:
+def test_fmu_runs_in_a_clean_python_with_only_numpy(
+        fmu_path: Path, tmp_path: Path, shipped: dict[str, str]) -> None:
+    vendored_name = shipped[CANONICAL]
     site = clean_site(tmp_path)
     script = tmp_path / "host.py"
-    script.write_text(CLEAN_SCRIPT % {"vendored": VENDORED})
+    script.write_text(CLEAN_SCRIPT % {"vendored": vendored_name,
+                                      "pythonfmu": shipped[PYTHONFMU_VENDORED]})
     work = tmp_path / "cwd"
     work.mkdir()
     env = {"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "PYTHONPATH": str(site),
@@ -277,9 +287,10 @@ SHADOW_SCRIPT = textwrap.dedent("""
 
 @pytest.mark.parametrize("order", ["controller_first", "fmu_first"])
 def test_no_shadowing_between_host_controller_and_vendored_copy(
-        fmu_path: Path, tmp_path: Path, order: str) -> None:
+        fmu_path: Path, tmp_path: Path, order: str, shipped: dict[str, str]) -> None:
+    vendored_name = shipped[CANONICAL]
     script = tmp_path / "host.py"
-    script.write_text(SHADOW_SCRIPT % {"vendored": VENDORED})
+    script.write_text(SHADOW_SCRIPT % {"vendored": vendored_name})
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     proc = subprocess.run([sys.executable, str(script), order, str(fmu_path)], cwd=tmp_path,
                           env=env, capture_output=True, text=True, timeout=120)
@@ -287,11 +298,14 @@ def test_no_shadowing_between_host_controller_and_vendored_copy(
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out["force"] == 1000.0
     assert Path(out["controller"]).resolve() == (ROOT / "controller" / "__init__.py").resolve()
-    assert out["vendored"].startswith(out["unzipdir"])
+    # numba is installed here: the vendored copy is imported from its stable per-user copy
+    # (named by content hash, for numba's cache of the compiled law), never the host's
+    assert Path(out["vendored"]).parents[1].name.startswith(f"{vendored_name}-")
     assert not out["same_class"]
 
 
-def test_no_shadowing_in_this_process(make, vr) -> None:
+def test_no_shadowing_in_this_process(make, vr, shipped: dict[str, str]) -> None:
+    vendored_name = shipped[CANONICAL]
     before = controller.__file__
     inst = make()
     inst.initialize()
@@ -301,8 +315,8 @@ def test_no_shadowing_in_this_process(make, vr) -> None:
     # pytest`) must never resolve into the FMU's resources/ folder
     spec = importlib.util.find_spec("controller")
     assert spec is None or "resources" not in Path(spec.origin).parts
-    vendored = sys.modules[VENDORED]
-    assert "resources" in Path(vendored.__file__).parts
+    vendored = sys.modules[vendored_name]
+    assert Path(vendored.__file__).parents[1].name.startswith(f"{vendored_name}-")  # stable copy
     assert vendored.StrainController is not controller.StrainController
 
 

@@ -27,9 +27,15 @@ from drillcosim.cosim.master.interface import (
 )
 from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.master.system import FmuSpec
+from drillcosim.cosim.scenario.build import build_system
+from drillcosim.cosim.scenario.config import ConfigError, load_config
 from drillcosim.cosim.scenario.interface import InterfaceWarning
-from drillcosim.cosim.scenario.scene_system import scene_system
-from drillcosim.plant.scene import load_scene
+
+
+def _build(scene, overrides=None, **fmus):
+    """The scene's system through the one builder (FMU files: ``plant_fmu``,
+    ``controller_fmu``)."""
+    return build_system(load_config(scene, overrides, **fmus), "fmu")
 
 PLANT_LABEL = "plant (DrillstringPlant.fmu)"
 
@@ -79,11 +85,11 @@ def _mismatched(root: ET.Element) -> None:
 
 @pytest.fixture
 def closed_loop():
-    return load_scene("paper_closed_loop")
+    return "paper_closed_loop"
 
 
 def test_the_default_pair_fits_and_is_wired_by_name(project_fmus, closed_loop) -> None:
-    ss = scene_system(closed_loop, plant_fmu=project_fmus["DrillstringPlant"],
+    ss = _build(closed_loop, plant_fmu=project_fmus["DrillstringPlant"],
                       controller_fmu=project_fmus["StrainController"])
     pairs = {(c.source, c.target) for c in ss.system.connections}
     assert pairs == {(f"plant.strain{s}_{a}", f"controller.strain{s}_{a}") for s in (1, 2)
@@ -96,7 +102,7 @@ def test_a_mismatched_controller_is_refused_with_every_reason(project_fmus, c_co
                                                               closed_loop, tmp_path) -> None:
     bad = variant(c_controller_fmu, tmp_path / "Bad.fmu", _mismatched)
     with pytest.raises(InterfaceError) as info:
-        scene_system(closed_loop, plant_fmu=project_fmus["DrillstringPlant"],
+        _build(closed_loop, plant_fmu=project_fmus["DrillstringPlant"],
                      controller_fmu=bad)
     lines = str(info.value).splitlines()
     assert lines[0].startswith(f"{PLANT_LABEL} and controller (Bad.fmu) do not fit: 5 problems")
@@ -148,24 +154,23 @@ def test_a_scene_key_the_controller_lacks_is_a_problem_a_default_is_not(
     no_lag = variant(c_controller_fmu, tmp_path / "NoLag.fmu",
                      lambda r: _drop(r, {"lag_time_constant", "enabled"}))
     plant = project_fmus["DrillstringPlant"]
-    ss = scene_system(load_scene("paper_closed_loop"), plant_fmu=plant, controller_fmu=no_lag)
+    ss = _build("paper_closed_loop", plant_fmu=plant, controller_fmu=no_lag)
     assert "lag_time_constant" not in ss.system.fmu("controller").parameters  # default: skipped
-    sc = load_scene("paper_closed_loop", overrides={"controller": {"lag_time_constant": 0.01}})
     with pytest.raises(InterfaceError, match=r"controller \(NoLag.fmu\) has no parameter "
                                              r"'lag_time_constant' for \[controller\] "
                                              r"lag_time_constant of .*paper_closed_loop.toml"):
-        scene_system(sc, plant_fmu=plant, controller_fmu=no_lag)
+        _build("paper_closed_loop", {"controller.lag_time_constant": 0.01}, plant_fmu=plant,
+               controller_fmu=no_lag)
 
 
 def test_a_controller_serving_fewer_sites_warns_and_runs(project_fmus, c_controller_fmu,
                                                          tmp_path) -> None:
     one_site = variant(c_controller_fmu, tmp_path / "OneSite.fmu", lambda r: _drop(
         r, {"strain2_C", "strain2_E", "actuator2_force_C", "actuator2_force_E"}))
-    sc = load_scene("paper_closed_loop")
     with pytest.warns(InterfaceWarning, match=r"keep their start value: "
                                               r"plant.actuator2_force_C, plant.actuator2_force_E$"):
-        ss = scene_system(sc, plant_fmu=project_fmus["DrillstringPlant"],
-                          controller_fmu=one_site)
+        ss = _build("paper_closed_loop", plant_fmu=project_fmus["DrillstringPlant"],
+                    controller_fmu=one_site)
     assert len(ss.system.connections) == 4
     data = Master(ss.system).simulate(0.2, ss.outputs).data
     assert np.max(np.abs(data["controller.actuator1_force_C"])) > 0  # site 1 is controlled
@@ -193,8 +198,8 @@ def test_a_partly_served_site_is_a_problem(project_fmus, c_controller_fmu, tmp_p
     with pytest.raises(InterfaceError, match=r"plant \(DrillstringPlant.fmu\) input "
                                              r"'actuator2_force_E' is not fed: controller "
                                              r"\(Half.fmu\) has no variable"):
-        scene_system(load_scene("paper_closed_loop"),
-                     plant_fmu=project_fmus["DrillstringPlant"], controller_fmu=half)
+        _build("paper_closed_loop", plant_fmu=project_fmus["DrillstringPlant"],
+               controller_fmu=half)
 
 
 def test_scene_tables_choose_the_fmus_relative_to_the_scene_file(project_fmus, c_controller_fmu,
@@ -204,18 +209,18 @@ def test_scene_tables_choose_the_fmus_relative_to_the_scene_file(project_fmus, c
     base = 'extends = "paper_closed_loop"\n'
     scene.write_text(f'{base}\n[plant]\nfmu = "{project_fmus["DrillstringPlant"]}"\n\n'
                      '[controller]\nfmu = "ctrl.fmu"\n')
-    ss = scene_system(load_scene(scene))
+    ss = _build(scene)
     assert Path(ss.system.fmu("controller").path) == (tmp_path / "ctrl.fmu").resolve()
     assert Path(ss.system.fmu("plant").path) == project_fmus["DrillstringPlant"]
     # the command line takes precedence over the scene
-    ss = scene_system(load_scene(scene), controller_fmu=project_fmus["StrainController"])
+    ss = _build(scene, controller_fmu=project_fmus["StrainController"])
     assert Path(ss.system.fmu("controller").path) == project_fmus["StrainController"]
     scene.write_text(f'{base}[controller]\nfmu = "missing.fmu"\n')
-    with pytest.raises(FileNotFoundError, match=r"\[controller\] fmu = 'missing.fmu': no file"):
-        scene_system(load_scene(scene))
+    with pytest.raises(ConfigError, match=r"\[controller\] fmu = 'missing.fmu': no file"):
+        _build(scene)
     scene.write_text(f'{base}[plant]\nfmuu = "x.fmu"\n')
-    with pytest.raises(ValueError, match=r"\[plant\] unknown key 'fmuu'; allowed: fmu"):
-        scene_system(load_scene(scene))
+    with pytest.raises(ConfigError, match=r"\[plant\] unknown key 'fmuu'; allowed: fmu"):
+        _build(scene)
 
 
 def test_a_plant_without_a_scene_parameter_is_warned_about(project_fmus, tmp_path,
@@ -224,6 +229,6 @@ def test_a_plant_without_a_scene_parameter_is_warned_about(project_fmus, tmp_pat
                     lambda r: _var(r, "scene").set("name", "config"))
     with pytest.warns(InterfaceWarning, match=r"plant \(OtherPlant.fmu\) has no 'scene' "
                                               r"parameter: the plant tables of .* not applied"):
-        ss = scene_system(closed_loop, plant_fmu=plant,
+        ss = _build(closed_loop, plant_fmu=plant,
                           controller_fmu=project_fmus["StrainController"])
     assert ss.system.fmu("plant").parameters == {}

@@ -13,7 +13,6 @@ libcosim runs in a subprocess (support.engines): it loads the FMUs in process.
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -21,8 +20,8 @@ import pytest
 
 from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.master.ssp import export_ssp
-from drillcosim.cosim.scenario.scene_system import scene_system
-from drillcosim.plant.scene import load_scene
+from drillcosim.cosim.scenario.build import build_system
+from drillcosim.cosim.scenario.config import load_config
 from support.closed_loop import ClosedLoop
 from support.engines import compare, run_libcosim
 
@@ -54,9 +53,10 @@ def test_libcosim_runs_the_c_controller_like_our_master(closed_loop_c, tmp_path,
 
 def test_libcosim_multirate_restricted_actuator(project_fmus, tmp_path: Path) -> None:
     """Controller every 2 base steps (osp:StepSizeHint), Integer/Boolean/String bindings."""
-    sc = load_scene("paper_restricted_actuator", overrides={"controller": {"gain": 5e8}})
-    sc = dataclasses.replace(sc, cosim={"step": 1e-3, "controller_sample_period": 2e-3})
-    ss = scene_system(sc, project_fmus["DrillstringPlant"].parent)
+    config = load_config("paper_restricted_actuator", {
+        "controller.gain": 5e8, "cosim.step": 1e-3, "cosim.controller_sample_period": 2e-3,
+        "cosim.algorithm": "jacobi", "cosim.order": ["plant", "controller"]})
+    ss = build_system(config, "fmu", fmu_dir=project_fmus["DrillstringPlant"].parent)
     n = 200
     ours = Master(ss.system).simulate(n * 1e-3, ss.outputs).data
     exp = export_ssp(ss.system, tmp_path / "sys.ssp")
@@ -73,13 +73,12 @@ def test_libcosim_runs_the_four_sites_ssp_written_by_the_cli(tmp_path: Path) -> 
     """``drillcosim ssp four_sites``: FMUs built for the scene (4 sites, 8 forces), Jacobi at
     H = 0.1 ms (SSP 1.0 holds no Gauss-Seidel order), libcosim against our master."""
     from drillcosim.cosim.cli import main
-    from drillcosim.cosim.scenario.run import scene_system_from_options
 
     fmus, ssp = tmp_path / "fmus", tmp_path / "four_sites.ssp"
-    opts = dict(step=1e-4, sets=["cosim.algorithm='jacobi'"], fmu_dir=fmus)
     assert main(["ssp", "four_sites", "--out", str(ssp), "--step", "1e-4", "--set",
                  "cosim.algorithm='jacobi'", "--fmu-dir", str(fmus)]) == 0
-    ss = scene_system_from_options("four_sites", **opts)
+    config = load_config("four_sites", {"cosim.step": 1e-4, "cosim.algorithm": "jacobi"})
+    ss = build_system(config, "fmu", fmu_dir=fmus)
     assert {f.path.name for f in ss.system.fmus} == {"DrillstringPlant_four_sites.fmu",
                                                      "StrainController_four_sites.fmu"}
     assert len(ss.system.connections) == 16

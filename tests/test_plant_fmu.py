@@ -33,7 +33,7 @@ from fmpy import simulate_fmu
 from fmpy.validation import validate_fmu
 
 from drillcosim import plant
-from drillcosim.fmu_src.build import REGISTRY
+from drillcosim.fmu_src.build import PYTHONFMU_VENDORED, REGISTRY, shipped_modules
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.params import PlantParams
 from drillcosim.plant.scene import SECTIONS, load_scene
@@ -42,7 +42,7 @@ from support.fmi_logging import RecordingInstance, fmu_fixtures
 
 ROOT = Path(__file__).resolve().parents[1]
 SPEC = next(s for s in REGISTRY if s.name == "DrillstringPlant")
-VENDORED = dict(SPEC.vendored)["plant"]
+CANONICAL = dict(SPEC.vendored)["plant"]  # the name in the source
 INPUTS = ["actuator1_force_C", "actuator1_force_E", "actuator2_force_C", "actuator2_force_E"]
 OK, DISCARD, ERROR, FATAL = 0, 2, 3, 4
 DT = 1e-3
@@ -67,6 +67,12 @@ def reference(scene: str = "paper_open_loop", overrides: dict | None = None) -> 
 
 
 fmu_path, md, vr, unzipdir = fmu_fixtures(SPEC)
+
+
+@pytest.fixture(scope="session")
+def shipped(fmu_path: Path) -> dict[str, str]:
+    """Canonical module name -> the name the session build ships it under (build hash)."""
+    return shipped_modules(fmu_path)
 
 
 @pytest.fixture(scope="session")
@@ -159,13 +165,14 @@ def test_interface_matches_the_plant_model(md) -> None:
     assert all(u.dependencies == [] for u in md.outputs)  # no direct feedthrough
 
 
-def test_fmu_ships_scenes_and_only_the_versioned_package(fmu_path: Path) -> None:
+def test_fmu_ships_scenes_and_only_the_versioned_package(fmu_path: Path, shipped: dict[str, str]) -> None:
+    vendored_name = shipped[CANONICAL]
     import zipfile
 
     names = zipfile.ZipFile(fmu_path).namelist()
     for scene in (ROOT / "scenes").glob("*.toml"):
         assert f"resources/scenes/{scene.name}" in names
-    assert f"resources/{VENDORED}/__init__.py" in names
+    assert f"resources/{vendored_name}/__init__.py" in names
     assert not any(n.startswith("resources/plant/") or "__pycache__" in n for n in names)
 
 
@@ -269,7 +276,7 @@ CLEAN_SCRIPT = textwrap.dedent("""
     print(json.dumps({
         "hook": s.getReal([vr["hook_load"]])[0], "cold_start_s": t1 - t0,
         "vendored_file": sys.modules["%(vendored)s"].__file__, "unzipdir": str(d),
-        "pythonfmu_file": sys.modules["_dcs_pythonfmu_0_7_0"].__file__,
+        "pythonfmu_file": sys.modules["%(pythonfmu)s"].__file__,
         "generic_pythonfmu": "pythonfmu" in sys.modules,
         "plant_imported": "plant" in sys.modules,
         "plant_modules": sorted(m for m in sys.modules if m.startswith("%(vendored)s")),
@@ -300,13 +307,15 @@ def clean_site(tmp_path: Path) -> Path:
     return site
 
 
-def test_self_contained_and_cold_start(fmu_path: Path, tmp_path: Path, make) -> None:
+def test_self_contained_and_cold_start(fmu_path: Path, tmp_path: Path, make, shipped: dict[str, str]) -> None:
+    vendored_name = shipped[CANONICAL]
     warm = make()  # first use (same content hash, same cache): compiles if ever needed
     warm.initialize()
     warm.run(np.zeros((1, 4)))
     site = clean_site(tmp_path)
     script = tmp_path / "host.py"
-    script.write_text(CLEAN_SCRIPT % {"vendored": VENDORED})
+    script.write_text(CLEAN_SCRIPT % {"vendored": vendored_name,
+                                      "pythonfmu": shipped[PYTHONFMU_VENDORED]})
     work = tmp_path / "cwd"
     work.mkdir()
     env = {"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "PYTHONPATH": str(site),
@@ -328,11 +337,11 @@ def test_self_contained_and_cold_start(fmu_path: Path, tmp_path: Path, make) -> 
     # numpy reference rhs (tests, benchmarks) and the modal analysis are not shipped
     import zipfile
 
-    shipped = {n[len("resources/"):-len(".py")].replace("/", ".").removesuffix(".__init__")
+    payload = {n[len("resources/"):-len(".py")].replace("/", ".").removesuffix(".__init__")
                for n in zipfile.ZipFile(fmu_path).namelist()
-               if n.startswith(f"resources/{VENDORED}/") and n.endswith(".py")}
-    assert shipped == set(out["plant_modules"])
-    assert not {f"{VENDORED}.numpy_rhs", f"{VENDORED}.modal"} & shipped
+               if n.startswith(f"resources/{vendored_name}/") and n.endswith(".py")}
+    assert payload == set(out["plant_modules"])
+    assert not {f"{vendored_name}.numpy_rhs", f"{vendored_name}.modal"} & payload
     # after first use nothing is compiled again: every kernel comes from numba's cache (the
     # time is reported by benchmarks/bench_fmu_boundary.py, not asserted here)
     assert out["numba_compiled"] == []
@@ -370,9 +379,10 @@ SHADOW_SCRIPT = textwrap.dedent("""
 
 @pytest.mark.parametrize("order", ["plant_first", "fmu_first"])
 def test_no_shadowing_between_host_plant_and_vendored_copy(
-        fmu_path: Path, tmp_path: Path, order: str) -> None:
+        fmu_path: Path, tmp_path: Path, order: str, shipped: dict[str, str]) -> None:
+    vendored_name = shipped[CANONICAL]
     script = tmp_path / "host.py"
-    script.write_text(SHADOW_SCRIPT % {"vendored": VENDORED})
+    script.write_text(SHADOW_SCRIPT % {"vendored": vendored_name})
     env = dict(SUBPROCESS_ENV, PYTHONPATH=str(ROOT))
     proc = subprocess.run([sys.executable, str(script), order, str(fmu_path)], cwd=tmp_path,
                           env=env, capture_output=True, text=True, timeout=120)
@@ -383,7 +393,8 @@ def test_no_shadowing_between_host_plant_and_vendored_copy(
     assert not out["same_class"]
 
 
-def test_no_shadowing_in_this_process(make) -> None:
+def test_no_shadowing_in_this_process(make, shipped: dict[str, str]) -> None:
+    vendored_name = shipped[CANONICAL]
     before = plant.__file__
     inst = make()
     inst.initialize()
@@ -393,7 +404,7 @@ def test_no_shadowing_in_this_process(make) -> None:
     # pytest`) must never resolve into the FMU's resources/ folder
     spec = importlib.util.find_spec("plant")
     assert spec is None or "resources" not in Path(spec.origin).parts
-    assert "_dcs_plant_0_1_0-" in sys.modules[VENDORED].__file__
+    assert f"{vendored_name}-" in sys.modules[vendored_name].__file__
 
 
 # ----------------------------------------------------------------------------- state

@@ -80,9 +80,13 @@ def test_every_shipped_scene_loads_with_the_cheapest_model():
 
 
 def test_scene_inheritance_and_overrides():
+    from drillcosim.cosim.scenario.config import load_config
+
+    config = load_config("paper_restricted_actuator")
+    assert config.controller.mode == "compressive_only"
+    assert config.controller.force_limit == 5000.0
     sc = load_scene("paper_restricted_actuator")
-    assert sc.controller["mode"] == "compressive_only"
-    assert sc.controller["force_limit"] == 5000.0
+    assert sc == config.scene
     assert sc.plant.bit.displacement_amplitude == 0.003  # from paper_open_loop
     sc2 = load_scene("paper_open_loop", overrides={"top_drive": {"rotary_speed": 10.0}})
     assert sc2.plant.top_drive.rotary_speed == 10.0
@@ -135,7 +139,7 @@ def test_unknown_scene_name_suggests():
 
 
 def test_scene_schema_doc_is_current():
-    from drillcosim.cosim.cli import scene_schema
+    from drillcosim.cosim.scenario.schema import scene_schema
 
     doc = (ROOT / "docs" / "scenes.md").read_text()
     assert schema_markdown() in doc

@@ -46,10 +46,103 @@ def test_a_chain_run_summary_has_no_bending_actuators(tmp_path) -> None:
     the summary must not list two sites with zero force."""
     import json
 
-    from drillcosim.cosim.scenario.run import simulate_scene
+    from drillcosim import simulate
 
-    out = simulate_scene("stick_slip", stop_time=0.5, out_dir=tmp_path, plots=False,
-                         progress=False)
+    res = simulate("stick_slip", stop_time=0.5)
+    res.save(tmp_path, plots=False)
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert out.exit_code == 0 and summary["actuators"] == {}
+    assert res.completed and summary["actuators"] == {}
     assert summary["torsional"]["bit_speed_max_rad_s"] > 0.0
+
+
+def test_envelope_keeps_every_pixel_columns_min_and_max() -> None:
+    """Against the undecimated data: in each of the columns of a 300-dpi figure, the decimated
+    series has the same smallest and largest value, and the same first and last sample."""
+    from drillcosim.cosim.scenario.plots import envelope
+
+    rng = np.random.default_rng(7)
+    n, columns = 30001, 1500
+    t = np.linspace(0.0, 30.0, n)
+    y = np.sin(7.3 * t) * np.exp(0.05 * t) + 0.3 * rng.standard_normal(n)
+    y[12345] = 40.0                          # single-sample spikes must survive
+    y[23456] = -55.0
+    td, yd = envelope(t, y, columns)
+    assert len(td) <= 4 * columns < n / 4
+    assert np.all(np.diff(td) > 0)           # in time order, no sample twice
+    edges = np.linspace(t[0], t[-1], columns + 1)
+    col, cold = (np.clip(np.searchsorted(edges, x, side="right") - 1, 0, columns - 1)
+                 for x in (t, td))
+    for c in range(columns):
+        full, dec = y[col == c], yd[cold == c]
+        assert dec.min() == full.min() and dec.max() == full.max()
+        assert dec[0] == full[0] and dec[-1] == full[-1]
+    assert yd.max() == 40.0 and yd.min() == -55.0
+    short_t, short_y = envelope(t[:100], y[:100], columns)   # fewer samples: all kept
+    assert np.array_equal(short_t, t[:100]) and np.array_equal(short_y, y[:100])
+
+
+def test_thin_path_keeps_the_path_to_one_pixel() -> None:
+    """Every dropped orbit sample lies in the pixel of a kept sample of its run; the samples
+    where the path changes pixel are all kept."""
+    from drillcosim.cosim.scenario.plots import thin_path
+
+    s = np.linspace(0.0, 60.0, 30001)
+    x, y = 20 * np.cos(s) * np.cos(0.1 * s), 20 * np.sin(s) * np.cos(0.07 * s)
+    cell = 0.03
+    xd, yd = thin_path(x, y, cell)
+    assert len(xd) < len(x)
+    kept = {(a, b) for a, b in zip(np.floor(xd / cell), np.floor(yd / cell))}
+    assert all((a, b) in kept for a, b in zip(np.floor(x / cell), np.floor(y / cell)))
+    assert (xd[0], yd[0], xd[-1], yd[-1]) == (x[0], y[0], x[-1], y[-1])
+
+
+def test_a_long_run_is_drawn_from_its_envelope(tmp_path) -> None:
+    """The figures of a 30 s run at 1 ms draw at most 4 samples per 300-dpi column."""
+    from drillcosim.cosim.scenario import plots
+
+    data = _record(["plant.body11_X", "plant.body11_Y", "plant.body11_radial_deflection",
+                    "plant.body11_contact_force"], n=30001)
+    drawn = []
+    real = plots._series
+
+    def spy(ax, t, y, **kw):
+        real(ax, t, y, **kw)
+        drawn.append(len(ax.lines[-1].get_xdata()))
+
+    plots._series = spy
+    try:
+        plots.plot_deflection_contact(data, tmp_path / "d.png", 0.02)
+    finally:
+        plots._series = real
+    assert len(drawn) == 2 and max(drawn) <= 4 * 5 * plots.SHOW_DPI < 30001 / 4
+    assert imread(tmp_path / "d.png").shape[:2] == (720, 600)
+
+
+def test_plot_workers_write_the_same_figures_as_this_process(tmp_path) -> None:
+    """Two worker processes draw the figures (each its group): the same PNG bytes as
+    plot_run in this process, the paths in its order; a dead worker's share is drawn here."""
+    from drillcosim.cosim.scenario.plot_workers import PlotWorkers
+
+    data = _record(["plant.body11_X", "plant.body11_Y", "plant.body11_radial_deflection",
+                    "plant.body11_contact_force", "plant.actuator1_power",
+                    "controller.actuator1_force_C"], n=3000)
+    for name in ("here", "there", "again"):
+        (tmp_path / name).mkdir()
+    here = plot_run(data, tmp_path / "here", clearance=0.02, n_sites=1, title="t")
+    with PlotWorkers(2) as workers:
+        assert len(workers.procs) == 2
+        there = workers.plot_run(data, tmp_path / "there", clearance=0.02, n_sites=1,
+                                 title="t")
+    assert [p.name for p in there] == [p.name for p in here] == [
+        "orbit.png", "orbit_steady.png", "deflection_contact.png", "actuators.png"]
+    for a, b in zip(here, there):
+        assert a.read_bytes() == b.read_bytes()
+    with PlotWorkers(2) as workers:
+        workers.procs[0].kill()                       # its group falls back to this process
+        workers.procs[0].wait()
+        again = workers.plot_run(data, tmp_path / "again", clearance=0.02, n_sites=1,
+                                 title="t")
+    assert [p.name for p in again] == [p.name for p in here]
+    assert all(a.read_bytes() == b.read_bytes() for a, b in zip(here, again))
+    with PlotWorkers(0) as none:                      # one core: no workers
+        assert none.procs == []

@@ -3,7 +3,7 @@
 * The same scene and parameters give bit-identical results run to run: two fmpy
   runs of the plant FMU (default stable step, i.e. the eigenvalue estimate
   included), and the master with plant + controller (``drillcosim run``'s
-  ``simulate_scene``); a run in a worker process (``ProcessPoolExecutor``, spawn) equals
+  ``drillcosim.simulate``); a run in a worker process (``ProcessPoolExecutor``, spawn) equals
   the in-process run bit for bit.
 * Two instances with different parameters in one process share no state: their
   interleaved steps equal their solo runs, for the plant and for the controller.
@@ -109,11 +109,11 @@ def test_controller_fmu_runs_are_bit_identical_in_process_and_in_a_worker(fmu_pa
 
 def scene_run(out_dir: str, fmu_dir: str) -> bytes:
     """``drillcosim run`` (plant + controller through the master): results.csv bytes."""
-    from drillcosim.cosim.scenario.run import simulate_scene
+    from drillcosim import simulate
 
-    outcome = simulate_scene("paper_closed_loop", stop_time=0.01, out_dir=out_dir,
-                             fmu_dir=fmu_dir, progress=False, plots=False)
-    assert outcome.exit_code == 0, outcome.message
+    res = simulate("paper_closed_loop", stop_time=0.01, fmu_dir=fmu_dir)
+    res.save(out_dir, plots=False)
+    assert res.completed, res.message()
     return (Path(out_dir) / "results.csv").read_bytes()
 
 

@@ -36,7 +36,7 @@ import pytest
 
 import drillcosim.cosim.master.files as files_module
 import drillcosim.cosim.master.master as master_module
-import drillcosim.cosim.scenario.summary as summary_module
+import drillcosim.cosim.scenario.result as result_module
 from drillcosim.cosim.master.errors import CosimError
 from drillcosim.cosim.master.execution import Execution
 from drillcosim.cosim.master.manipulators import InjectFault, ScheduledChange
@@ -315,7 +315,7 @@ def test_cli_run_disk_full_while_writing_summary_gives_one_line(
     def full(*args, **kwargs):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(tmp_path / "summary.json"))
 
-    monkeypatch.setattr(summary_module, "write_json", full)
+    monkeypatch.setattr(result_module, "write_json", full)
     code = None
     with contextlib.suppress(OSError):
         code = main(["run", "--out", str(tmp_path / "out"), "--stop-time", "0.01",

@@ -195,14 +195,19 @@ def test_misspelt_key_gets_did_you_mean(tmp_path: Path, sec: str, name: str) -> 
     ("gravty = 9.81\n", "did you mean 'gravity'?"),
     ("[pipes]\nlength = 80.0\n", "did you mean 'pipe'?"),
     ("[[load]]\nmagnitude = 1.0\n", "did you mean 'loads'?"),
-    ("[cosim]\nstepp = 1e-3\n", None),  # validated by the master, not by load_scene
+    ("[cosim]\nstepp = 1e-3\n", None),  # validated by the run's config, not by load_scene
 ])
 def test_unknown_top_level_keys_get_did_you_mean(tmp_path: Path, text: str,
                                                  expected: str | None) -> None:
     path = tmp_path / "typo.toml"
     path.write_text(text)
     if expected is None:
-        assert load_scene(path).cosim == {"stepp": 1e-3}
+        from drillcosim.cosim.scenario.config import ConfigError, load_config
+
+        assert load_scene(path).plant == load_scene("paper_open_loop").plant.__class__()
+        with pytest.raises(ConfigError, match=r"\[cosim\] unknown key 'stepp' \(did you mean "
+                                              r"'step'\?\)"):
+            load_config(path)
         return
     with pytest.raises(SceneError, match=expected):
         load_scene(path)
@@ -299,7 +304,7 @@ BAD_FILES = {
     (["run", "--set", "cosim.stepp=1e-3", "--no-plots"], "did you mean 'step'?"),
     (["run", "--stop-time", "nan", "--no-plots"], "stop_time = nan"),
     (["run", "--gain", "-1", "--no-plots"], "gain = -1.0 is out of range"),
-    (["run", "--set", "pipe.length", "--no-plots"], "expected section.key=value"),
+    (["run", "--set", "pipe.length", "--no-plots"], "expected KEY=VALUE"),
 ])
 def test_cli_bad_input_exits_2_with_one_line_and_no_traceback(
         tmp_path: Path, args: list[str], expected: str) -> None:
@@ -315,11 +320,12 @@ def test_cli_bad_input_exits_2_with_one_line_and_no_traceback(
     assert not (tmp_path / "out").exists()  # nothing written
 
 
-def test_library_callers_get_value_error_from_simulate_scene(tmp_path: Path) -> None:
-    from drillcosim.cosim.scenario.run import simulate_scene
+def test_library_callers_get_a_user_error_from_simulate(tmp_path: Path) -> None:
+    from drillcosim import UserError, simulate
 
-    with pytest.raises(ValueError, match="not found"):
-        simulate_scene("NO_SUCH_SCENE", out_dir=tmp_path / "out")
-    with pytest.raises(ValueError, match="pipe.length"):
-        simulate_scene(sets=["pipe.length=-1"], out_dir=tmp_path / "out")
+    with pytest.raises(UserError, match="not found"):
+        simulate("NO_SUCH_SCENE", csv_path=tmp_path / "out" / "results.csv")
+    with pytest.raises(UserError, match="pipe.length"):
+        simulate(overrides={"pipe.length": -1}, csv_path=tmp_path / "out" / "results.csv")
+    assert issubclass(UserError, ValueError)
     assert not (tmp_path / "out").exists()

@@ -13,12 +13,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import drillcosim
 from drillcosim.cosim.cli import main
 from drillcosim.cosim.master.errors import CosimError
-from drillcosim.cosim.scenario.run import simulate_system
-from drillcosim.cosim.scenario.scene_system import ensure_fmus, scene_system
+from drillcosim.cosim.scenario.build import build_system
+from drillcosim.cosim.scenario.config import load_config
+from drillcosim.cosim.scenario.scene_fmus import ensure_recipes, recipe_named
+from drillcosim.cosim.scenario.simulate import simulate
 from drillcosim.cosim.scenario.summary import SUMMARY_KEYS
-from drillcosim.plant.scene import load_scene
 
 PNGS = ("orbit.png", "orbit_steady.png", "deflection_contact.png", "actuators.png")
 #: Fixed co-simulation settings, so the tests do not follow tuning of the scene files.
@@ -29,7 +31,7 @@ COSIM = ["--set", "cosim.step=1e-3", "--set", 'cosim.algorithm="jacobi"',
 @pytest.fixture(scope="module")
 def fmu_dir() -> Path:
     try:
-        paths = ensure_fmus()
+        paths = ensure_recipes([recipe_named(n) for n in ("DrillstringPlant", "StrainController")])
     except (FileNotFoundError, RuntimeError) as exc:
         pytest.skip(f"plant/controller FMUs unavailable: {exc}")
     return paths["DrillstringPlant"].parent
@@ -110,15 +112,15 @@ def test_failure_before_the_first_step_keeps_earlier_files(good_run, fmu_dir, ca
                                                            caplog) -> None:
     out, _ = good_run
     before = _snapshot(out)
-    sc = dataclasses.replace(load_scene("paper_closed_loop"), cosim={"step": 1e-3})
-    ss = scene_system(sc, fmu_dir)
+    ss = build_system(load_config("paper_closed_loop", {"cosim.step": 1e-3}), "fmu",
+                      fmu_dir=fmu_dir)
     plant = ss.system.fmu("plant")
     bad = dataclasses.replace(plant, parameters={**plant.parameters, "pipe.length": -1.0})
     ss = dataclasses.replace(ss, system=dataclasses.replace(
         ss.system, fmus=[bad, ss.system.fmu("controller")]))
     with pytest.raises(CosimError) as info, \
             caplog.at_level("DEBUG", "drillcosim.cosim.master.fmi_log"):
-        simulate_system(ss, out, stop_time=0.1, progress=False)
+        simulate(ss, 0.1, csv_path=out / "results.csv")
     err = info.value
     # the plant FMU (native wrapper) refuses the parameter at initialization with fmi2Error;
     # the error names FMU and call and ends with the FMU's own message naming the parameter,
@@ -150,10 +152,10 @@ def test_bad_plant_parameter_from_the_cli_exits_2_naming_it(good_run, capsys) ->
 def test_parameter_refused_by_the_fmu_at_initialization_exits_2_naming_it(
         good_run, fmu_dir, capsys, monkeypatch) -> None:
     """The FMU's own check (not the scene's) rejects a parameter: one line, exit 2."""
-    import drillcosim.cosim.scenario.scene_system as scene_system_module
+    import drillcosim.api as api_module
     out, _ = good_run
     before = _snapshot(out)
-    real = scene_system_module.scene_system
+    real = api_module.build_system
 
     def with_bad_plant_parameter(*args, **kwargs):
         ss = real(*args, **kwargs)
@@ -163,7 +165,7 @@ def test_parameter_refused_by_the_fmu_at_initialization_exits_2_naming_it(
         return dataclasses.replace(ss, system=dataclasses.replace(
             ss.system, fmus=[bad, ss.system.fmu("controller")]))
 
-    monkeypatch.setattr(scene_system_module, "scene_system", with_bad_plant_parameter)
+    monkeypatch.setattr(api_module, "build_system", with_bad_plant_parameter)
     capsys.readouterr()
     code = main(["run", "paper_closed_loop", "--out", str(out), *COSIM])
     err = capsys.readouterr().err
@@ -189,3 +191,42 @@ def test_diverging_run_exits_1_and_keeps_partial_results(fmu_dir, tmp_path, caps
     assert s["diverged"]["message"] and "\n" not in s["diverged"]["message"]
     data = np.loadtxt(out / "results.csv", delimiter=",", skiprows=1, ndmin=2)
     assert 1 < len(data) and data[-1, 0] == pytest.approx(s["end_time_s"])
+
+
+def test_top_drive_controller_key_set_from_the_cli_reaches_that_controller(tmp_path,
+                                                                          capsys) -> None:
+    """``drillcosim run stick_slip_soft_torque --set top_drive_controller.p_gain=150``: once
+    passed to the plant FMU ("plant ... has no variable 'top_drive_controller.p_gain'", exit
+    2); the key belongs to the top-drive controller, and a lower P gain lets the bit stick
+    longer in the same time (the stick-slip study's direction, docs/physics.md section 6)."""
+    runs = {}
+    for p_gain in (150, 1000):
+        out = tmp_path / f"p{p_gain}"
+        code = main(["run", "stick_slip_soft_torque", "--set",
+                     f"top_drive_controller.p_gain={p_gain}", "--stop-time", "20",
+                     "--out", str(out), "--no-plots", "--no-progress"])
+        assert code == 0, capsys.readouterr().err
+        runs[p_gain] = json.loads((out / "summary.json").read_text())
+    assert runs[150]["top_drive_controller"]["p_gain"] == 150.0
+    assert runs[1000]["top_drive_controller"]["p_gain"] == 1000.0
+    severity = {p: s["torsional"]["stick_slip_severity"] for p, s in runs.items()}
+    assert severity[150] > 10 * severity[1000], severity
+
+
+def test_the_api_and_the_cli_give_identical_numbers(good_run) -> None:
+    """``drillcosim run`` is a thin layer on ``drillcosim.simulate``: the same run, the same
+    bits (results.csv holds 17 significant digits: the doubles themselves)."""
+    out, _ = good_run
+    res = drillcosim.simulate("paper_closed_loop", stop_time=0.2,
+                              overrides={"cosim.step": 1e-3, "cosim.algorithm": "jacobi"})
+    frame = res.to_pandas()
+    header = (out / "results.csv").read_text().splitlines()[0].split(",")
+    data = np.loadtxt(out / "results.csv", delimiter=",", skiprows=1)
+    assert header == ["time", *frame.columns]
+    np.testing.assert_array_equal(data[:, 0], frame.index.to_numpy())
+    for j, name in enumerate(header[1:], start=1):
+        np.testing.assert_array_equal(data[:, j], frame[name].to_numpy(), err_msg=name)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["spans"] == json.loads(json.dumps(res.summary["spans"]))
+    assert res.units["plant.body11_radial_deflection"] == "m"
+    assert res.units["controller.actuator1_force_C"] == "N" and res.units["time"] == "s"

@@ -21,8 +21,9 @@ from fmpy.validation import validate_fmu
 
 from drillcosim.controller import ControllerParams, StrainController, check_gain_matrix
 from drillcosim.cosim.cli import main
+from drillcosim.cosim.scenario.build import scene_recipes
+from drillcosim.cosim.scenario.config import load_config
 from drillcosim.cosim.scenario.scene_fmus import controller_recipe, plant_layout, plant_recipe
-from drillcosim.cosim.scenario.scene_system import scene_recipes
 from drillcosim.cosim.study.point import measure_point
 from drillcosim.fmu_src.build import build_one
 from drillcosim.plant.model import DrillstringModel
@@ -58,8 +59,8 @@ def four_sites_fmus(tmp_path_factory, scene_dir) -> Path:
     out = tmp_path_factory.mktemp("scene_fmus")
     recipes = {}
     for scene in ("four_sites", scene_dir / "four_sites_mimo.toml"):
-        recipes.update({r.name: r for r in scene_recipes(load_scene(scene)).values()})
-    recipes.update({r.name: r for r in scene_recipes(load_scene("paper_closed_loop")).values()})
+        recipes.update({r.name: r for r in scene_recipes(load_config(scene)).values()})
+    recipes.update({r.name: r for r in scene_recipes(load_config("paper_closed_loop")).values()})
     for recipe in recipes.values():
         path = build_one(recipe, out)
         assert validate_fmu(str(path)) == [], path
@@ -73,18 +74,17 @@ def _variables(fmu: Path) -> dict:
 # ------------------------------------------------------------------ which FMUs a scene needs
 def test_the_paper_scenes_keep_the_default_fmus() -> None:
     for name in ("paper_open_loop", "paper_closed_loop", "paper_severe"):
-        sc = load_scene(name)
-        assert plant_layout(sc) is None
-        assert [r.name for r in scene_recipes(sc).values()][:1] == ["DrillstringPlant"]
-        assert all(not r.base for r in scene_recipes(sc).values())
+        config = load_config(name)
+        assert plant_layout(config.scene) is None
+        assert [r.name for r in scene_recipes(config).values()][:1] == ["DrillstringPlant"]
+        assert all(not r.base for r in scene_recipes(config).values())
 
 
 def test_other_layouts_get_variants_named_after_the_scene(scene_dir) -> None:
-    four = load_scene("four_sites")
-    names = {i: r.name for i, r in scene_recipes(four).items()}
+    names = {i: r.name for i, r in scene_recipes(load_config("four_sites")).items()}
     assert names == {"plant": "DrillstringPlant_four_sites",
                      "controller": "StrainController_four_sites"}
-    soft = scene_recipes(load_scene("stick_slip_soft_torque"))
+    soft = scene_recipes(load_config("stick_slip_soft_torque"))
     assert {i: r.name for i, r in soft.items()} == {
         "plant": "DrillstringPlant_stick_slip_soft_torque",
         "top_drive_controller": "TopDriveController"}
@@ -252,7 +252,7 @@ def test_bad_gain_matrix_is_refused_in_one_line(bad, fragment) -> None:
 def test_scene_fmus_equal_the_in_process_models(four_sites_fmus, scene_dir, scene) -> None:
     path = "four_sites" if scene == "four_sites" else str(scene_dir / f"{scene}.toml")
     rows = [measure_point(path, 1e8, 0.0, 2.5e-4, 0.05, engine, fmu_dir=str(four_sites_fmus),
-                          rms_fraction=1.0) for engine in ("fmu", "python")]
+                          rms_fraction=1.0) for engine in ("fmu", "inprocess")]
     for key in ("rms_long", "rms_short", "peak_force", "peak_power", "end_time"):
         assert rows[0][key] == rows[1][key], key
     assert rows[0]["status"] == "ok" and rows[0]["peak_force"] > 0.0
@@ -300,7 +300,7 @@ def test_every_shipped_scene_runs_through_the_cli(scene, tmp_path, capsys) -> No
     assert main(["run", scene, "--fmu-dir", str(fmus), "--stop-time", "0.05", "--out", str(res),
                  "--no-plots", "--no-progress"]) == 0
     built = {p.stem for p in fmus.glob("*.fmu")}
-    assert {r.name for r in scene_recipes(load_scene(scene)).values()} == built
+    assert {r.name for r in scene_recipes(load_config(scene)).values()} == built
     for path in fmus.glob("*.fmu"):
         assert validate_fmu(str(path)) == [], path
     assert json.loads((res / "summary.json").read_text())["end_time_s"] == pytest.approx(0.05)

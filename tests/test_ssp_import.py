@@ -12,7 +12,6 @@ input over step n (n >= 1) is the gain's output read after step n-1, i.e. ``-k A
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import zipfile
 from pathlib import Path
@@ -24,8 +23,8 @@ from drillcosim.cosim.cli import main
 from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.master.ssp import export_ssp
 from drillcosim.cosim.master.ssp_import import SspError, read_ssp
-from drillcosim.cosim.scenario.scene_system import scene_system
-from drillcosim.plant.scene import load_scene
+from drillcosim.cosim.scenario.build import build_system
+from drillcosim.cosim.scenario.config import load_config
 
 A, W, K, X0, H, STOP = 2.0, 5.0, 3.0, 0.25, 0.01, 1.0
 
@@ -134,10 +133,10 @@ def closed_form(n_rows: int) -> np.ndarray:
 @pytest.fixture(scope="module")
 def multirate(project_fmus):
     """Controller every 2 base steps, Integer/Boolean/String/Real start values."""
-    sc = load_scene("paper_restricted_actuator", overrides={"controller": {"gain": 5e8}})
-    sc = dataclasses.replace(sc, cosim={"step": 1e-3, "controller_sample_period": 2e-3,
-                                        "stop_time": 0.2})
-    return scene_system(sc, project_fmus["DrillstringPlant"].parent)
+    config = load_config("paper_restricted_actuator", {
+        "controller.gain": 5e8, "cosim.step": 1e-3, "cosim.controller_sample_period": 2e-3,
+        "cosim.stop_time": 0.2, "cosim.algorithm": "jacobi", "cosim.order": ["plant", "controller"]})
+    return build_system(config, "fmu", fmu_dir=project_fmus["DrillstringPlant"].parent)
 
 
 def test_round_trip_export_import_is_bit_for_bit(multirate, tmp_path) -> None:

@@ -111,15 +111,15 @@ def test_prediction_boundaries_of_the_paper_scene(drill):
 
 
 def _monolithic_force_growth(gain: float, delay: float, step: float, t_end: float) -> float:
-    """Fit ln|F| peaks of the 'python' engine loop over its second half [1/s]."""
-    from drillcosim.cosim.study.point import PointOptions, point_scene, simulate_point
+    """Fit ln|F| peaks of the 'inprocess' engine loop over its second half [1/s]."""
+    from drillcosim.cosim.study.point import PointOptions, point_config, simulate_point
 
     kick = {"kind": "force", "body": 11, "direction": "x", "magnitude": 1.0, "start": 0.05,
             "duration": 0.01}
-    sc, over = point_scene("paper_closed_loop", gain, delay, step, t_end, False,
-                           {"bit": {"displacement_amplitude": 0.0},
-                            "unbalance": {"moment": 0.0}, "loads": [kick]})
-    data, reason = simulate_point(sc, over, PointOptions(force_cap=1e9), engine="python")
+    config = point_config("paper_closed_loop", gain, delay, step, t_end, False,
+                          {"bit.displacement_amplitude": 0.0, "unbalance.moment": 0.0,
+                           "loads": [kick]})
+    data, reason = simulate_point(config, PointOptions(force_cap=1e9), engine="inprocess")
     assert reason == ""
     t = data["time"]
     f = np.max(np.abs(np.vstack([data[f"controller.actuator{s}_force_{a}"] for s in (1, 2)

@@ -103,7 +103,7 @@ def _ordered_result(gain, step, stop_time, open_loop):
             "peak_force": gain, "peak_power": 0.0, "wall_time": 0.0}
 
 
-ORDERED = SweepSpec(SCENE, [0.1, 0.2, 0.55, 2.0, 3.0, 13.0], [0.0], [1e-3, 2e-3], 2.0, "python")
+ORDERED = SweepSpec(SCENE, [0.1, 0.2, 0.55, 2.0, 3.0, 13.0], [0.0], [1e-3, 2e-3], 2.0, "inprocess")
 
 
 # --- grid ---------------------------------------------------------------------------------
@@ -121,12 +121,12 @@ def test_parse_list_forms():
 
 def test_a_stop_time_that_is_not_a_whole_number_of_steps_is_refused():
     with pytest.raises(ValueError, match="6 s: not a whole number of steps of 0.00035 s"):
-        SweepSpec(SCENE, [1e9], [0.0], [1e-4, 3.5e-4], 6.0, "python").points()
-    assert len(SweepSpec(SCENE, [1e9], [0.0], [1e-4, 4e-4], 6.0, "python").points()) == 4
+        SweepSpec(SCENE, [1e9], [0.0], [1e-4, 3.5e-4], 6.0, "inprocess").points()
+    assert len(SweepSpec(SCENE, [1e9], [0.0], [1e-4, 4e-4], 6.0, "inprocess").points()) == 4
 
 
 def test_points_open_loop_first_and_keys_unique():
-    spec = SweepSpec(SCENE, [1e8, 1e9], [0.0, 1e-4], [2.5e-4, 5e-4], 1.0, "python")
+    spec = SweepSpec(SCENE, [1e8, 1e9], [0.0, 1e-4], [2.5e-4, 5e-4], 1.0, "inprocess")
     pts = spec.points()
     assert len(pts) == 2 + 8
     assert [p.kind for p in pts[:2]] == ["open_loop"] * 2
@@ -136,10 +136,10 @@ def test_points_open_loop_first_and_keys_unique():
 # --- table --------------------------------------------------------------------------------
 def test_table_drops_a_half_written_row(tmp_path):
     t = ResultTable(tmp_path)
-    p = Point(SCENE, 1e9, 0.0, 1e-3, 1.0, "python")
+    p = Point(SCENE, 1e9, 0.0, 1e-3, 1.0, "inprocess")
     t.append(point_row(p, fake_runner))
     with open(t.csv_path, "a") as fh:          # a kill in the middle of a write
-        fh.write("paper_closed_loop|python|closed_loop|1e8,paper_clo")
+        fh.write("paper_closed_loop|inprocess|closed_loop|1e8,paper_clo")
     rows = ResultTable(tmp_path).rows
     assert [r["key"] for r in rows] == [p.key]
     assert not t.csv_path.read_text().endswith("\n")     # a reader writes nothing
@@ -150,7 +150,7 @@ def test_table_drops_a_half_written_row(tmp_path):
 
 def test_duplicate_rows_keep_the_newest_and_the_folder_is_locked(tmp_path):
     t = ResultTable(tmp_path)
-    p = Point(SCENE, 1e9, 0.0, 1e-3, 1.0, "python")
+    p = Point(SCENE, 1e9, 0.0, 1e-3, 1.0, "inprocess")
     row = point_row(p, fake_runner)
     t.append(row)
     with open(t.csv_path, "a") as fh:           # what two concurrent writers would leave
@@ -165,7 +165,7 @@ def test_duplicate_rows_keep_the_newest_and_the_folder_is_locked(tmp_path):
 
 
 def test_benefit_from_the_open_loop_row(tmp_path):
-    spec = SweepSpec(SCENE, [1.0], [0.0], [1e-3], 1.0, "python")
+    spec = SweepSpec(SCENE, [1.0], [0.0], [1e-3], 1.0, "inprocess")
     execute_sweep(spec, tmp_path, workers=0, measure=fake_runner, progress=False)
     rows = {r["kind"]: r for r in read_table(tmp_path)}
     assert rows["closed_loop"]["benefit_long"] == pytest.approx(0.5)
@@ -178,19 +178,19 @@ def test_benefit_from_the_open_loop_row(tmp_path):
 # --- bad points ---------------------------------------------------------------------------
 def test_bad_points_are_recorded_with_their_reason(tmp_path):
     """A raising runner (gain 13) and a real point with invalid input (negative delay)."""
-    spec = SweepSpec(SCENE, [1.0, 13.0], [0.0], [1e-3], 1.0, "python")
+    spec = SweepSpec(SCENE, [1.0, 13.0], [0.0], [1e-3], 1.0, "inprocess")
     out = execute_sweep(spec, tmp_path, workers=1, measure=fake_runner, progress=False)
     rows = {r["gain"]: r for r in read_table(tmp_path) if r["kind"] == "closed_loop"}
     assert out.n_errors == 1 and out.n_run == 3
     assert rows[13.0]["status"] == "error"
     assert rows[13.0]["reason"].startswith("RuntimeError: injected failure second line")
     assert rows[1.0]["status"] == "ok"
-    bad = point_row(Point(SCENE, 1e9, -1e-3, 1e-3, 0.01, "python"))
+    bad = point_row(Point(SCENE, 1e9, -1e-3, 1e-3, 0.01, "inprocess"))
     assert bad["status"] == "error" and "actuator_delay" in bad["reason"]
 
 
 def test_a_dying_worker_is_recorded_and_the_sweep_goes_on(tmp_path):
-    spec = SweepSpec(SCENE, [1.0, 7.0], [0.0], [1e-3], 1.0, "python")
+    spec = SweepSpec(SCENE, [1.0, 7.0], [0.0], [1e-3], 1.0, "inprocess")
     out = execute_sweep(spec, tmp_path, workers=1, measure=dying_runner, progress=False)
     rows = {r["gain"]: r for r in read_table(tmp_path) if r["kind"] == "closed_loop"}
     assert out.n_points == 3 and len(read_table(tmp_path)) == 3
@@ -206,7 +206,7 @@ def test_killed_sweep_resumes_and_skips_finished_points(tmp_path):
         "import sys; sys.path.insert(0, {!r})\n"
         "from test_sweep import slow_runner\n"
         "from drillcosim.cosim.study.sweep import SweepSpec, execute_sweep\n"
-        "spec = SweepSpec({!r}, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0], [0.0], [1e-3], 1.0, 'python')\n"
+        "spec = SweepSpec({!r}, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0], [0.0], [1e-3], 1.0, 'inprocess')\n"
         "execute_sweep(spec, {!r}, workers=0, measure=slow_runner, progress=False)\n"
     ).format(str(ROOT / "tests"), SCENE, str(tmp_path))
     proc = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT)
@@ -220,7 +220,7 @@ def test_killed_sweep_resumes_and_skips_finished_points(tmp_path):
     proc.wait()
     before = {r["key"] for r in read_table(tmp_path)}
     assert 2 <= len(before) < 7
-    spec = SweepSpec(SCENE, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0], [0.0], [1e-3], 1.0, "python")
+    spec = SweepSpec(SCENE, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0], [0.0], [1e-3], 1.0, "inprocess")
     out = execute_sweep(spec, tmp_path, workers=0, measure=fake_runner, progress=False)
     assert out.n_skipped == len(before) and out.n_run == 7 - len(before)
     rows = read_table(tmp_path)
@@ -352,7 +352,7 @@ def test_killed_process_group_then_resume_equals_a_clean_run(clean_ordered_run, 
 def test_a_stale_derived_column_is_repaired_by_the_next_sweep(tmp_path):
     """A CSV row written before its reference (an older version kept it forever) is
     re-judged when read, and the files are repaired by the next (resumed) sweep."""
-    spec = SweepSpec(SCENE, [2.0], [0.0], [1e-3], 2.0, "python")
+    spec = SweepSpec(SCENE, [2.0], [0.0], [1e-3], 2.0, "inprocess")
     execute_sweep(spec, tmp_path, workers=0, measure=ordered_runner, progress=False)
     path = tmp_path / "results.csv"
     text = path.read_text()
@@ -420,7 +420,7 @@ def test_judging_window_from_modes():
 
 @pytest.mark.slow
 def test_short_runs_are_undecided_and_long_runs_are_judged(tmp_path, capsys):
-    """paper_closed_loop, python engine, H = 0.25 ms: gain 1e8 without delay is undecided in
+    """paper_closed_loop, inprocess engine, H = 0.25 ms: gain 1e8 without delay is undecided in
     1 s runs (inside the start-up transient; the CLI says so in one line) and stable in 6 s
     runs; gain 1e9 with 1 ms of delay (predicted growth +13 1/s) is unstable in 6 s runs."""
     from drillcosim.cosim.cli import main
@@ -428,7 +428,7 @@ def test_short_runs_are_undecided_and_long_runs_are_judged(tmp_path, capsys):
 
     need = scene_judging_window(SCENE).min_stop_time
     assert 1.0 < need <= 6.0
-    common = ["sweep", SCENE, "--engine", "python", "--delay", "0,1e-3", "--workers", "0",
+    common = ["sweep", SCENE, "--engine", "inprocess", "--delay", "0,1e-3", "--workers", "0",
               "--no-progress"]
     assert main([*common, "--gain", "1e8", "--stop-time", "1", "--out", str(tmp_path / "a")]) == 0
     err = capsys.readouterr().err
@@ -449,11 +449,11 @@ def test_short_runs_are_undecided_and_long_runs_are_judged(tmp_path, capsys):
 # --- real engines -------------------------------------------------------------------------
 @pytest.mark.slow
 def test_small_sweep_on_a_dask_local_cluster(tmp_path):
-    """2 x 2 closed-loop points (+ 1 open loop), python engine, 1.2 s at H = 1 ms, on a
+    """2 x 2 closed-loop points (+ 1 open loop), inprocess engine, 1.2 s at H = 1 ms, on a
     LocalCluster with one worker process; then the maps."""
     from distributed import Client, LocalCluster
 
-    spec = SweepSpec(SCENE, [1e8, 1e9], [0.0, 1e-3], [1e-3], 1.2, "python", FAST,
+    spec = SweepSpec(SCENE, [1e8, 1e9], [0.0, 1e-3], [1e-3], 1.2, "inprocess", FAST,
                      options={"force_cap": 1e5})
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
                       dashboard_address=None) as cluster, Client(cluster) as client:
@@ -482,11 +482,11 @@ def test_fmu_and_in_process_slaves_give_the_same_run_bit_for_bit(gain, delay, st
     """One master, two sets of slaves: the plant and controller FMUs, or the same models in
     process (cosim.scenario.inprocess). Every recorded value is identical, for Gauss-Seidel
     with a hold and for Jacobi with linear coupling and fractional delays."""
-    from drillcosim.cosim.study.point import PointOptions, point_scene, simulate_point
+    from drillcosim.cosim.study.point import PointOptions, point_config, simulate_point
 
-    sc, over = point_scene(SCENE, gain, delay, step, 0.2, False, {"cosim": cosim})
-    fmu, reason_fmu = simulate_point(sc, over, PointOptions(), "fmu")
-    py, reason_py = simulate_point(sc, over, PointOptions(), "python")
+    config = point_config(SCENE, gain, delay, step, 0.2, False, {"cosim": cosim})
+    fmu, reason_fmu = simulate_point(config, PointOptions(), "fmu")
+    py, reason_py = simulate_point(config, PointOptions(), "inprocess")
     assert reason_fmu == reason_py == ""
     assert fmu.dtype.names == py.dtype.names and len(fmu) == 201
     assert np.any(fmu["controller.actuator1_force_C"] != 0.0)

@@ -10,6 +10,7 @@ soft and of a damping tuning, through the sweep tool; the linearized two-DOF loo
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -18,12 +19,12 @@ from fmpy import read_model_description, simulate_fmu
 from scipy.integrate import solve_ivp
 
 from drillcosim.controller import TopDriveController, TopDriveControllerParams
+from drillcosim.cosim.scenario.config import ConfigError, load_config
 from drillcosim.cosim.study.grid import SweepSpec
 from drillcosim.cosim.study.maps import plot_maps
 from drillcosim.cosim.study.point import measure_point
 from drillcosim.cosim.study.sweep import execute_points, execute_sweep
 from drillcosim.cosim.study.table import ResultTable, read_table
-from drillcosim.plant.scene import load_scene
 from support.torsional import bit_torque, sampled_loop_growth, two_dof
 
 KEY = "top_drive_controller.p_gain"
@@ -75,12 +76,10 @@ def test_bad_parameters_are_refused_in_one_line(kwargs, fragment) -> None:
 
 
 def test_bad_scene_table_names_the_file_and_key(tmp_path) -> None:
-    from drillcosim.cosim.scenario.scene_system import scene_system
-
     path = tmp_path / "bad.toml"
     path.write_text('extends = "stick_slip_soft_torque"\n[top_drive_controller]\np_gain = -3.0\n')
-    with pytest.raises(ValueError, match="p_gain") as exc:
-        scene_system(load_scene(path), tmp_path)
+    with pytest.raises(ConfigError, match="p_gain") as exc:
+        load_config(path)
     assert str(path) in str(exc.value) or "bad" in str(exc.value)
 
 
@@ -127,7 +126,7 @@ def test_soft_torque_scene_fmus_equal_the_in_process_slaves(project_fmus) -> Non
     folder = str(project_fmus["TopDriveController"].parent)  # + the plant built for the scene
     rows = [measure_point("stick_slip_soft_torque", 1000.0, 0.02, 1e-3, 3.0, engine,
                           gain_key=KEY, rms_fraction=1.0, fmu_dir=folder)
-            for engine in ("fmu", "python")]
+            for engine in ("fmu", "inprocess")]
     for key in ("stick_slip_severity", "stick_fraction", "end_time"):
         assert rows[0][key] == rows[1][key], key
     assert rows[0]["status"] == "ok"
@@ -136,8 +135,8 @@ def test_soft_torque_scene_fmus_equal_the_in_process_slaves(project_fmus) -> Non
 # ------------------------------------------------------------------ against the two-DOF reference
 def _reference(p_gain: float, stop: float) -> tuple[np.ndarray, np.ndarray]:
     """Bit speed [rad/s] of the two-DOF model of stick_slip_soft_torque at ``p_gain``."""
-    sc = load_scene("stick_slip_soft_torque")
-    plant, tc = sc.plant, sc.top_drive_controller
+    config = load_config("stick_slip_soft_torque")
+    plant, tc = config.scene.plant, dataclasses.asdict(config.top_drive)
     m = two_dof(plant)
     minv = np.linalg.inv(m.mass)
     weight = plant.bit.weight_on_bit
@@ -169,7 +168,7 @@ def test_sweep_of_the_p_gain_matches_the_two_dof_reference(tmp_path) -> None:
     severity as the scipy reference's."""
     stop = 60.0
     spec = SweepSpec("stick_slip_soft_torque", (150.0, 400.0, 1000.0), (0.0,), (1e-3,), stop,
-                     "python", open_loop=False, gain_key=KEY)
+                     "inprocess", open_loop=False, gain_key=KEY)
     outcome = execute_sweep(spec, tmp_path, workers=0, progress=False)
     assert outcome.n_errors == 0
     rows = {r["gain"]: r for r in read_table(tmp_path)}
@@ -197,8 +196,8 @@ def test_linearized_two_dof_loop_threshold_brackets_the_sweep() -> None:
     is linearly stable above P_c(I); the co-simulation started at rest needs more (the start-up
     transient reaches the stuck bit): P = 150 < P_c sticks (previous test), P_c itself is
     between 150 and 1000."""
-    sc = load_scene("stick_slip_soft_torque")
-    plant, tc = sc.plant, sc.top_drive_controller
+    config = load_config("stick_slip_soft_torque")
+    plant, tc = config.scene.plant, dataclasses.asdict(config.top_drive)
     m = two_dof(plant)
     minv = np.linalg.inv(m.mass)
     d = 1e-6
@@ -227,14 +226,15 @@ def test_actuator_delay_map_follows_the_sampled_linear_loop(tmp_path) -> None:
     torque delayed, Jacobi step, ZOH) is stable only near P = 1000 and unstable for 600 and
     1500; at 0.8 s unstable for every P. The co-simulation (sweep tool) sticks where the loop
     is unstable, keeps turning where it is stable, and diverges at 0.8 s."""
-    sc = load_scene("stick_slip_soft_torque")
+    config = load_config("stick_slip_soft_torque")
+    plant, tc = config.scene.plant, dataclasses.asdict(config.top_drive)
     spec = SweepSpec("stick_slip_soft_torque", (600.0, 1000.0, 1500.0), (0.4, 0.8), (1e-3,),
-                     60.0, "python", open_loop=False, gain_key=KEY)
+                     60.0, "inprocess", open_loop=False, gain_key=KEY)
     pts = [p for p in spec.points() if p.delay == 0.4 or p.gain == 1000.0]
     execute_points(pts, ResultTable(tmp_path), measure_point, workers=0, progress=False)
     rows = {(r["gain"], r["delay"]): r for r in read_table(tmp_path)}
     for (p_gain, delay), row in sorted(rows.items()):
-        growth = sampled_loop_growth(sc.plant, sc.top_drive_controller, p_gain, delay, 1e-3)
+        growth = sampled_loop_growth(plant, tc, p_gain, delay, 1e-3)
         print(f"P = {p_gain:g}, delay {delay:g} s: linear growth {growth:+.3f} 1/s, "
               f"{row['status']}, severity {row['stick_slip_severity']:.3g}, "
               f"stuck {row['stick_fraction']:.2f}")
@@ -247,4 +247,4 @@ def test_actuator_delay_map_follows_the_sampled_linear_loop(tmp_path) -> None:
         else:            # measured: +0.446 1/s; diverged at 24.9 s
             assert row["status"] == "diverged"
     assert sum(1 for (p, d) in rows if sampled_loop_growth(
-        sc.plant, sc.top_drive_controller, p, d, 1e-3) < 0) == 1
+        plant, tc, p, d, 1e-3) < 0) == 1

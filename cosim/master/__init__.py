@@ -10,11 +10,14 @@ co-simulation FMUs can be coupled. The pieces, each with one job (as in libcosim
   exchange timing (:func:`~.algorithms.newest_sample_tick`) stated once;
 * :mod:`.delays` - transport delays and coupling (hold, extrapolation) on connections;
 * :mod:`.execution` - owns time (integer ticks) and calls algorithm, observers, manipulators;
-* :mod:`.recorder`, :mod:`.progress` - observers (read only);
+* :mod:`.native` - the same stepping in chunks of steps in C (the FMUs' entry points called
+  from C, Python between chunks), chosen by the execution wherever it applies;
+* :mod:`.recorder`, :mod:`.progress`, :mod:`.limits` - observers (read only);
 * :mod:`.manipulators` - scenario events and fault injection (write only);
 * :mod:`.errors` - the one place FMI statuses become exceptions;
 * :mod:`.fmi_log` - FMU log messages through the FMI logger callback;
 * :mod:`.files` - atomic files (every file the project publishes);
+* :mod:`.unpack` - where FMUs are unpacked (once per content, in the user cache);
 * :mod:`.ssp` - SSP 1.0 export; :mod:`.ssp_import` - SSP 1.0 import;
 * :mod:`.interface` - the check that connected FMU variables fit (before the first step);
 * :mod:`.master` - :class:`~.master.Master`: simulate a system to a stop time and return its

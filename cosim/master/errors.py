@@ -4,7 +4,7 @@ This is the one place where FMI status codes returned by fmpy's low-level calls
 become exceptions: :func:`raise_for_status` turns a status
 of ``fmi2Discard``, ``fmi2Error``, ``fmi2Fatal`` or ``fmi2Pending`` into a
 :class:`CosimError` naming the FMU instance, the FMI function and the simulated
-time of the call.
+time of the call. :class:`UserError` is the one type of bad input.
 """
 
 from __future__ import annotations
@@ -24,6 +24,15 @@ def status_name(status: int) -> str:
     if 0 <= status < len(FMI2_STATUS_NAMES):
         return FMI2_STATUS_NAMES[status]
     return f"illegal status {status}"
+
+
+class UserError(ValueError):
+    """Bad input from the user: a file, a key, a value, or FMUs that do not fit.
+
+    The message is complete in itself (one line per problem, naming what is wrong and what is
+    allowed); the command line prints it without a traceback and exits with code 2. Anything
+    else that escapes is an internal error and keeps its traceback.
+    """
 
 
 class CosimError(RuntimeError):

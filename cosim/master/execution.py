@@ -11,6 +11,11 @@ run bit for bit.
 Observers only read (``on_step(execution)``, called after every step, and
 ``on_start`` / ``on_stop`` if they define them); manipulators only write
 (``before_step(execution)``, called before every step).
+
+Two loops step the same plan with the same results, bit for bit: the native loop
+(:mod:`.native`: chunks of steps in C calling the FMUs' entry points, Python between the
+chunks), chosen wherever it applies, and the Python loop (:meth:`Execution.simulate_until`)
+for everything else.
 """
 
 from __future__ import annotations
@@ -22,13 +27,12 @@ from fractions import Fraction
 from pathlib import Path
 from typing import Protocol
 
-from fmpy import extract
-
 from . import fmi_log
 from .algorithms import GaussSeidelAlgorithm, JacobiAlgorithm, _Algorithm, make_algorithm
 from .errors import CosimError
 from .slave import FmuSlave, Slave
 from .system import SystemSpec, split_variable
+from .unpack import unpack
 
 
 class Observer(Protocol):
@@ -89,6 +93,7 @@ class Execution:
         self._states: list[ExecutionState] = []
         self.algorithm = algorithm or make_algorithm(system.algorithm)
         self._read_outputs = tuple(read_outputs)
+        self._native = None          # the native loop's plan, built at the first use
         self.initialized = False
         self.closed = False
         given = dict(slaves or {})
@@ -104,8 +109,9 @@ class Execution:
                     continue
                 path = Path(spec.path).resolve()
                 if path not in dirs and path.is_file():
-                    dirs[path] = extract(str(path))
-                    self._dirs.append(dirs[path])
+                    dirs[path], owned = unpack(path)
+                    if owned:
+                        self._dirs.append(dirs[path])
                 self.slaves[spec.name] = FmuSlave(spec, dirs.get(path))
         except BaseException:
             for slave in given.values():  # ready-made ones not taken over yet
@@ -190,8 +196,11 @@ class Execution:
         if k_stop < self.tick:
             raise ValueError(f"stop_time: >= current time {self.time} s, got {stop_time} s")
         fmi_log.claim()
-        do_step = self.algorithm.do_step
         observers = tuple(o.on_step for o in self.observers)
+        native = self._native_loop(k_stop)
+        if native is not None and native.run(k_stop, observers, self.manipulators):
+            return
+        do_step = self.algorithm.do_step
         manipulators = tuple(m.before_step for m in self.manipulators)
         tick = self.tick
         if not observers and not manipulators:
@@ -208,6 +217,18 @@ class Execution:
             self.tick = tick
             for o in observers:
                 o(self)
+
+    def _native_loop(self, k_stop: int):
+        """The native loop if it applies to this run (see :mod:`.native.runner`), else None."""
+        from .native.runner import NativeLoop
+
+        native = self._native
+        if native is None or native.observed != (self.observers, self.manipulators):
+            native = NativeLoop.for_execution(self, self.observers, self.manipulators)
+            self._native = native
+        if native is None or not native.exact_until(k_stop):
+            return None
+        return native
 
     # -- access ----------------------------------------------------------------
     def get_real(self, ref: str) -> float:
@@ -243,13 +264,19 @@ class Execution:
         self.tick = state.tick
 
     def close(self) -> None:
-        """Free saved states, close all slaves (FMUs: terminate, free), delete extracted files."""
+        """Free saved states, close all slaves (FMUs: terminate, free), delete temporary
+        unpacked files (the shared cache of :mod:`.unpack` stays). An observer's ``on_stop``
+        that raises (e.g. the recorder's last write) is raised after all that."""
         if self.closed:
             return
         self.closed = True
+        failure = None
         for obs in self.observers:
             if hasattr(obs, "on_stop"):
-                obs.on_stop(self)
+                try:
+                    obs.on_stop(self)
+                except Exception as exc:  # noqa: BLE001 - raised once everything is freed
+                    failure = failure or exc
         for state in self._states:
             for slave, fs in zip(self.slaves.values(), state.fmu_states):
                 slave.free_state(fs)
@@ -258,6 +285,8 @@ class Execution:
             slave.close()
         for d in self._dirs:
             shutil.rmtree(d, ignore_errors=True)
+        if failure is not None:
+            raise failure
 
     def __enter__(self) -> Execution:
         return self

@@ -29,6 +29,7 @@ from pathlib import Path
 
 from fmpy import read_model_description
 
+from .errors import UserError
 from .system import Connection, FmuSpec, split_variable
 
 __all__ = ["FmuInterface", "InterfaceError", "InterfaceReport", "Port", "check_system",
@@ -140,7 +141,7 @@ class InterfaceReport:
     unconnected: dict[str, list[str]] = field(default_factory=dict)
 
 
-class InterfaceError(ValueError):
+class InterfaceError(UserError):
     """FMUs that do not fit: the message is a header line, then one line per problem."""
 
     def __init__(self, header: str, problems: Sequence[str]):

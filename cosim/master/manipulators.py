@@ -4,6 +4,11 @@ A manipulator's ``before_step(execution)`` runs before every step; it may only
 write (``execution.set_value``). A value written to a connected input is
 overwritten at that FMU's next exchange, so manipulate parameters or
 unconnected inputs.
+
+A manipulator that also says when it acts, ``next_action_tick(execution, tick)`` (the first
+tick >= ``tick`` whose ``before_step`` may write, None: never), lets the master run the steps
+in between in its native loop (:mod:`cosim.master.native`), calling ``before_step`` at that
+tick only; one without it keeps the master in its Python loop.
 """
 
 from __future__ import annotations
@@ -31,10 +36,18 @@ class ScheduledChange:
 
     def before_step(self, execution) -> None:
         """Apply the change when the execution reaches the event tick."""
+        if execution.tick == self._event_tick(execution):
+            execution.set_value(self.ref, self.value)
+
+    def next_action_tick(self, execution, tick: int) -> int | None:
+        """The event tick if it is not before ``tick``, else None."""
+        event = self._event_tick(execution)
+        return event if event >= tick else None
+
+    def _event_tick(self, execution) -> int:
         if self._tick is None:
             self._tick = execution.ticks_until(self.time)
-        if execution.tick == self._tick:
-            execution.set_value(self.ref, self.value)
+        return self._tick
 
 
 class InjectFault:
@@ -72,13 +85,27 @@ class InjectFault:
 
     def before_step(self, execution) -> None:
         """Write the fault while the execution's tick lies in [start, stop)."""
-        if self._ticks is None:
-            self._ticks = (execution.ticks_until(self.start),
-                           None if self.stop is None else execution.ticks_until(self.stop))
-        first, end = self._ticks
+        first, end = self._window(execution)
         tick = execution.tick
         if tick >= first and (end is None or tick < end):
             execution.set_value(self.ref, self.value)
             self.applied += 1
         elif end is not None and tick == end and self.restore is not None:
             execution.set_value(self.ref, self.restore)
+
+    def next_action_tick(self, execution, tick: int) -> int | None:
+        """``tick`` inside [start, stop), else start or stop (with a restore) ahead, else None."""
+        first, end = self._window(execution)
+        if end is not None and tick > end:
+            return None
+        if tick < first:
+            return first
+        if end is None or tick < end:
+            return tick
+        return end if self.restore is not None else None
+
+    def _window(self, execution) -> tuple[int, int | None]:
+        if self._ticks is None:
+            self._ticks = (execution.ticks_until(self.start),
+                           None if self.stop is None else execution.ticks_until(self.stop))
+        return self._ticks

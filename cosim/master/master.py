@@ -169,11 +169,26 @@ class Master:
         end = execution.time if execution is not None else float("nan")
         sim = (execution.time - execution.start_time) if execution is not None else 0.0
         stepped = execution is not None and execution.tick > 0
-        if execution is not None:
-            execution.close()
-        if stepped:
-            recorder.close()
-        else:  # failed before the first step: leave any earlier file untouched
+
+        def result() -> Result:
+            return Result(recorder.data, wall, sim / wall if wall > 0 else float("inf"), end,
+                          diverged, recorder.csv_path)
+
+        try:
+            if execution is not None:
+                execution.close()
+        except CosimError as err:   # the recorder's last write (on_stop) failed
             recorder.abort()
-        return Result(recorder.data, wall, sim / wall if wall > 0 else float("inf"), end,
-                      diverged, recorder.csv_path)
+            if err.result is None:
+                err.result = result()
+            raise
+        if not stepped:  # failed before the first step: leave any earlier file untouched
+            recorder.abort()
+            return result()
+        try:
+            recorder.close()
+        except CosimError as err:   # the last rows could not be written: they are in memory
+            if err.result is None:
+                err.result = result()
+            raise
+        return result()

@@ -11,6 +11,9 @@ from tqdm import tqdm
 class ProgressObserver:
     """Show simulated time [s] and real-time factor (simulated / wall time).
 
+    It acts only at ticks that are multiples of :attr:`stride_ticks` (set by :meth:`on_start`),
+    so the native loop calls it at the ends of its chunks only (:mod:`cosim.master.native`).
+
     Parameters
     ----------
     stop_time : float
@@ -33,7 +36,8 @@ class ProgressObserver:
         """Open the bar at the current simulated time."""
         t0 = execution.time
         span = max(self.stop_time - t0, execution.base_step)
-        self._every = max(1, int(span / execution.base_step / self.updates))
+        #: the bar is refreshed at ticks that are multiples of this (~``updates`` times)
+        self.stride_ticks = max(1, int(span / execution.base_step / self.updates))
         self._t0, self._shown = t0, t0
         self._wall0 = time.perf_counter()
         self.bar = tqdm(total=round(span, 12), unit="s", disable=self.disable,
@@ -42,7 +46,7 @@ class ProgressObserver:
 
     def on_step(self, execution) -> None:
         """Refresh every ``span / updates`` of simulated time."""
-        if execution.tick % self._every or self.bar is None:
+        if execution.tick % self.stride_ticks or self.bar is None:
             return
         t = execution.time
         self.bar.update(t - self._shown)

@@ -11,6 +11,12 @@ never truncated before the new one is complete; if the run fails, closing
 (which the facade does in a ``finally``) still finalises the partial,
 readable file under the target name.
 
+The text of a block of rows is made by :class:`CsvWriter` in a thread, in C without the GIL
+(:mod:`cosim.master.native`, ``rows.c``: the text of ``numpy.savetxt(fmt="%.17g")``), while
+the run steps on; blocks are written in order, and each flush first waits for the block before
+it, so a failed write is raised at the next flush (or at :meth:`Recorder.close`), always the
+same one. Without the native library the rows are written at once in Python.
+
 If writing the CSV fails (disk full, quota, I/O error), the recorder raises
 :class:`ResultWriteError` (a :class:`~cosim.master.errors.CosimError`: when it happens
 while stepping, the facade attaches the rows recorded in memory as
@@ -22,7 +28,9 @@ replaces the target: an earlier file under the target name stays unchanged.
 
 from __future__ import annotations
 
+import ctypes
 from collections.abc import Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +61,57 @@ class ResultWriteError(CosimError):
 
     def __reduce__(self):
         return (type(self), (self.path, self.time, self.message, self.os_errno))
+
+
+class CsvWriter:
+    """Appends row blocks to an open text file in a thread, in order (see the module docstring).
+
+    Parameters
+    ----------
+    file : text file
+        Open for writing; only this writer writes to it until :meth:`close`.
+    format_rows : ctypes function
+        ``dcs_format_rows`` of the native library.
+    """
+
+    #: bytes that hold one value and its separator (``rows.c``)
+    VALUE_BYTES = 25
+
+    def __init__(self, file, format_rows):
+        self.file = file
+        self.format_rows = format_rows
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="csv-writer")
+        self._pending: Future | None = None
+
+    def _write(self, rows: np.ndarray) -> None:
+        n, ncols = rows.shape
+        cap = n * (ncols * self.VALUE_BYTES + 1)
+        buf = ctypes.create_string_buffer(cap)
+        length = self.format_rows(rows.ctypes.data, n, ncols, buf, cap)   # GIL released
+        if length < 0:
+            raise RuntimeError("internal: dcs_format_rows ran out of room")
+        self.file.write(buf.raw[:length].decode("ascii"))
+        self.file.flush()
+
+    def submit(self, rows: np.ndarray) -> None:
+        """Wait for the block before (raising its ``OSError``), then start writing ``rows``
+        (shape (n, ncols), float64)."""
+        self.wait()
+        self._pending = self._pool.submit(self._write, np.ascontiguousarray(rows, np.float64))
+
+    def wait(self) -> None:
+        """Wait for the block being written; raise its ``OSError``."""
+        pending, self._pending = self._pending, None
+        if pending is not None:
+            pending.result()
+
+    def close(self) -> None:
+        """Stop the thread (after the block being written; its error is not raised)."""
+        try:
+            self.wait()
+        except Exception:  # noqa: BLE001 - closing after a failure: nothing more to report
+            pass
+        self._pool.shutdown()
 
 
 class Recorder:
@@ -95,11 +154,14 @@ class Recorder:
         self.interval_ticks = interval_ticks
         self.flush_every = flush_every
         self.keep_in_memory = keep_in_memory
-        self._rows: list[tuple[float, ...]] = []     # rows not yet flushed
+        self._rows: list[tuple[float, ...]] = []     # rows not yet flushed (newest)
+        self._blocks: list[np.ndarray] = []           # row blocks not yet flushed (older)
+        self._n_blocked = 0                           # rows in _blocks
         self._chunks: list[np.ndarray] = []           # flushed rows kept in memory
         self.n_rows = 0
         self.csv_path = Path(csv_path) if csv_path is not None else None
         self._csv: AtomicFile | None = None
+        self._writer: CsvWriter | None = None
         self._last_time = float("nan")
         self.write_error: ResultWriteError | None = None
         self.closed = False
@@ -115,6 +177,11 @@ class Recorder:
             raise OSError(exc.errno, f"cannot write results to '{target}': directory "
                           f"'{directory}' is not writable ({exc.strerror})") from exc
         self._csv.file.write(",".join(self.names) + "\n")
+        from .native import library
+
+        lib = library()
+        if lib is not None:
+            self._writer = CsvWriter(self._csv.file, lib.dcs_format_rows)
 
     # -- observer hooks --------------------------------------------------------
     def on_start(self, execution) -> None:
@@ -143,29 +210,69 @@ class Recorder:
         if len(self._rows) >= self.flush_every:
             self.flush()
 
+    def exchanged_columns(self, y_index) -> list[int] | None:
+        """Indices in the exchange buffer of the recorded variables (``y_index``: the
+        algorithm's name -> index), or None if one is not exchanged (read by name)."""
+        columns = [y_index.get(v, -1) for v in self.variables]
+        return None if min(columns, default=0) < 0 else columns
+
+    def add_rows(self, block: np.ndarray) -> None:
+        """Record rows made elsewhere (the native loop): shape (n, 1 + len(variables)),
+        float64, time first; the same as :meth:`on_step` recording them one by one."""
+        if not len(block):
+            return
+        if self._rows:
+            self._blocks.append(np.array(self._rows, dtype=self.dtype))
+            self._n_blocked += len(self._rows)
+            self._rows = []
+        rows = np.ascontiguousarray(block, dtype=np.float64).view(self.dtype).reshape(-1)
+        self._blocks.append(rows)
+        self._n_blocked += len(rows)
+        self.n_rows += len(rows)
+        self._last_time = float(rows["time"][-1])
+        if self._n_blocked >= self.flush_every:
+            self.flush()
+
     def on_stop(self, execution) -> None:
         """Flush buffered rows (the file is finalised by :meth:`close`)."""
         self.flush()
 
     # -- storage -----------------------------------------------------------------
+    def _pending(self) -> list[np.ndarray]:
+        """The rows not flushed yet, oldest first."""
+        parts = list(self._blocks)
+        if self._rows:
+            parts.append(np.array(self._rows, dtype=self.dtype))
+        return parts
+
     def flush(self) -> None:
         """Move buffered rows to the in-memory array and/or the CSV file."""
-        if not self._rows:
+        parts = self._pending()
+        if not parts:
             return
-        chunk = np.array(self._rows, dtype=self.dtype)
-        self._rows = []
+        chunk = parts[0] if len(parts) == 1 else np.concatenate(parts)
+        self._rows, self._blocks, self._n_blocked = [], [], 0
         if self.keep_in_memory:
             self._chunks.append(chunk)
         if self._csv is not None:
             flat = chunk.view(np.float64).reshape(len(chunk), len(self.names))
             try:
-                np.savetxt(self._csv.file, flat, delimiter=",", fmt="%.17g")
-                self._csv.file.flush()
+                if self._writer is not None:
+                    self._writer.submit(flat)
+                else:
+                    np.savetxt(self._csv.file, flat, delimiter=",", fmt="%.17g")
+                    self._csv.file.flush()
             except OSError as exc:
                 self._write_failed(exc)
 
+    def _stop_writer(self) -> None:
+        writer, self._writer = self._writer, None
+        if writer is not None:
+            writer.close()
+
     def _write_failed(self, exc: OSError) -> None:
         """Drop the temporary file (never the target) and raise :class:`ResultWriteError`."""
+        self._stop_writer()
         csv, self._csv = self._csv, None
         csv.discard()
         kept = "kept in memory" if self.keep_in_memory else "lost (keep_in_memory=False)"
@@ -177,9 +284,7 @@ class Recorder:
     @property
     def data(self) -> np.ndarray:
         """Recorded rows, shape (n_rows,), structured dtype ``time`` first [s]."""
-        parts = list(self._chunks)
-        if self._rows:
-            parts.append(np.array(self._rows, dtype=self.dtype))
+        parts = self._chunks + self._pending()
         if not parts:
             return np.zeros(0, dtype=self.dtype)
         return np.concatenate(parts)
@@ -189,6 +294,7 @@ class Recorder:
         if self.closed:
             return
         self.closed = True
+        self._stop_writer()
         if self._csv is not None:
             self._csv.discard()
             self._csv = None
@@ -205,6 +311,12 @@ class Recorder:
             return
         self.closed = True
         self.flush()
+        if self._writer is not None:
+            try:
+                self._writer.wait()
+            except OSError as exc:
+                self._write_failed(exc)
+            self._stop_writer()
         if self._csv is not None:
             try:
                 self._csv.commit()

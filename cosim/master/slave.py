@@ -15,17 +15,19 @@ import functools
 import math
 import shutil
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NoReturn
 
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
 
 from . import fmi_log
 from .errors import FMI2_ERROR, FMI2_FATAL, CosimError, raise_for_status
 from .system import FmuSpec, ParameterValue, _did_you_mean
+from .unpack import unpack
 
-__all__ = ["FmuSlave", "Slave", "c_double_ptr"]
+__all__ = ["CompiledCalls", "FmiCalls", "FmuSlave", "Slave", "c_double_ptr"]
 
 _C_DOUBLE_P = ctypes.POINTER(ctypes.c_double)
 _C_UINT_P = ctypes.POINTER(ctypes.c_uint)
@@ -64,6 +66,17 @@ class Slave(abc.ABC):
        times; a state can be restored many times).
     9. :meth:`close` ``()``: release everything; idempotent; called once by the execution,
        after failures too.
+    10. Optional, for the master's native loop (:mod:`.native`): :meth:`native_calls` ``()``
+        returns the C entry points equivalent to the three hot calls, valid from :meth:`bind`
+        until the next call of any other method of the slave (the master asks again before
+        each chunk of steps): :class:`FmiCalls` (an FMU's functions) or :class:`CompiledCalls`
+        (a compiled step over arrays the slave keeps alive and in place); None (the default):
+        the master steps this slave in Python. A compiled step returns 0 (done) or another
+        code; for that the master calls :meth:`native_step_failed` ``(code, t, h)``, which
+        settles the step as the Python :meth:`do_step` would (e.g. does it in Python, or
+        records the failure for :meth:`take_problem`) and returns its status: OK or Warning
+        and the run goes on after that step, else the failure is reported as from
+        :meth:`do_step`.
 
     This base class implements :meth:`fail` from :meth:`take_problem` and refuses state
     handling.
@@ -116,6 +129,14 @@ class Slave(abc.ABC):
         """The component's newest problem message not reported yet (one line), or None."""
         return None
 
+    def native_calls(self) -> FmiCalls | CompiledCalls | None:
+        """C entry points of the hot calls (contract item 10); None: stepped in Python."""
+        return None
+
+    def native_step_failed(self, code: int, t: float, h: float) -> int:
+        """Settle a compiled step that returned ``code``; its FMI status (item 10)."""
+        raise NotImplementedError(f"{type(self).__name__} has no compiled step")
+
     def fail(self, status: int, call: str, time: float) -> NoReturn:
         """Record a failed status (errored on Error, dead on Fatal) and raise
         :class:`CosimError` with the component's own message."""
@@ -141,9 +162,48 @@ class Slave(abc.ABC):
         del state   # nothing to release unless a subclass holds native resources
 
 
+@dataclass(frozen=True)
+class FmiCalls:
+    """An FMU instance's hot calls as C entry points (addresses, ``int``).
+
+    ``set_real(component, in_vrs, n, u)``, ``do_step(component, t, h, 0)`` and
+    ``get_real(component, out_vrs, n, y)`` with the value references of the bound inputs and
+    outputs (addresses of ``unsigned int`` arrays of the bound lengths, kept alive by the slave).
+    """
+
+    component: int
+    set_real: int
+    do_step: int
+    get_real: int
+    in_vrs: int
+    out_vrs: int
+
+
+@dataclass(frozen=True)
+class CompiledCalls:
+    """A compiled step ``int step(void *context, double t, double h)`` (0: OK) and its arrays.
+
+    Bound input ``i`` is written to ``inputs[input_slots[i]]`` before the step; bound output
+    ``i`` is read from ``outputs[output_slots[i]]`` after it (``inputs``, ``outputs``: addresses
+    of float64 arrays the slave keeps alive and in place, contract item 10).
+    """
+
+    step: int
+    context: int
+    inputs: int
+    input_slots: tuple[int, ...]
+    outputs: int
+    output_slots: tuple[int, ...]
+
+
 def _vr_array(vrs: Sequence[int]):
     arr = (ctypes.c_uint * max(1, len(vrs)))(*vrs)
     return arr, ctypes.cast(arr, _C_UINT_P)
+
+
+def _address_of(dll, name: str) -> int:
+    """Address of the exported function ``name`` of a loaded library."""
+    return ctypes.cast(getattr(dll, name), ctypes.c_void_p).value
 
 
 def c_double_ptr(buf, offset: int = 0):
@@ -164,8 +224,8 @@ class FmuSlave(Slave):
     spec : FmuSpec
         Instance name, path, parameters.
     unzip_dir : str, optional
-        Where the FMU was already extracted (shared between instances of one file);
-        extracted to a temporary folder owned by this object otherwise.
+        Where the FMU was already unpacked (shared between instances of one file); unpacked
+        by :func:`.unpack.unpack` otherwise.
     """
 
     def __init__(self, spec: FmuSpec, unzip_dir: str | None = None):
@@ -177,8 +237,10 @@ class FmuSlave(Slave):
         self.model_description = md = read_model_description(str(path))
         if md.coSimulation is None:
             raise CosimError(spec.name, "load", math.nan, "the FMU has no co-simulation interface")
-        self._own_dir = unzip_dir is None
-        self.unzip_dir = unzip_dir or extract(str(path))
+        self._own_dir = False
+        if unzip_dir is None:
+            unzip_dir, self._own_dir = unpack(path)
+        self.unzip_dir = unzip_dir
         self.variables = {v.name: v for v in md.modelVariables}
         self.can_get_set_state = bool(md.coSimulation.canGetAndSetFMUstate)
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self.unzip_dir,
@@ -194,6 +256,7 @@ class FmuSlave(Slave):
         #: fmi2ExitInitializationMode succeeded (fmi2Terminate is allowed only then)
         self.initialized = False
         self._bound: tuple = ()
+        self._native: FmiCalls | None = None
 
     # -- variables -------------------------------------------------------------
     def variable(self, name: str, causality: Sequence[str] | None = None):
@@ -250,6 +313,10 @@ class FmuSlave(Slave):
         in_vrs, in_p = _vr_array(self.real_vrs(inputs))
         self._bound = (out_vrs, in_vrs, y, u)           # keep the buffers alive
         comp = self.component
+        address = functools.partial(_address_of, self.fmu.dll)
+        self._native = FmiCalls(comp or 0, address("fmi2SetReal"), address("fmi2DoStep"),
+                                address("fmi2GetReal"), ctypes.addressof(in_vrs),
+                                ctypes.addressof(out_vrs))
         n_out, n_in = len(outputs), len(inputs)
         y_p = c_double_ptr(y, offset)
         self._step = (self.c_do_step, comp)
@@ -263,6 +330,10 @@ class FmuSlave(Slave):
     def write_inputs(self) -> int:
         """``fmi2SetReal`` of all bound inputs (nothing bound: nothing to do)."""
         return 0
+
+    def native_calls(self) -> FmiCalls | None:
+        """The library's ``fmi2SetReal`` / ``fmi2DoStep`` / ``fmi2GetReal`` (after :meth:`bind`)."""
+        return self._native if self._bound and not (self.errored or self.dead) else None
 
     def do_step(self, t: float, h: float) -> int:
         """``fmi2DoStep(t, h, noSetFMUStatePriorToCurrentPoint = false)``."""

@@ -51,6 +51,7 @@ from typing import Any
 from urllib.parse import unquote, urlparse
 from xml.etree import ElementTree as ET
 
+from .errors import UserError
 from .interface import FmuInterface, check_system, read_interface
 from .ssp import NS
 from .system import Connection, FmuSpec, ParameterValue, SystemSpec, integer_multiple
@@ -82,7 +83,7 @@ _WHY = {
 }
 
 
-class SspError(ValueError):
+class SspError(UserError):
     """An SSP file that cannot be run: one line naming the file and the element."""
 
 

@@ -7,15 +7,15 @@ The FMUs wrap the same objects (``fmu_src/``): :class:`PlantSlave` steps a
 :class:`TopDriveSlave` a :class:`controller.TopDriveController` exactly as the FMU adapters do
 (same times, same step sizes, outputs taken after each step, a failed plant step discarded with
 the plant's own message; the plant is the model the plant FMU builds: the scene's, or the 3D
-model for a scene the default plant FMU runs), so the master
+model for a scene the default plant FMU runs) and through the same compiled steps
+(:mod:`plant.compiled_step`, :mod:`controller.compiled`, called here through ctypes), so the master
 (:class:`cosim.master.execution.Execution`, its algorithms, delay lines and observers) gives
 the same numbers with either, bit for bit (``tests/test_sweep.py``), while the in-process
 slaves save the FMI boundary. Parameters stay typed (:class:`plant.model.DrillstringModel`,
 :class:`controller.ControllerParams`).
 
-:func:`inprocess_slaves` makes the slaves that stand in for the FMUs of a
-:class:`~.scene_system.SceneSystem` (the FMU files still describe the system: instance names,
-variables, wiring; they are not loaded).
+:func:`inprocess_slaves` makes the slaves that stand in for the FMUs of a configuration
+(:func:`.build.build_system` with ``engine="inprocess"`` wires them as it wires the FMUs).
 """
 
 from __future__ import annotations
@@ -32,24 +32,24 @@ from drillcosim.controller import (
     TopDriveControllerParams,
 )
 from drillcosim.cosim.master.errors import FMI2_DISCARD, FMI2_ERROR, CosimError
-from drillcosim.cosim.master.slave import Slave
+from drillcosim.cosim.master.slave import CompiledCalls, Slave
 from drillcosim.cosim.master.system import ParameterValue, _did_you_mean
 from drillcosim.plant.model import DrillstringModel
-from drillcosim.plant.simulator import PlantSimulator
-
-from .scene_fmus import plant_layout
-from .scene_system import (
-    AXES,
+from drillcosim.plant.signals import (
     CONTROLLER,
     PLANT,
     TOP_DRIVE,
-    SceneSystem,
-    scene_controller,
-    scene_top_drive_controller,
+    TOP_DRIVE_TORQUE,
+    actuator_force,
+    site_channels,
+    strain,
 )
+from drillcosim.plant.simulator import PlantSimulator
 
-__all__ = ["ControllerSlave", "PlantSlave", "TopDriveSlave", "inprocess_slaves",
-           "inprocess_system"]
+from .config import SceneConfig
+from .scene_fmus import plant_layout
+
+__all__ = ["ControllerSlave", "PlantSlave", "TopDriveSlave", "inprocess_slaves"]
 
 
 class _ArraySlave(Slave):
@@ -130,6 +130,13 @@ class _ArraySlave(Slave):
         self.u[:], self.y[:] = u, y
         self.errored = False
 
+    def _compiled_calls(self, step: Any) -> CompiledCalls:
+        """The master's native loop view of ``step`` (a compiled step reading ``self.u`` and
+        writing ``self.y``, both kept in place): the bound inputs and outputs by slot."""
+        return CompiledCalls(step.function, step.context, self.u.ctypes.data,
+                             tuple(int(i) for i in self._in_idx), self.y.ctypes.data,
+                             tuple(int(i) for i in self._out_idx))
+
     def _save(self):  # pragma: no cover - each subclass has its own
         raise NotImplementedError
 
@@ -152,6 +159,9 @@ class PlantSlave(_ArraySlave):
         super().__init__(name, simulator.input_names, simulator.model.output_names)
         self.sim = simulator
         self._halted: str | None = None
+        # the plant FMU's compiled step on this slave's arrays (None: Python do_step)
+        self._step = simulator.compiled_step(self.u, np.arange(len(self.inputs)), self.y,
+                                             np.arange(len(self.outputs)))
 
     def instantiate(self, start_time: float, stop_time: float | None) -> None:
         """Start at ``start_time`` with the outputs of the initial state."""
@@ -165,17 +175,38 @@ class PlantSlave(_ArraySlave):
         if self._halted is not None:
             self._problem = f"the simulation diverged earlier ({self._halted})"
             return FMI2_DISCARD
-        sim = self.sim
-        sim.u[:] = self.u
-        res = sim.do_step(t, h)
+        if self._step is not None:
+            res = self._step.step(t, h)  # inputs from self.u, outputs into self.y
+        else:
+            sim = self.sim
+            sim.u[:] = self.u
+            res = sim.do_step(t, h)
+            if res.ok:
+                self.y[:] = sim.outputs()
+        return self._settle(res)
+
+    def _settle(self, res) -> int:
+        """The status of a step's :class:`~plant.simulator.StepResult` (its message kept)."""
         if not res.ok:
             self._problem = res.message
             if not res.quantity:
                 return FMI2_ERROR
             self._halted = res.message
             return FMI2_DISCARD
-        self.y[:] = sim.outputs()
         return 0
+
+    def native_calls(self) -> CompiledCalls | None:
+        """The compiled step for the master's native loop (None once diverged: every later
+        step is discarded in Python, as the FMU does)."""
+        if self._step is None or self._halted is not None:
+            return None
+        self._step.refresh()  # the method or operator may have changed in Python
+        return self._compiled_calls(self._step)
+
+    def native_step_failed(self, code: int, t: float, h: float) -> int:
+        """A compiled step's failure code settled as :meth:`do_step` would (a fallback runs
+        the step in Python)."""
+        return self._settle(self._step.finish(code, t, h))
 
     def _save(self):
         return self.sim.get_state(), self._halted
@@ -187,21 +218,42 @@ class PlantSlave(_ArraySlave):
 
 class _LawSlave(_ArraySlave):
     """A controller law as a slave: ``law`` (``reset``, ``get_state``, ``set_state``) stepped
-    by :meth:`_advance`; a ``ValueError`` of the law is the step's error, state unchanged."""
+    by its compiled step on this slave's arrays, as in the controller FMUs, else (or for a step
+    the compiled law leaves to Python) by :meth:`_advance`; a ``ValueError`` of the law is the
+    step's error, state unchanged."""
 
     law: Any
+    _step: Any = None
 
     def _advance(self, t: float, h: float) -> None:  # pragma: no cover - each law its own
         raise NotImplementedError
 
     def do_step(self, t: float, h: float) -> int:
         """The outputs at ``t + h`` from the inputs held over the step."""
+        if self._step is not None:
+            code = self._step.step(t, h)
+            if code == 0:
+                return 0
+            return self.native_step_failed(code, t, h)
+        return self._python_step(t, h)
+
+    def _python_step(self, t: float, h: float) -> int:
         try:
             self._advance(t, h)
         except ValueError as exc:
             self._problem = f"at t = {t!r}: {exc}"
             return FMI2_ERROR
         return 0
+
+    def native_calls(self) -> CompiledCalls | None:
+        """The law's compiled step for the master's native loop (None: stepped in Python)."""
+        return None if self._step is None else self._compiled_calls(self._step)
+
+    def native_step_failed(self, code: int, t: float, h: float) -> int:
+        """A step the compiled law left to Python (nothing changed): the Python step; an
+        internal failure raises."""
+        self._step.check(code, t, h)
+        return self._python_step(t, h)
 
     def _save(self):
         return self.law.get_state()
@@ -226,10 +278,11 @@ class ControllerSlave(_LawSlave):
     """
 
     def __init__(self, name: str, params: ControllerParams, sites: Sequence[int] = (1, 2)):
-        pairs = [(s, a) for s in sites for a in AXES]
-        super().__init__(name, [f"strain{s}_{a}" for s, a in pairs],
-                         [f"actuator{s}_force_{a}" for s, a in pairs])
+        pairs = site_channels(sites)
+        super().__init__(name, [strain(s, a) for s, a in pairs],
+                         [actuator_force(s, a) for s, a in pairs])
         self.law = StrainController(params, len(sites))
+        self._step = self.law.compiled_step(self.u, self.y)
 
     def instantiate(self, start_time: float, stop_time: float | None) -> None:
         """Zero force (the lag state) at the start."""
@@ -252,8 +305,9 @@ class TopDriveSlave(_LawSlave):
     """
 
     def __init__(self, name: str, params: TopDriveControllerParams):
-        super().__init__(name, ["top_rotary_speed", "top_torque"], ["top_drive_torque"])
+        super().__init__(name, ["top_rotary_speed", "top_torque"], [TOP_DRIVE_TORQUE])
         self.law = TopDriveController(params)
+        self._step = self.law.compiled_step(self.u, self.y)
 
     def instantiate(self, start_time: float, stop_time: float | None) -> None:
         """Zero integral and torque at the start."""
@@ -264,89 +318,26 @@ class TopDriveSlave(_LawSlave):
         self.y[0] = self.law.step(t, h, float(self.u[0]), float(self.u[1]))
 
 
-def inprocess_slaves(ss: SceneSystem) -> dict[str, Slave]:
-    """In-process slaves standing in for the FMUs of a scene's system (built from the scene).
+def inprocess_slaves(config: SceneConfig) -> dict[str, Slave]:
+    """In-process slaves standing in for the FMUs of a configuration's system.
+
+    The plant is the model the plant FMU builds: the scene's own (any number of actuator
+    sites), or the 3D model for a scene the default plant FMU runs (:func:`.scene_fmus.
+    plant_layout`); the strain controller serves every site of the plant.
 
     Returns
     -------
     dict
         ``{"plant": PlantSlave, "controller": ControllerSlave, "top_drive_controller":
-        TopDriveSlave}`` (the controllers the system has), for ``Execution(..., slaves=...)``.
+        TopDriveSlave}`` (the enabled controllers), for ``Master(system, slaves)``.
     """
-    scene = ss.scene
+    scene = config.scene
     kind = "full3d" if plant_layout(scene) is None else scene.model
     slaves: dict[str, Slave] = {
         PLANT: PlantSlave(PLANT, PlantSimulator(DrillstringModel(scene.plant, kind)))}
-    instances = {f.name for f in ss.system.fmus}
-    if CONTROLLER in instances:
-        slaves[CONTROLLER] = ControllerSlave(
-            CONTROLLER, scene_controller(scene),
-            tuple(range(1, len(scene.plant.actuator_joints) + 1)))
-    if TOP_DRIVE in instances:
-        slaves[TOP_DRIVE] = TopDriveSlave(TOP_DRIVE, scene_top_drive_controller(scene))
+    if config.controller.enabled:
+        slaves[CONTROLLER] = ControllerSlave(CONTROLLER, config.controller,
+                                             tuple(range(1, config.n_sites + 1)))
+    if config.top_drive.enabled:
+        slaves[TOP_DRIVE] = TopDriveSlave(TOP_DRIVE, config.top_drive)
     return slaves
-
-
-def inprocess_system(scene) -> tuple[SceneSystem, dict[str, Slave]]:
-    """A scene's system and its in-process slaves, for any number of actuator sites.
-
-    No FMU file is needed (:func:`~.scene_system.scene_system` uses, and builds, FMUs for the
-    scene's layout): the plant takes the scene's sites (``[actuators] joints``) and
-    :class:`ControllerSlave` serves all of them, so the same master, with the same algorithm,
-    order, delays and sampling as :func:`~.scene_system.scene_system` builds from the scene's
-    ``[cosim]``, runs e.g. 1, 2 or 3 sites per span. No FMU file is read; the instances'
-    paths are placeholders.
-
-    Parameters
-    ----------
-    scene : plant.scene.Scene
-        A loaded scene (``model = 'full3d'`` when its controller is enabled).
-
-    Returns
-    -------
-    SceneSystem, dict
-        The system (recorded outputs: per contact body X, Y, radial deflection, contact
-        force; per site the strains C/E and the actuator power; the controller's forces) and
-        ``{"plant": PlantSlave, "controller": ControllerSlave}`` (no controller when the
-        scene's controller is disabled) for ``Execution(ss.system, slaves=...)``.
-    """
-    from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec
-
-    from .scene_system import cosim_settings
-
-    settings = cosim_settings(scene)
-    params = scene_controller(scene)
-    plant = PlantSlave(PLANT, PlantSimulator(DrillstringModel(scene.plant, scene.model)))
-    slaves: dict[str, Slave] = {PLANT: plant}
-    sites = range(1, len(scene.plant.actuator_joints) + 1)
-    outputs = [f"{PLANT}.body{b}_{q}" for b in scene.plant.contact_bodies
-               for q in ("X", "Y", "radial_deflection", "contact_force")]
-    outputs += [f"{PLANT}.{n}" for s in sites
-                for n in (*(f"strain{s}_{a}" for a in AXES), f"actuator{s}_power")]
-    missing = [o for o in outputs if o.split(".", 1)[1] not in plant.outputs]
-    if missing:
-        raise ValueError(f"{scene.source}: the plant has no output {', '.join(missing)}")
-    fmus = [FmuSpec(PLANT, "<in-process plant>")]
-    connections: list[Connection] = []
-    order: tuple[str, ...] = (PLANT,)
-    if params.enabled:
-        if scene.model != "full3d":
-            raise ValueError(f"{scene.source}: the controller needs model = 'full3d', "
-                             f"got '{scene.model}'")
-        ctrl = ControllerSlave(CONTROLLER, params, tuple(sites))
-        slaves[CONTROLLER] = ctrl
-        fmus.append(FmuSpec(CONTROLLER, "<in-process controller>", {},
-                            settings.controller_sample_ticks))
-        for s in sites:
-            for a in AXES:
-                connections.append(Connection(f"{PLANT}.strain{s}_{a}",
-                                              f"{CONTROLLER}.strain{s}_{a}",
-                                              settings.sensor_delay, settings.coupling))
-                connections.append(Connection(f"{CONTROLLER}.actuator{s}_force_{a}",
-                                              f"{PLANT}.actuator{s}_force_{a}",
-                                              settings.actuator_delay, settings.coupling))
-        outputs += [f"{CONTROLLER}.{n}" for n in ctrl.outputs]
-        order = settings.order
-    system = SystemSpec(fmus, connections, settings.step, settings.algorithm, order, 0.0,
-                        settings.stop_time)
-    return SceneSystem(scene, system, settings, tuple(outputs)), slaves

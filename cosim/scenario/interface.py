@@ -28,7 +28,6 @@ start value; its extra forces go nowhere). A site served in part (``actuator1_fo
 
 from __future__ import annotations
 
-import re
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -39,26 +38,30 @@ from drillcosim.cosim.master.interface import (
     check_system,
     pair_by_name,
 )
-from drillcosim.cosim.master.system import Connection, FmuSpec
+from drillcosim.cosim.master.system import FmuSpec
+from drillcosim.plant.signals import AXES, actuator_force, actuator_power, sites_in, strain
 
-__all__ = ["InterfaceWarning", "PairWiring", "connections_of", "site_of", "wire_pair",
-           "wire_system"]
-
-_SITE = re.compile(r"^(actuator|strain)(\d+)_")
+__all__ = ["InterfaceWarning", "PairWiring", "wire_system"]
 
 
 class InterfaceWarning(UserWarning):
     """A pair that runs but not as a whole: e.g. a plant site no controller output feeds."""
 
 
-def site_of(name: str) -> tuple[str, int] | None:
-    """``("actuator", 2)`` for ``actuator2_force_C``, ``("strain", 1)`` for ``strain1_E``, else None."""
-    m = _SITE.match(name)
-    return (m.group(1), int(m.group(2))) if m else None
+def _site_names(kind: str, site: int) -> tuple[str, ...]:
+    """The names of site ``site`` of one kind: ``"actuator"`` (forces and power) or ``"strain"``."""
+    if kind == "strain":
+        return tuple(strain(site, a) for a in AXES)
+    return (*(actuator_force(site, a) for a in AXES), actuator_power(site))
+
+
+def _sites(face: FmuInterface, kind: str) -> dict[str, int]:
+    """``{name: site}`` of the face's ``kind`` names (built from the site numbers it has)."""
+    return {n: s for s in sites_in(face.ports) for n in _site_names(kind, s) if n in face.ports}
 
 
 def _serves(face: FmuInterface, kind: str, site: int) -> bool:
-    return any(site_of(n) == (kind, site) for n in face.ports)
+    return any(n in face.ports for n in _site_names(kind, site))
 
 
 @dataclass(frozen=True)
@@ -75,12 +78,6 @@ class PairWiring:
 
     connections: tuple[tuple[str, str], ...]
     unserved: tuple[str, ...]
-
-
-def wire_pair(plant: FmuInterface, controller: FmuInterface, fmus: Sequence[FmuSpec],
-              extra_problems: Sequence[str] = ()) -> PairWiring:
-    """:func:`wire_system` of a plant and one controller."""
-    return wire_system(plant, [controller], fmus, extra_problems)
 
 
 def wire_system(plant: FmuInterface, controllers: Sequence[FmuInterface],
@@ -119,10 +116,10 @@ def wire_system(plant: FmuInterface, controllers: Sequence[FmuInterface],
     problems = list(report.problems)
     unserved, idle = [], []
     others = " nor ".join(c.label for c in controllers)
+    actuator_site = _sites(plant, "actuator")
     for name in report.unconnected.get(plant.instance, []):
-        site = site_of(name)
-        if site is not None and site[0] == "actuator" and not any(
-                _serves(c, "actuator", site[1]) for c in controllers):
+        site = actuator_site.get(name)
+        if site is not None and not any(_serves(c, "actuator", site) for c in controllers):
             if controllers:
                 unserved.append(f"{plant.instance}.{name}")
         elif not controllers:
@@ -131,9 +128,10 @@ def wire_system(plant: FmuInterface, controllers: Sequence[FmuInterface],
             problems.append(f"{plant.label} input '{name}' is not fed: {others} has no "
                             f"variable '{name}'")
     for c in controllers:
+        strain_site = _sites(c, "strain")
         for name in report.unconnected.get(c.instance, []):
-            site = site_of(name)
-            if site is not None and site[0] == "strain" and not _serves(plant, "strain", site[1]):
+            site = strain_site.get(name)
+            if site is not None and not _serves(plant, "strain", site):
                 unserved.append(f"{c.instance}.{name}")
             else:
                 problems.append(f"{c.label} input '{name}' is not fed: {plant.label} has no "
@@ -153,9 +151,3 @@ def wire_system(plant: FmuInterface, controllers: Sequence[FmuInterface],
             f"{plant.label} runs without a controller: its inputs {', '.join(idle)} keep their "
             f"start value"), stacklevel=3)
     return PairWiring(tuple(pairs), tuple(unserved))
-
-
-def connections_of(wiring: PairWiring, delays: dict[str, float], coupling: str) -> list[Connection]:
-    """Master connections of a wiring; ``delays[instance]`` is the delay of what it receives [s]."""
-    return [Connection(s, t, delays.get(t.split(".", 1)[0], 0.0), coupling)
-            for s, t in wiring.connections]

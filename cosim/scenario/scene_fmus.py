@@ -31,10 +31,16 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from drillcosim.fmu_src.build import REGISTRY, FmuRecipe
+from drillcosim.fmu_src.build import DEFAULT_OUT, REGISTRY, FmuRecipe, build_one, stale
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.params import PlantParams
 from drillcosim.plant.scene import Scene, scene_files, scenes_dir
+from drillcosim.plant.signals import (
+    TOP_DRIVE_SPEED_COMMAND,
+    TOP_DRIVE_TORQUE,
+    actuator_force,
+    body_signal,
+)
 
 __all__ = ["DEFAULT_CONTROLLER", "DEFAULT_PLANT", "TOP_DRIVE_CONTROLLER", "PlantLayout",
            "controller_recipe", "default_fmu_dir", "ensure_recipes", "plant_layout",
@@ -84,8 +90,6 @@ def recipe_named(name: str) -> FmuRecipe:
 
 def default_fmu_dir() -> Path:
     """Where the project's FMUs are built and found by default (``build/fmus/`` of a checkout)."""
-    from drillcosim.fmu_src.build import DEFAULT_OUT
-
     return DEFAULT_OUT
 
 
@@ -149,10 +153,12 @@ def plant_recipe(scene: Scene) -> FmuRecipe:
     if layout is None:
         return base
     _name, copies = _scene_files(scene)
-    sites = sum(1 for n, _u, _d in layout.inputs if n.endswith("_force_C"))
-    bodies = sorted({n.split("_")[0][4:] for n, _u, _d in layout.outputs
-                     if n.startswith("body") and n.endswith("_X")}, key=int)
-    drive = [n for n, _u, _d in layout.inputs if n.startswith("top_drive")]
+    inputs = {n for n, _u, _d in layout.inputs}
+    outputs = {n for n, _u, _d in layout.outputs}
+    sites = sum(1 for s in range(1, len(scene.plant.actuator_joints) + 1)
+                if actuator_force(s, "C") in inputs)
+    bodies = [str(b) for b in scene.plant.contact_bodies if body_signal(b, "X") in outputs]
+    drive = [n for n in (TOP_DRIVE_TORQUE, TOP_DRIVE_SPEED_COMMAND) if n in inputs]
     description = (f"Drillstring vibration plant built for scene '{layout.scene}' "
                    f"({layout.model} model): {sites} actuator sites, contact bodies "
                    f"[{', '.join(bodies)}]" + (f", top-drive input {drive[0]}" if drive else "")
@@ -205,8 +211,6 @@ def ensure_recipes(recipes: Sequence[FmuRecipe], fmu_dir: str | Path | None = No
     FileNotFoundError
         If an FMU is still missing after the build (e.g. no adapter yet).
     """
-    from drillcosim.fmu_src.build import build_one, stale
-
     folder = Path(fmu_dir) if fmu_dir is not None else default_fmu_dir()
     paths = {}
     for recipe in recipes:

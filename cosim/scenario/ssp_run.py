@@ -12,15 +12,14 @@ the output folder (default ``out/<system name>``)
   time [s], real-time factor, the components (file, period [s], start values) and the
   divergence (time, quantity, value) if the run stopped early.
 
-The scene-specific summary and plots of :func:`cosim.scenario.run.simulate_system` need a
-scene and are not written.
+The scene-specific summary and plots (:class:`cosim.scenario.result.Result`) need a scene and
+are not written.
 """
 
 from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,16 +27,36 @@ from drillcosim.cosim.master.ssp import SspExport, export_ssp, unsupported_featu
 from drillcosim.cosim.master.ssp_import import read_ssp
 from drillcosim.cosim.master.system import integer_multiple
 
-from .run import (
-    EXIT_DIVERGED,
-    EXIT_OK,
-    SceneOutcome,
-    scene_system_from_options,
-    seconds_text,
-    simulate_into,
-)
+from .build import build_system
+from .config import ConfigError, SceneConfig
+from .result import seconds_text
+from .simulate import simulate_system
+from .summary import write_json
 
-__all__ = ["SspWarning", "WrittenSsp", "simulate_ssp", "write_scene_ssp"]
+__all__ = ["SspOutcome", "SspWarning", "WrittenSsp", "simulate_ssp", "write_scene_ssp"]
+
+
+@dataclass(frozen=True)
+class SspOutcome:
+    """What :func:`simulate_ssp` produced.
+
+    Attributes
+    ----------
+    completed : bool
+        False if the run stopped early (divergence or an FMU failure).
+    message : str
+        One line: where the files are, or why the run stopped.
+    out_dir : Path
+    summary : dict
+        The content of ``summary.json``.
+    files : tuple of Path
+    """
+
+    completed: bool
+    message: str
+    out_dir: Path
+    summary: dict
+    files: tuple[Path, ...]
 
 
 class SspWarning(UserWarning):
@@ -46,7 +65,7 @@ class SspWarning(UserWarning):
 
 def simulate_ssp(path: str | Path, *, stop_time: float | None = None, step: float | None = None,
             out_dir: str | Path | None = None, output_interval: float | None = None,
-            progress: bool | None = None) -> SceneOutcome:
+            progress: bool | None = None) -> SspOutcome:
     """Run an SSP 1.0 file and write ``results.csv`` and ``summary.json``.
 
     Parameters
@@ -67,12 +86,11 @@ def simulate_ssp(path: str | Path, *, stop_time: float | None = None, step: floa
 
     Returns
     -------
-    SceneOutcome
-        ``exit_code`` 1 if the run stopped early (divergence or an FMU failure).
+    SspOutcome
 
     Raises
     ------
-    ValueError
+    UserError
         Unsupported SSP content or bad options, one line (nothing is written).
     CosimError
         The run failed before its first step (earlier files are kept).
@@ -82,27 +100,27 @@ def simulate_ssp(path: str | Path, *, stop_time: float | None = None, step: floa
     SspWarning
         One per note of the import (e.g. a parameter that names no variable: ignored).
     """
-    from .summary import write_json
-
     for name, value in (("stop time", stop_time), ("step", step)):
         if value is not None and not (math.isfinite(value) and value > 0):
-            raise ValueError(f"{name}: a finite number > 0 [s], got {value!r}")
+            raise ConfigError(f"{name}: a finite number > 0 [s], got {value!r}")
     with read_ssp(path, step=step, stop_time=stop_time) as imp:
         for note in imp.notes:
             warnings.warn(SspWarning(f"{Path(path).name}: {note}"), stacklevel=2)
         system = imp.system
         stop = system.stop_time
         if stop is None:
-            raise ValueError(f"{Path(path).name}: no stop time (DefaultExperiment has no "
+            raise ConfigError(f"{Path(path).name}: no stop time (DefaultExperiment has no "
                              "stopTime): give one (--stop-time S)")
         out = Path(out_dir) if out_dir is not None else Path("out") / imp.name
         out.mkdir(parents=True, exist_ok=True)
         ticks = 1 if output_interval is None else integer_multiple(output_interval,
                                                                     system.base_step)
         if ticks is None:
-            raise ValueError(f"output interval: a positive integer multiple of the step "
+            raise ConfigError(f"output interval: a positive integer multiple of the step "
                              f"{system.base_step:g} s, got {output_interval!r} s")
-        result, failure, csv = simulate_into(system, imp.outputs, ticks, stop, out, progress)
+        csv = out / "results.csv"
+        result, failure = simulate_system(system, None, imp.outputs, ticks, stop, progress=progress,
+                                     csv_path=csv)
         summary = {
             "ssp_file": str(Path(path).resolve()), "system": imp.name,
             "step_s": system.base_step, "stop_time_s": stop, "end_time_s": result.end_time,
@@ -116,10 +134,10 @@ def simulate_ssp(path: str | Path, *, stop_time: float | None = None, step: floa
         }
     files = (csv, write_json(summary, out / "summary.json"))
     if failure is not None:
-        return SceneOutcome(EXIT_DIVERGED, f"run stopped at t = {result.end_time:.6g} s of "
+        return SspOutcome(False, f"run stopped at t = {result.end_time:.6g} s of "
                             f"{stop:g} s: {failure['message']}; partial results in {out}",
                             out, summary, files)
-    return SceneOutcome(EXIT_OK, f"{imp.name}: {result.end_time:g} s simulated in "
+    return SspOutcome(True, f"{imp.name}: {result.end_time:g} s simulated in "
                         f"{seconds_text(result.wall_time)} s (real-time factor "
                         f"{result.real_time_factor:.3g}); results.csv, summary.json in {out}",
                         out, summary, files)
@@ -133,21 +151,19 @@ class WrittenSsp:
     scene: str
 
 
-def write_scene_ssp(scene: str, out: str | Path | None = None, *, step: float | None = None,
-                    stop_time: float | None = None, sets: Sequence[str] = (),
-                    fmu_dir: str | Path | None = None, plant_fmu: str | Path | None = None,
-                    controller_fmu: str | Path | None = None,
+def write_scene_ssp(config: SceneConfig, out: str | Path | None = None, *,
+                    fmu_dir: str | Path | None = None,
                     omit_unsupported: bool = False) -> WrittenSsp:
-    """Write a scene's system (FMUs included) as an SSP 1.0 archive.
+    """Write a configuration's system (its FMUs included) as an SSP 1.0 archive.
 
     Parameters
     ----------
-    scene : str
-        Scene name or file.
+    config : SceneConfig
+        From :func:`.config.load_config` (overrides, FMU files of the user applied).
     out : path-like, optional
         ``.ssp`` file (default ``out/<scene>.ssp``).
-    step, stop_time, sets, fmu_dir, plant_fmu, controller_fmu :
-        As for ``drillcosim run`` (:func:`cosim.scenario.run.scene_system_from_options`).
+    fmu_dir : path-like, optional
+        Folder of the project's FMUs (:func:`.build.build_system`).
     omit_unsupported : bool
         Write a system with delays, linear coupling or Gauss-Seidel stepping without them
         (listed in :attr:`SspExport.omitted`); refused otherwise.
@@ -158,18 +174,16 @@ def write_scene_ssp(scene: str, out: str | Path | None = None, *, step: float | 
 
     Raises
     ------
-    ValueError
-        Bad scene input, or features SSP 1.0 cannot hold without ``omit_unsupported``.
+    UserError
+        Features SSP 1.0 cannot hold without ``omit_unsupported``, or FMUs that do not fit.
     """
-    ss = scene_system_from_options(scene, step=step, stop_time=stop_time, sets=sets,
-                                   fmu_dir=fmu_dir, plant_fmu=plant_fmu,
-                                   controller_fmu=controller_fmu)
-    target = Path(out) if out is not None else Path("out") / f"{ss.scene.name}.ssp"
-    omitted = unsupported_features(ss.system)
+    built = build_system(config, "fmu", fmu_dir=fmu_dir)
+    target = Path(out) if out is not None else Path("out") / f"{config.name}.ssp"
+    omitted = unsupported_features(built.system)
     if omitted and not omit_unsupported:
         more = f" (and {len(omitted) - 1} more)" if len(omitted) > 1 else ""
-        raise ValueError(f"{ss.scene.source}: SSP 1.0 cannot hold {omitted[0]}{more}; set "
-                         "cosim.algorithm='jacobi' and zero delays, or write it without them "
-                         "(--omit-unsupported)")
-    exp = export_ssp(ss.system, target, name=ss.scene.name, strict=False)
-    return WrittenSsp(exp, ss.scene.name)
+        raise ConfigError(f"{config.source}: SSP 1.0 cannot hold {omitted[0]}{more}; set "
+                          "cosim.algorithm='jacobi' and zero delays, or write it without them "
+                          "(--omit-unsupported)")
+    exp = export_ssp(built.system, target, name=config.name, strict=False)
+    return WrittenSsp(exp, config.name)

@@ -53,11 +53,21 @@ from typing import Any
 import numpy as np
 
 from drillcosim.cosim.master.files import atomic_write
-
-from .scene_system import CONTROLLER, PLANT, TOP_DRIVE
+from drillcosim.plant.scene import Scene
+from drillcosim.plant.signals import (
+    AXES,
+    CONTROLLER,
+    PLANT,
+    TOP_DRIVE,
+    TOP_DRIVE_TORQUE,
+    actuator_force,
+    actuator_power,
+    body_signal,
+    strain,
+)
 
 __all__ = ["STICK_SPEED", "SUMMARY_KEYS", "column", "contact_bodies", "load_results",
-           "stick_slip_metrics", "summarize", "write_json"]
+           "span_info", "stick_slip_metrics", "summarize", "write_json"]
 
 #: The bit counts as stuck below this speed [rad/s] (the cutting bit's friction is regularized
 #: over ``bit.slip_speed``, 0.05 rad/s in stick_slip: a stuck bit creeps at < 0.04 rad/s).
@@ -92,6 +102,30 @@ def contact_bodies(data: np.ndarray) -> list[int]:
     """Bodies whose ``plant.body<b>_radial_deflection`` was recorded."""
     return sorted({int(n[len(PLANT) + 5:].split("_")[0]) for n in (data.dtype.names or ())
                    if n.startswith(f"{PLANT}.body") and n.endswith("_radial_deflection")})
+
+
+def span_info(scene: Scene) -> dict[int, dict[str, float | str]]:
+    """Per contact body: its span's length [m] and 'long'/'short'.
+
+    Returns
+    -------
+    dict
+        ``{body: {"span_length": L_span [m], "span": "long" | "short" | "only"}}``.
+    """
+    plant = scene.plant
+    dx = plant.pipe.segment_length
+    spans = plant.spans()
+    out: dict[int, dict[str, float | str]] = {}
+    lengths = [b - a for a, b in spans]
+    for body in plant.contact_bodies:
+        z = (body - 0.5) * dx
+        length = next((b - a for a, b in spans if a <= z <= b), float("nan"))
+        if len(set(round(x, 9) for x in lengths)) < 2 or math.isnan(length):
+            kind = "only"
+        else:
+            kind = "long" if length >= max(lengths) - 1e-9 else "short"
+        out[body] = {"span_length": length, "span": kind}
+    return out
 
 
 def _stats(t: np.ndarray, r: np.ndarray, t0: float, t1: float) -> dict[str, float]:
@@ -160,7 +194,7 @@ def summarize(data: np.ndarray, *, scene: str = "", scene_file: str = "",
         Scene name and file.
     spans : mapping, optional
         ``{body: {"span": ..., "span_length": [m]}}`` (see
-        :func:`cosim.scenario.scene_system.span_info`); default: bodies found in ``data``.
+        :func:`span_info`); default: bodies found in ``data``.
     n_sites : int
         Number of actuator sites; a site none of whose columns was recorded is left out.
     stop_time, step : float
@@ -196,11 +230,11 @@ def summarize(data: np.ndarray, *, scene: str = "", scene_file: str = "",
         spans = {b: {"span": "", "span_length": math.nan} for b in contact_bodies(data)}
     out_spans: dict[str, Any] = {}
     for body, info in spans.items():
-        r = column(data, PLANT, f"body{body}_radial_deflection")
+        r = column(data, PLANT, body_signal(body, "radial_deflection"))
         if r is None:
             continue
-        entries, t_contact, f_peak = _contact(t, column(data, PLANT, f"body{body}_contact_force"),
-                                              output_interval)
+        entries, t_contact, f_peak = _contact(
+            t, column(data, PLANT, body_signal(body, "contact_force")), output_interval)
         entry: dict[str, Any] = {"span": info.get("span", ""),
                                  "span_length_m": info.get("span_length", math.nan),
                                  "peak_radial_deflection_m": _peak(r), **_stats(t, r, w0, t_last),
@@ -215,11 +249,9 @@ def summarize(data: np.ndarray, *, scene: str = "", scene_file: str = "",
         out_spans[f"body{body}"] = entry
     actuators: dict[str, Any] = {}
     for s in range(1, n_sites + 1):
-        forces = [column(data, CONTROLLER, f"actuator{s}_force_{a}") for a in ("C", "E")]
-        p = column(data, PLANT, f"actuator{s}_power")
-        strains = [x for x in (column(data, PLANT, f"strain{s}_C"),
-                                        column(data, PLANT, f"strain{s}_E"))
-                    if x is not None]
+        forces = [column(data, CONTROLLER, actuator_force(s, a)) for a in AXES]
+        p = column(data, PLANT, actuator_power(s))
+        strains = [x for x in (column(data, PLANT, strain(s, a)) for a in AXES) if x is not None]
         if p is None and not strains and all(f is None for f in forces):
             continue  # nothing of this site was recorded (e.g. the axial-torsional chain)
         fc, fe = (_peak(f) for f in forces)
@@ -246,7 +278,7 @@ def summarize(data: np.ndarray, *, scene: str = "", scene_file: str = "",
     bit_speed = column(data, PLANT, "bit_rotary_speed")
     if bit_speed is not None:
         torsional = stick_slip_metrics(t, bit_speed, w0)
-        motor = column(data, TOP_DRIVE, "top_drive_torque")
+        motor = column(data, TOP_DRIVE, TOP_DRIVE_TORQUE)
         if motor is not None:
             torsional["peak_motor_torque_N_m"] = _peak(motor)
     return {

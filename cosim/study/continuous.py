@@ -30,9 +30,12 @@ the numbers of ``docs/delay_study.md`` (section 5).
 from __future__ import annotations
 
 import math
+import sys
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from math import factorial
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -40,7 +43,13 @@ import scipy.linalg
 import scipy.signal
 from threadpoolctl import threadpool_limits
 
-from .stability import _bisect, _first_crossing
+from drillcosim.cosim.scenario.config import SceneConfig, load_config
+from drillcosim.plant.closed_loop import ClosedLoopSimulator, StrainLaw
+from drillcosim.plant.equilibrium import static_equilibrium
+from drillcosim.plant.linearize import operating_params
+from drillcosim.plant.model import DrillstringModel
+
+from .stability import LoopModel, _bisect, _first_crossing
 
 __all__ = [
     "ContinuousLoop",
@@ -117,8 +126,6 @@ class ContinuousLoop:
 
         ``kwargs`` override fields (e.g. ``pade_order=8``).
         """
-        from .stability import LoopModel
-
         return cls.from_loop_model(LoopModel.from_scene(scene, overrides), **kwargs)
 
     @classmethod
@@ -288,33 +295,29 @@ class ContinuousLoop:
 
 
 # ---------------------------------------------------------------------------------- simulations
-def _load(scene: Any, overrides: Mapping[str, Any] | None) -> Any:
-    from drillcosim.plant.scene import load_scene
-
-    if isinstance(scene, (str, bytes)) or hasattr(scene, "__fspath__"):
-        return load_scene(scene, overrides=dict(overrides) if overrides else None)
-    return scene
+def _config(scene: str | Path | SceneConfig, overrides: Mapping[str, Any] | None = None
+            ) -> SceneConfig:
+    return scene if isinstance(scene, SceneConfig) else load_config(scene, overrides)
 
 
-def law_from_scene(scene: Any, delay: float = 0.0, gain: float | None = None) -> Any:
-    """The scene's ``[controller]`` law as a :class:`plant.closed_loop.StrainLaw` [SI units].
+def law_from_scene(scene: str | Path | SceneConfig, delay: float = 0.0,
+                   gain: float | None = None) -> StrainLaw:
+    """The scene's strain controller as a :class:`plant.closed_loop.StrainLaw` [SI units].
 
-    The table is validated once, by ``cosim.scenario.scene_system.scene_controller``; ``gain``
-    overrides the scene's gain [N per unit strain], ``delay`` is the actuator delay [s].
+    ``scene`` is a name, a file or a :class:`cosim.scenario.config.SceneConfig` (validated
+    once there); ``gain`` overrides the scene's gain [N per unit strain], ``delay`` is the
+    actuator delay [s].
     """
-    from drillcosim.cosim.scenario.scene_system import scene_controller
-    from drillcosim.plant.closed_loop import StrainLaw
-
-    params = scene_controller(_load(scene, None))
+    params = _config(scene).controller
     if gain is not None:
         params = replace(params, gain=float(gain))
     return StrainLaw.from_controller(params, delay=delay)
 
 
-def operating_point_simulator(scene: Any, gain: float, delay: float,
+def operating_point_simulator(scene: str | Path | SceneConfig, gain: float, delay: float,
                               perturbation: float = 1e-6, seed: int = 0,
                               overrides: Mapping[str, Any] | None = None,
-                              max_step: float | None = None) -> Any:
+                              max_step: float | None = None) -> ClosedLoopSimulator:
     """A continuous-time closed loop started at the linearization's operating point.
 
     The scene's plant without forcing (``plant.linearize.operating_params``), spinning at the
@@ -327,13 +330,8 @@ def operating_point_simulator(scene: Any, gain: float, delay: float,
     -------
     plant.closed_loop.ClosedLoopSimulator
     """
-    from drillcosim.plant.closed_loop import ClosedLoopSimulator
-    from drillcosim.plant.linearize import operating_params
-    from drillcosim.plant.modal import static_equilibrium
-    from drillcosim.plant.model import DrillstringModel
-
-    sc = _load(scene, overrides)
-    prm = operating_params(sc.plant)
+    config = _config(scene, overrides)
+    prm = operating_params(config.scene.plant)
     omega = prm.top_drive.rotary_speed
     spin = replace(prm, top_drive=replace(prm.top_drive, ramp_time=0.0))
     rest = replace(prm, top_drive=replace(prm.top_drive, rotary_speed=0.0))
@@ -344,7 +342,7 @@ def operating_point_simulator(scene: Any, gain: float, delay: float,
     rng = np.random.default_rng(seed)
     y0[0:3 * n:3] += perturbation * rng.standard_normal(n)
     y0[1:3 * n:3] += perturbation * rng.standard_normal(n)
-    sim = ClosedLoopSimulator(model, law_from_scene(sc, delay, gain), max_step=max_step)
+    sim = ClosedLoopSimulator(model, law_from_scene(config, delay, gain), max_step=max_step)
     sim.y[:] = y0
     return sim
 
@@ -378,8 +376,6 @@ def envelope_growth_rate(t: np.ndarray, signal: np.ndarray, band: tuple[float, f
 
 def _report(scene: str = "paper_closed_loop") -> list[str]:
     """The numbers of ``docs/delay_study.md`` (section 5)."""
-    from .stability import LoopModel
-
     lm = LoopModel.from_scene(scene)
     cl = ContinuousLoop.from_loop_model(lm)
     lines = [f"scene {scene}: {cl.A.shape[0]} coupled states ({cl.dropped.size} decoupled modes "
@@ -418,8 +414,6 @@ def _band_root(cl: ContinuousLoop, gain: float, delay: float, band: tuple[float,
 
 def _simulation_report(scene: str = "paper_closed_loop") -> list[str]:
     """Simulated growth of the continuous loop vs the prediction (``--simulate``)."""
-    import time
-
     cl = ContinuousLoop.from_scene(scene)
     lines = ["gain [N/strain] | delay [ms] | predicted root in 150-300 rad/s [1/s] | simulated "
              "growth of strain1_C, 4 s from the perturbed operating point [1/s] | wall [s]"]
@@ -435,8 +429,6 @@ def _simulation_report(scene: str = "paper_closed_loop") -> list[str]:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    import sys
-
     args = [a for a in sys.argv[1:] if not a.startswith("--")]
     report = _simulation_report if "--simulate" in sys.argv else _report
     print("\n".join(report(*args[:1])))

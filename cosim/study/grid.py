@@ -19,7 +19,9 @@ from typing import Any
 
 import numpy as np
 
+from drillcosim.cosim.master.errors import UserError
 from drillcosim.cosim.master.system import integer_multiple
+from drillcosim.cosim.scenario.build import ENGINES
 
 __all__ = ["DEFAULT_GAIN_KEY", "GAIN_TABLES", "Point", "SweepSpec", "check_gain_key", "parse_list",
            "point_key"]
@@ -35,7 +37,7 @@ def check_gain_key(key: str) -> str:
     """``key`` if it names a key of a controller table (``"table.key"``), else ValueError."""
     table, dot, name = key.partition(".")
     if not dot or table not in GAIN_TABLES or not name.isidentifier():
-        raise ValueError(f"--gain-key {key!r}: must be TABLE.KEY with TABLE one of "
+        raise UserError(f"--gain-key {key!r}: must be TABLE.KEY with TABLE one of "
                          f"{', '.join(GAIN_TABLES)} (e.g. {DEFAULT_GAIN_KEY}, "
                          f"top_drive_controller.p_gain)")
     return key
@@ -45,9 +47,9 @@ def _number(text: str, what: str) -> float:
     try:
         x = float(text)
     except ValueError:
-        raise ValueError(f"{what}: {text!r} is not a number") from None
+        raise UserError(f"{what}: {text!r} is not a number") from None
     if not math.isfinite(x):
-        raise ValueError(f"{what}: {text!r} is not finite")
+        raise UserError(f"{what}: {text!r} is not finite")
     return x
 
 
@@ -55,17 +57,17 @@ def _range(item: str, what: str) -> list[float]:
     log = item.startswith("log:")
     parts = item[4:].split(":") if log else item.split(":")
     if len(parts) != 3:
-        raise ValueError(f"{what}: {item!r}: use start:stop:count or log:start:stop:count")
+        raise UserError(f"{what}: {item!r}: use start:stop:count or log:start:stop:count")
     a, b = _number(parts[0], what), _number(parts[1], what)
     try:
         n = int(parts[2])
     except ValueError:
-        raise ValueError(f"{what}: {item!r}: count {parts[2]!r} is not an integer") from None
+        raise UserError(f"{what}: {item!r}: count {parts[2]!r} is not an integer") from None
     if n < 1:
-        raise ValueError(f"{what}: {item!r}: count must be >= 1")
+        raise UserError(f"{what}: {item!r}: count must be >= 1")
     if log:
         if a <= 0 or b <= 0:
-            raise ValueError(f"{what}: {item!r}: log spacing needs start, stop > 0")
+            raise UserError(f"{what}: {item!r}: log spacing needs start, stop > 0")
         return [float(x) for x in np.geomspace(a, b, n)]
     return [float(x) for x in np.linspace(a, b, n)]
 
@@ -99,12 +101,12 @@ def parse_list(text: str, what: str = "list", minimum: float | None = None,
             continue
         values += _range(item, what) if ":" in item else [_number(item, what)]
     if not values:
-        raise ValueError(f"{what}: no values in {text!r}")
+        raise UserError(f"{what}: no values in {text!r}")
     for v in values:
         if positive and v <= 0:
-            raise ValueError(f"{what}: {v!r} must be > 0")
+            raise UserError(f"{what}: {v!r} must be > 0")
         if minimum is not None and v < minimum:
-            raise ValueError(f"{what}: {v!r} must be >= {minimum}")
+            raise UserError(f"{what}: {v!r} must be >= {minimum}")
     # round to 12 significant digits so 1e-3 from a range equals a typed 0.001
     return sorted({float(f"{v:.12g}") for v in values})
 
@@ -133,10 +135,10 @@ class Point:
         Communication step [s].
     stop_time : float
         [s].
-    engine : {"fmu", "python"}
+    engine : {"fmu", "inprocess"}
     kind : {"closed_loop", "open_loop"}
     overrides : str
-        JSON of extra scene overrides (nested dict), "" for none.
+        JSON of extra scene keys by key path, "" for none.
     options : tuple of (str, float)
         Metric options for the measurement (see :class:`cosim.study.point.PointOptions`).
     gain_key : str
@@ -193,9 +195,9 @@ class SweepSpec:
         Communication steps [s], > 0.
     stop_time : float
         [s].
-    engine : {"fmu", "python"}
+    engine : {"fmu", "inprocess"}
     overrides : mapping
-        Extra scene overrides (nested dict, e.g. ``{"cosim": {"algorithm": "jacobi"}}``).
+        Extra scene keys by key path (e.g. ``{"cosim.algorithm": "jacobi"}``).
     open_loop : bool
         Also run one open-loop reference per step (needed for the control benefit).
     options : mapping of str -> float
@@ -218,13 +220,14 @@ class SweepSpec:
 
     def points(self) -> list[Point]:
         """Open-loop references first (one per step), then gain x delay x step."""
-        if self.engine not in ("fmu", "python"):
-            raise ValueError(f"engine = {self.engine!r}: 'fmu' or 'python'")
+        if self.engine not in ENGINES:
+            raise UserError(f"engine = {self.engine!r} is not allowed; allowed: "
+                            f"{', '.join(ENGINES)}")
         if not (self.stop_time > 0 and math.isfinite(self.stop_time)):
-            raise ValueError(f"stop time: a finite number > 0 [s], got {self.stop_time!r}")
+            raise UserError(f"stop time: a finite number > 0 [s], got {self.stop_time!r}")
         for h in self.steps:
             if integer_multiple(self.stop_time, h) is None:
-                raise ValueError(f"stop time {self.stop_time:g} s: not a whole number of steps "
+                raise UserError(f"stop time {self.stop_time:g} s: not a whole number of steps "
                                  f"of {h:g} s ({self.stop_time / h:.6g}); choose a stop time "
                                  "every step divides")
         over = json.dumps(dict(self.overrides), sort_keys=True) if self.overrides else ""

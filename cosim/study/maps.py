@@ -26,6 +26,9 @@ import numpy as np
 
 from drillcosim.cosim.master.files import atomic_write
 
+from .stability import LoopModel
+from .table import read_table
+
 __all__ = ["plot_maps", "predicted_boundary"]
 
 #: Axis label of a sweep's gain, by gain key.
@@ -45,8 +48,6 @@ def predicted_boundary(scene: str, steps: Sequence[float], delays: Sequence[floa
         ``{step: [(delay, critical_gain), ...]}``; ``inf`` where stable over the range,
         ``0`` where unstable at its low end.
     """
-    from .stability import LoopModel
-
     lm = LoopModel.from_scene(scene, overrides=overrides)
     lo, hi = gain_range
     out: dict[float, list[tuple[float, float]]] = {}
@@ -106,8 +107,6 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True) -> list[Path]:
     from matplotlib.colors import TwoSlopeNorm
 
     from drillcosim.cosim.scenario.plots import save_figure
-
-    from .table import read_table
 
     folder = Path(folder)
     rows = [r for r in read_table(folder) if r["kind"] == "closed_loop"]

@@ -2,13 +2,14 @@
 
 :func:`measure_point` is a plain module-level function of picklable arguments that
 returns a flat dict, so it runs unchanged in a process pool or on a
-dask.distributed worker. The scene's system
-(:func:`cosim.scenario.scene_system.scene_system`) is run by the master
-(:class:`cosim.master.execution.Execution`) with one of two sets of slaves:
+dask.distributed worker. The point's configuration (:func:`point_config`: the scene with the
+point's key-path overrides) is built by the one builder
+(:func:`cosim.scenario.build.build_system`) with one of its engines and run by the one master
+call (:func:`cosim.scenario.simulate.simulate`):
 
 ``"fmu"``
     the plant FMU and the controller FMU;
-``"python"``
+``"inprocess"``
     the same models in process (:mod:`cosim.scenario.inprocess`), without the FMI
     boundary: the same numbers, bit for bit.
 
@@ -57,17 +58,32 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
+from scipy.signal import butter, sosfilt
 
-from drillcosim.cosim.scenario.scene_system import AXES, CONTROLLER, PLANT, scene_instances
+from drillcosim.cosim.master.limits import OutputLimit
+from drillcosim.cosim.scenario.build import ENGINES, build_system
+from drillcosim.cosim.scenario.config import ConfigError, SceneConfig, key_paths, load_config
+from drillcosim.cosim.scenario.simulate import simulate
+from drillcosim.cosim.scenario.summary import span_info, stick_slip_metrics
+from drillcosim.plant.signals import (
+    CONTROLLER,
+    PLANT,
+    TOP_DRIVE,
+    actuator_force,
+    actuator_power,
+    body_signal,
+    ref,
+    site_channels,
+    strain,
+)
 
 from .grid import DEFAULT_GAIN_KEY, check_gain_key
+from .verdict import scene_judging_window
 
-__all__ = ["ENGINES", "PointOptions", "default_gain_key", "error_row", "metrics", "point_scene",
-           "measure_point", "run_system", "simulate_point"]
+__all__ = ["ENGINES", "PointOptions", "default_gain_key", "error_row", "measure_point", "metrics",
+           "point_config", "simulate_point"]
 
 SPANS = ("long", "short")
-#: Slave sets of the master: the FMUs, or the same models in process.
-ENGINES = ("fmu", "python")
 
 
 @dataclass(frozen=True)
@@ -161,11 +177,9 @@ def metrics(data: np.ndarray, spans: Mapping[int, str], n_sites: int, opts: Poin
     t = np.asarray(data["time"], dtype=float)
     out: dict[str, float] = {}
     sites = range(1, n_sites + 1)
-    strains = [np.asarray(data[n], dtype=float) for s in sites for a in AXES
-               if (n := f"{PLANT}.strain{s}_{a}") in names]
+    strains = [np.asarray(data[n], dtype=float) for s, a in site_channels(sites)
+               if (n := ref(PLANT, strain(s, a))) in names]
     if strains and len(t) > 8 and opts.highpass > 0:
-        from scipy.signal import butter, sosfilt
-
         dt = float(np.median(np.diff(t)))
         nyq = math.pi / dt
         if opts.highpass < 0.9 * nyq:
@@ -176,18 +190,16 @@ def metrics(data: np.ndarray, spans: Mapping[int, str], n_sites: int, opts: Poin
         smax = np.max(np.abs(np.vstack(strains)), axis=0)
         out["growth_rate"], out["growth_noise"] = _envelope_growth(
             t, smax, opts.envelope_window, opts.fit_fraction)
-    forces = [data[n] for s in sites for a in AXES
-              if (n := f"{CONTROLLER}.actuator{s}_force_{a}") in names]
-    powers = [data[n] for s in sites if (n := f"{PLANT}.actuator{s}_power") in names]
+    forces = [data[n] for s, a in site_channels(sites)
+              if (n := ref(CONTROLLER, actuator_force(s, a))) in names]
+    powers = [data[n] for s in sites if (n := ref(PLANT, actuator_power(s))) in names]
     out["peak_force"] = float(np.max(np.abs(np.vstack(forces)))) if forces and len(t) else 0.0
     out["peak_power"] = float(np.max(np.abs(np.vstack(powers)))) if powers and len(t) else 0.0
     t_rms = t[-1] - opts.rms_fraction * (t[-1] - t[0]) if len(t) else 0.0
     out["stick_slip_severity"] = out["stick_fraction"] = math.nan
-    if f"{PLANT}.bit_rotary_speed" in names and len(t) and not diverged:
-        from drillcosim.cosim.scenario.summary import stick_slip_metrics
-
-        torsional = stick_slip_metrics(t, np.asarray(data[f"{PLANT}.bit_rotary_speed"], float),
-                                       t_rms)
+    bit_speed = ref(PLANT, "bit_rotary_speed")
+    if bit_speed in names and len(t) and not diverged:
+        torsional = stick_slip_metrics(t, np.asarray(data[bit_speed], float), t_rms)
         out["stick_slip_severity"] = torsional["stick_slip_severity"]
         out["stick_fraction"] = torsional["stick_fraction"]
     for span in SPANS:
@@ -195,7 +207,7 @@ def metrics(data: np.ndarray, spans: Mapping[int, str], n_sites: int, opts: Poin
         out[f"peak_deflection_{span}"] = math.nan
     for body, kind in spans.items():
         col = "long" if kind == "only" else kind
-        name = f"{PLANT}.body{body}_radial_deflection"
+        name = ref(PLANT, body_signal(body, "radial_deflection"))
         if name not in names or not len(t):
             continue
         r = np.asarray(data[name], dtype=float)
@@ -208,152 +220,84 @@ def metrics(data: np.ndarray, spans: Mapping[int, str], n_sites: int, opts: Poin
 def default_gain_key(scene: str, overrides: Mapping[str, Any] | None = None) -> str:
     """The key a sweep of ``scene`` varies by default: ``top_drive_controller.p_gain`` when the
     scene enables a top-drive controller and no strain controller, else ``controller.gain``."""
-    from drillcosim.plant.scene import load_scene
-
-    instances = scene_instances(load_scene(scene, overrides=dict(overrides or {}) or None))
-    if "top_drive_controller" in instances and CONTROLLER not in instances:
-        return "top_drive_controller.p_gain"
+    instances = load_config(scene, overrides).instances
+    if TOP_DRIVE in instances and CONTROLLER not in instances:
+        return f"{TOP_DRIVE}.p_gain"
     return DEFAULT_GAIN_KEY
 
 
-def point_scene(scene: str, gain: float, delay: float, step: float, stop_time: float,
-                open_loop: bool, overrides: Mapping[str, Any] | None,
-                gain_key: str = DEFAULT_GAIN_KEY):
-    """The scene of a point and its nested overrides (``(Scene, dict)``): ``gain_key`` set to
-    ``gain`` and its controller enabled (disabled for the open-loop reference)."""
-    from drillcosim.plant.scene import load_scene
-
-    table, _dot, key = check_gain_key(gain_key).partition(".")
-    over: dict[str, Any] = {k: dict(v) if isinstance(v, Mapping) else v
-                            for k, v in (overrides or {}).items()}
-    over.setdefault("cosim", {}).update({"step": step, "stop_time": stop_time,
-                                         "actuator_delay": delay})
-    ctrl = over.setdefault(table, {})
+def point_config(scene: str, gain: float, delay: float, step: float, stop_time: float,
+                 open_loop: bool, overrides: Mapping[str, Any] | None,
+                 gain_key: str = DEFAULT_GAIN_KEY) -> SceneConfig:
+    """The configuration of a point: the scene with ``overrides`` (key paths), the step, stop
+    time and actuator delay, ``gain_key`` set to ``gain`` and its controller enabled (disabled
+    for the open-loop reference)."""
+    table = check_gain_key(gain_key).partition(".")[0]
+    over = {**key_paths(overrides), "cosim.step": step, "cosim.stop_time": stop_time,
+            "cosim.actuator_delay": delay}
     if open_loop:
-        ctrl["enabled"] = False
+        over[f"{table}.enabled"] = False
     else:
-        ctrl.update({"enabled": True, key: gain})
-    return load_scene(scene, overrides=over), over
+        over.update({f"{table}.enabled": True, gain_key: gain})
+    return load_config(scene, over)
 
 
-class _ForceCap:
-    """Observer: stop the master (as a divergence) when a force exceeds the cap.
-
-    The forces are exchanged outputs: read from the master's output buffer (as the recorder
-    does), no FMI call per step.
-    """
-
-    def __init__(self, refs: list[str], cap: float):
-        self.refs = refs
-        self.cap = cap
-
-    def on_start(self, execution) -> None:
-        self._y = execution.algorithm.y
-        self._index = [(execution.algorithm.y_index[r], r) for r in self.refs]
-
-    def on_step(self, execution) -> None:
-        y, cap = self._y, self.cap
-        for i, ref in self._index:
-            if not abs(y[i]) <= cap:
-                from drillcosim.cosim.master.errors import DivergenceError
-
-                raise DivergenceError(ref, execution.time, y[i])
-
-
-def simulate_point(sc, over: Mapping[str, Any], opts: PointOptions, engine: str = "fmu",
+def simulate_point(config: SceneConfig, opts: PointOptions, engine: str = "fmu",
                    fmu_dir: str | None = None, initial_offset: np.ndarray | None = None
                    ) -> tuple[np.ndarray, str]:
-    """Run a loaded scene through the master and record it.
+    """Build and run a configuration, stopping early at the force cap.
 
     Parameters
     ----------
-    sc : Scene
-        The point's scene (:func:`point_scene`).
-    over : mapping
-        Its nested overrides (plant sections are passed to the plant FMU).
+    config : SceneConfig
+        The point's configuration (:func:`point_config`).
     opts : PointOptions
-    engine : {"fmu", "python"}
+    engine : {"fmu", "inprocess"}
         FMU slaves, or the in-process ones.
     fmu_dir : str, optional
         FMU folder (``fmu`` engine; default ``build/fmus``).
     initial_offset : numpy.ndarray, shape (n_state,), optional
-        Added to the plant's initial state (``python`` engine only: an FMU's state is not
+        Added to the plant's initial state (``inprocess`` engine only: an FMU's state is not
         an input), e.g. the perturbation of an ensemble member
         (:func:`cosim.study.ensemble.lateral_perturbation`).
 
     Returns
     -------
     data : numpy.ndarray
-        The recorder's structured array (``time`` and ``fmu.var`` columns).
+        The recorder's structured array (``time`` and ``instance.var`` columns).
     reason : str
         Why the run stopped early ("" if it reached its stop time).
 
     Raises
     ------
     CosimError
-        A failure before the run started (bad parameters, a missing FMU); a failure while
+        A failure before the run's first step (bad parameters, a missing FMU); a failure while
         stepping ends the run as diverged (its reason names the slave's own message).
     """
-    from drillcosim.cosim.scenario.scene_system import scene_system
-
-    if engine not in ENGINES:
-        raise ValueError(f"engine = {engine!r}: 'fmu' or 'python'")
-    if initial_offset is not None and engine != "python":
-        raise ValueError("initial_offset: a perturbed initial state needs engine 'python' "
-                         "(the in-process plant)")
-    # the FMU files describe the system; in process, slaves built from the scene object (which
-    # holds the overrides already) stand in for them
-    in_process = engine == "python"
-    plant_over = {} if in_process else {k: v for k, v in over.items()
-                                        if k not in ("cosim", "controller", "top_drive_controller")}
-    ss = scene_system(sc, fmu_dir, plant_overrides=plant_over)
-    slaves = None
-    if in_process:
-        from drillcosim.cosim.scenario.inprocess import inprocess_slaves
-
-        slaves = inprocess_slaves(ss)
-        if initial_offset is not None:
-            sim = slaves[PLANT].sim
-            offset = np.asarray(initial_offset, dtype=float)
-            if offset.shape != sim.y.shape:
-                raise ValueError(f"initial_offset: shape {offset.shape}, the plant's state has "
-                                 f"{sim.y.shape}")
-            sim.y = sim.y + offset
-    return run_system(ss, slaves, opts)
-
-
-def run_system(ss, slaves: Mapping[str, Any] | None, opts: PointOptions
-               ) -> tuple[np.ndarray, str]:
-    """Run a scene's system through the master, recording its outputs (see
-    :func:`simulate_point`; ``slaves`` as for :class:`~cosim.master.execution.Execution`)."""
-    from drillcosim.cosim.master.errors import CosimError, DivergenceError
-    from drillcosim.cosim.master.execution import Execution
-    from drillcosim.cosim.master.recorder import Recorder
-
-    recorder = Recorder(ss.outputs, ss.settings.output_ticks)
-    forces = [o for o in ss.outputs if o.startswith(f"{CONTROLLER}.actuator")]
-    reason = ""
-    execution = None
-    try:
-        execution = Execution(ss.system, read_outputs=ss.outputs, slaves=slaves)
-        execution.add_observer(recorder)
-        if forces:
-            execution.add_observer(_ForceCap(forces, opts.force_cap))
-        execution.initialize()
-        execution.simulate_until(ss.stop_time)
-    except DivergenceError as exc:
-        reason = (f"diverged at t = {exc.time:.6g} s: {exc.quantity} = {exc.value:.3g}"
-                  + (f" exceeds the force cap {opts.force_cap:g} N"
-                     if math.isfinite(exc.value) else ""))
-    except CosimError as exc:
-        if execution is None or not execution.initialized:
-            raise
-        reason = (f"diverged at t = {exc.time:.6g} s: {exc.fmu_name} {exc.call} failed: "
-                  f"{exc.fmu_message or exc.message}")
-    finally:
-        if execution is not None:
-            execution.close()
-    return recorder.data, reason
+    if initial_offset is not None and engine != "inprocess":
+        raise ConfigError("initial_offset: a perturbed initial state needs engine 'inprocess' "
+                          "(the in-process plant)")
+    built = build_system(config, engine, fmu_dir=fmu_dir)
+    if initial_offset is not None:
+        sim = built.slaves[PLANT].sim
+        offset = np.asarray(initial_offset, dtype=float)
+        if offset.shape != sim.y.shape:
+            raise ConfigError(f"initial_offset: shape {offset.shape}, the plant's state has "
+                              f"{sim.y.shape}")
+        sim.y = sim.y + offset
+    channels = site_channels(range(1, config.n_sites + 1))
+    forces = [o for o in (ref(CONTROLLER, actuator_force(s, a)) for s, a in channels)
+              if o in built.outputs]
+    # a force beyond the cap stops the point as a divergence (checked in C by the native loop)
+    res = simulate(built, observers=[OutputLimit(forces, opts.force_cap)] if forces else ())
+    f = res.failure
+    if f is None:
+        return res.data, ""
+    if f["value"] is None:
+        return res.data, f"diverged at t = {f['time_s']:.6g} s: {f['message']}"
+    return res.data, (f"diverged at t = {f['time_s']:.6g} s: {f['quantity']} = {f['value']:.3g}"
+                      + (f" exceeds the force cap {opts.force_cap:g} N"
+                         if math.isfinite(f["value"]) else ""))
 
 
 def error_row(exc: BaseException, wall_time: float = math.nan) -> dict[str, Any]:
@@ -379,16 +323,16 @@ def measure_point(scene: str, gain: float, delay: float, step: float, stop_time:
         Value of ``gain_key``: by default the strain controller's gain [N per unit strain]
         (ignored for open loop).
     delay : float
-        Actuator delay [s] (``[cosim] actuator_delay``).
+        Actuator delay [s] (``cosim.actuator_delay``).
     step : float
-        Communication step [s] (``[cosim] step``; the controller samples at it).
+        Communication step [s] (``cosim.step``; the controller samples at it).
     stop_time : float
         [s].
-    engine : {"fmu", "python"}
+    engine : {"fmu", "inprocess"}
     open_loop : bool
         Controller disabled (the reference run of the control benefit).
     overrides : mapping, optional
-        Extra nested scene overrides (e.g. ``{"cosim": {"algorithm": "jacobi"}}``).
+        Extra scene keys by key path (e.g. ``{"cosim.algorithm": "jacobi"}``).
     fmu_dir : str, optional
         FMU folder for the ``fmu`` engine (default ``build/fmus``).
     gain_key : str
@@ -410,22 +354,18 @@ def measure_point(scene: str, gain: float, delay: float, step: float, stop_time:
         Bad input or an FMU failure before the first step (the sweep records it
         as an ``error`` row, see :func:`cosim.study.sweep.execute_sweep`).
     """
-    from drillcosim.cosim.scenario.scene_system import span_info
-
     wall0 = time.perf_counter()
     opts = PointOptions.from_kwargs(options)
-    if engine not in ENGINES:
-        raise ValueError(f"engine = {engine!r}: 'fmu' or 'python'")
-    sc, over = point_scene(scene, gain, delay, step, stop_time, open_loop, overrides, gain_key)
-    data, reason = simulate_point(sc, over, opts, engine, fmu_dir)
+    config = point_config(scene, gain, delay, step, stop_time, open_loop, overrides, gain_key)
+    data, reason = simulate_point(config, opts, engine, fmu_dir)
     t = data["time"]
     end = float(t[-1]) if len(t) else 0.0
     diverged = bool(reason)
-    spans = {b: str(v["span"]) for b, v in span_info(sc).items()}
+    spans = {b: str(v["span"]) for b, v in span_info(config.scene).items()}
     row: dict[str, Any] = {"status": "diverged" if diverged else "ok",
                            "divergence_time": end if diverged else math.nan,
                            "end_time": end, "reason": reason}
-    row.update(metrics(data, spans, len(sc.plant.actuator_joints), opts, diverged))
+    row.update(metrics(data, spans, config.n_sites, opts, diverged))
     strain_loop = gain_key.startswith(f"{CONTROLLER}.")
     row["min_stop_time"] = (math.nan if open_loop or not strain_loop
                             else _min_stop_time(scene, overrides, opts))
@@ -436,14 +376,8 @@ def measure_point(scene: str, gain: float, delay: float, step: float, stop_time:
 def _min_stop_time(scene: str, overrides: Mapping[str, Any] | None, opts: PointOptions
                    ) -> float:
     """:attr:`JudgingWindow.min_stop_time` [s] of the scene; NaN if it cannot be derived."""
-    import numpy as np
-
-    from .verdict import scene_judging_window
-
     try:
         return scene_judging_window(scene, overrides, opts.highpass,
                                     opts.fit_fraction).min_stop_time
     except (ValueError, np.linalg.LinAlgError):  # e.g. no damped mode above the cut-off
         return math.nan
-
-

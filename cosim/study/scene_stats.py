@@ -3,9 +3,9 @@
 One point (:class:`ScenePoint`) is one run of a scene with overrides, started from the
 initial state plus the perturbation of an ensemble member
 (:func:`cosim.study.ensemble.lateral_perturbation`; member 0 is unperturbed, i.e. the run
-``drillcosim run`` makes). :func:`measure_scene` runs it through the master
-(:func:`cosim.study.point.simulate_point`, in-process slaves by default: the FMUs' numbers
-bit for bit) and reduces it with :func:`cosim.scenario.summary.summarize` to flat columns
+``drillcosim run`` makes). :func:`measure_scene` runs it through the one builder and master
+call (:func:`cosim.study.point.simulate_point`, in-process slaves by default: the FMUs'
+numbers bit for bit) and reduces it with :func:`cosim.scenario.summary.summarize` to flat columns
 (:data:`STAT_COLUMNS`); the points run through the sweep executors
 (:func:`cosim.study.sweep.execute_points`: local process pool, Dask, or inline) into a
 :class:`SceneTable` (resumable; its content does not depend on the order the points
@@ -42,11 +42,17 @@ from typing import Any
 
 import numpy as np
 
-from .ensemble import ensemble_stat
+from drillcosim.cosim.scenario.config import SceneConfig, key_paths, load_config
+from drillcosim.cosim.scenario.summary import span_info, summarize
+from drillcosim.plant.model import DrillstringModel
+from drillcosim.plant.signals import PLANT, body_signal, ref
+
+from .ensemble import ensemble_stat, lateral_perturbation
+from .point import PointOptions, simulate_point
 from .table import ResultTable, full_row
 
 __all__ = ["ID_COLUMNS", "STAT_COLUMNS", "SPAN_STATS", "SITE_STATS", "ScenePoint", "SceneTable",
-           "aggregate", "measure_scene", "run_member", "run_statistics"]
+           "aggregate", "measure_scene", "simulate_member", "run_statistics"]
 
 SPANS = ("long", "short")
 SITES = (1, 2)
@@ -79,15 +85,15 @@ class ScenePoint:
     stop_time : float
         [s].
     overrides : str
-        JSON of the nested scene overrides ("" for none), e.g.
-        ``{"bit": {"weight_on_bit": 36000.0}}``.
+        JSON of the scene keys by key path ("" for none), e.g.
+        ``{"bit.weight_on_bit": 36000.0}``.
     member : int
         Ensemble member (0: unperturbed).
     eps : float
         Standard deviation of the lateral position perturbation [m].
     seed : int
         Perturbation seed.
-    engine : {"python", "fmu"}
+    engine : {"inprocess", "fmu"}
         ``fmu`` runs member 0 only.
     tags : tuple of (str, float)
         Extra identity columns (e.g. the calibration's parameters).
@@ -100,7 +106,7 @@ class ScenePoint:
     member: int = 0
     eps: float = 1e-6
     seed: int = 2024
-    engine: str = "python"
+    engine: str = "inprocess"
     tags: tuple[tuple[str, float], ...] = ()
 
     @property
@@ -143,30 +149,27 @@ def _window_percentiles(t: np.ndarray, r: np.ndarray, t0: float, t1: float
     return float(p05), float(p95)
 
 
-def run_statistics(data: np.ndarray, sc) -> dict[str, float]:
+def run_statistics(data: np.ndarray, config: SceneConfig) -> dict[str, float]:
     """The columns of :data:`STAT_COLUMNS` (except status, reason, times) of one run.
 
     Parameters
     ----------
     data : numpy.ndarray
         The recorder's structured array (``time``, ``plant.*``, ``controller.*``).
-    sc : plant.scene.Scene
-        The run's scene (spans, sites, switch-on time).
+    config : SceneConfig
+        The run's configuration (spans, sites, switch-on time).
 
     Returns
     -------
     dict
         NaN where a quantity does not apply (no second span, no switch-on, no contact).
     """
-    from drillcosim.cosim.scenario.scene_system import PLANT, scene_controller, span_info
-    from drillcosim.cosim.scenario.summary import summarize
-
-    spans = span_info(sc)
-    ctrl = scene_controller(sc)
+    spans = span_info(config.scene)
+    ctrl = config.controller
     t = np.asarray(data["time"], dtype=float)
     switch = ctrl.switch_on_time if ctrl.enabled and len(t) and \
         t[0] < ctrl.switch_on_time < t[-1] else None
-    summ = summarize(data, spans=spans, n_sites=len(sc.plant.actuator_joints),
+    summ = summarize(data, spans=spans, n_sites=config.n_sites,
                      switch_on_time=switch)
     out: dict[str, float] = {f"{s}_{q}": math.nan for s in SPANS for q in SPAN_STATS}
     out.update({f"site{k}_{q}": math.nan for k in SITES for q in SITE_STATS})
@@ -176,10 +179,10 @@ def run_statistics(data: np.ndarray, sc) -> dict[str, float]:
         e = summ["spans"].get(f"body{body}")
         if e is None or span not in SPANS:
             continue
-        r = np.asarray(data[f"{PLANT}.body{body}_radial_deflection"], dtype=float)
+        r = np.asarray(data[ref(PLANT, body_signal(body, "radial_deflection"))], dtype=float)
         p05, p95 = _window_percentiles(t, r, w0, w1)
-        f = np.asarray(data[f"{PLANT}.body{body}_contact_force"], dtype=float) \
-            if f"{PLANT}.body{body}_contact_force" in (data.dtype.names or ()) else None
+        force = ref(PLANT, body_signal(body, "contact_force"))
+        f = np.asarray(data[force], dtype=float) if force in (data.dtype.names or ()) else None
         first = float(t[np.argmax(f > 0)]) if f is not None and np.any(f > 0) else math.nan
         before = e.get("before_switch_on", {})
         out.update({f"{span}_peak_m": e["peak_radial_deflection_m"],
@@ -210,38 +213,31 @@ def run_statistics(data: np.ndarray, sc) -> dict[str, float]:
     return {k: float(v) for k, v in out.items()}
 
 
-def run_member(scene: str, stop_time: float, engine: str = "python", *,
+def simulate_member(scene: str, stop_time: float, engine: str = "inprocess", *,
                overrides: Mapping[str, Any] | None = None, member: int = 0, eps: float = 1e-6,
-               seed: int = 2024, fmu_dir: str | None = None) -> tuple[np.ndarray, Any, str]:
+               seed: int = 2024, fmu_dir: str | None = None
+               ) -> tuple[np.ndarray, SceneConfig, str]:
     """Run one ensemble member of a scene (arguments: :func:`measure_scene`).
 
     Returns
     -------
     data : numpy.ndarray
         The recorder's structured array.
-    scene : plant.scene.Scene
-        The loaded scene (overrides applied).
+    config : SceneConfig
+        The member's configuration (overrides applied).
     reason : str
         Why the run stopped early ("" if it completed).
     """
-    from drillcosim.plant.model import DrillstringModel
-    from drillcosim.plant.scene import load_scene
-
-    from .ensemble import lateral_perturbation
-    from .point import PointOptions, simulate_point
-
-    over: dict[str, Any] = {k: dict(v) if isinstance(v, Mapping) else v
-                            for k, v in (overrides or {}).items()}
-    over.setdefault("cosim", {})["stop_time"] = float(stop_time)
-    sc = load_scene(scene, overrides=over)
+    config = load_config(scene, {**key_paths(overrides), "cosim.stop_time": float(stop_time)})
     offset = None
     if member:
-        offset = lateral_perturbation(DrillstringModel(sc.plant, sc.model), eps, seed, member)
-    data, reason = simulate_point(sc, over, PointOptions(), engine, fmu_dir, offset)
-    return data, sc, reason
+        model = DrillstringModel(config.scene.plant, config.scene.model)
+        offset = lateral_perturbation(model, eps, seed, member)
+    data, reason = simulate_point(config, PointOptions(), engine, fmu_dir, offset)
+    return data, config, reason
 
 
-def measure_scene(scene: str, stop_time: float, engine: str = "python", *,
+def measure_scene(scene: str, stop_time: float, engine: str = "inprocess", *,
                   overrides: Mapping[str, Any] | None = None, member: int = 0,
                   eps: float = 1e-6, seed: int = 2024, fmu_dir: str | None = None
                   ) -> dict[str, Any]:
@@ -253,10 +249,10 @@ def measure_scene(scene: str, stop_time: float, engine: str = "python", *,
         Scene name or path.
     stop_time : float
         [s] (``[cosim] stop_time``).
-    engine : {"python", "fmu"}
+    engine : {"inprocess", "fmu"}
         In-process slaves (any member) or the FMUs (member 0 only).
     overrides : mapping, optional
-        Nested scene overrides.
+        Scene keys by key path.
     member, eps, seed
         See :func:`cosim.study.ensemble.lateral_perturbation`.
     fmu_dir : str, optional
@@ -269,12 +265,12 @@ def measure_scene(scene: str, stop_time: float, engine: str = "python", *,
         the statistics of :func:`run_statistics`.
     """
     wall0 = time.perf_counter()
-    data, sc, reason = run_member(scene, stop_time, engine, overrides=overrides, member=member,
+    data, config, reason = simulate_member(scene, stop_time, engine, overrides=overrides, member=member,
                                   eps=eps, seed=seed, fmu_dir=fmu_dir)
     t = data["time"]
     row: dict[str, Any] = {"status": "diverged" if reason else "ok", "reason": reason,
                            "end_time": float(t[-1]) if len(t) else 0.0}
-    row.update(run_statistics(data, sc))
+    row.update(run_statistics(data, config))
     row["wall_time"] = time.perf_counter() - wall0
     return row
 

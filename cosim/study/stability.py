@@ -47,6 +47,7 @@ Only single-rate loops (controller period = communication step) are modelled.
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -57,6 +58,8 @@ import scipy.linalg
 from drillcosim.cosim.master.algorithms import newest_sample_tick
 from drillcosim.cosim.master.delays import DelayLine
 from drillcosim.cosim.master.system import ALGORITHMS
+from drillcosim.cosim.scenario.config import ConfigError, SceneConfig, load_config
+from drillcosim.plant.linearize import linearize
 
 __all__ = [
     "LoopModel",
@@ -338,8 +341,6 @@ def coupled_plant(scene: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nd
     stable_step : float
         The plant model's own stable RK4 step [s].
     """
-    from drillcosim.plant.linearize import linearize
-
     lin = linearize(scene.plant, "full3d")
     return (*reduce_loop(lin.A, lin.B, lin.C), lin.model.stable_step())
 
@@ -403,30 +404,27 @@ class LoopModel:
 
         Parameters
         ----------
-        scene : str or Scene
-            Scene name/path or a loaded :class:`plant.scene.Scene`.
+        scene : str or SceneConfig
+            Scene name/path, or a loaded :class:`cosim.scenario.config.SceneConfig`.
         overrides : mapping, optional
-            Nested overrides for :func:`plant.scene.load_scene`.
+            Scene keys by key path (with a scene name).
         **kwargs
             Override any field (e.g. ``algorithm="jacobi"``, ``method="rk4"``).
         """
-        from drillcosim.cosim.scenario.scene_system import cosim_settings, scene_controller
-        from drillcosim.plant.scene import load_scene
-
-        sc = load_scene(scene, overrides=dict(overrides) if overrides else None) \
-            if isinstance(scene, (str, bytes)) or hasattr(scene, "__fspath__") else scene
+        config = scene if isinstance(scene, SceneConfig) else load_config(scene, overrides)
+        sc = config.scene
         if sc.model != "full3d":
-            raise ValueError(f"scene {sc.name!r}: the stability prediction linearizes the lateral "
-                             f"strain loop (strain gauges -> bending actuators), which model "
-                             f"{sc.model!r} does not have; allowed: a full3d scene")
-        st = cosim_settings(sc)
-        if st.controller_sample_ticks != 1:
-            raise ValueError("LoopModel: only controller_sample_period = step is modelled")
+            raise ConfigError(f"scene {sc.name!r}: the stability prediction linearizes the "
+                              "lateral strain loop (strain gauges -> bending actuators), which "
+                              f"model {sc.model!r} does not have; allowed: a full3d scene")
+        st = config.cosim
+        if st.controller_ticks != 1:
+            raise ConfigError("LoopModel: only controller_sample_period = step is modelled")
         A, B, C, dropped, stable_step = coupled_plant(sc)
         opts: dict[str, Any] = {
             "algorithm": st.algorithm, "order": tuple(st.order), "coupling": st.coupling,
             "sensor_delay": st.sensor_delay,
-            "lag_time_constant": scene_controller(sc).lag_time_constant,
+            "lag_time_constant": config.controller.lag_time_constant,
         }
         if kwargs.get("method") == "rk4" and "max_step" not in kwargs:
             kwargs["max_step"] = stable_step
@@ -570,8 +568,6 @@ def _boundary_report(scene: str = "paper_closed_loop") -> list[str]:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    import sys
-
     try:
         print("\n".join(_boundary_report(*sys.argv[1:2])))
     except ValueError as exc:

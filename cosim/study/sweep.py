@@ -19,6 +19,8 @@ computed from the finished rows whatever order they finished in.
 from __future__ import annotations
 
 import json
+import math
+import multiprocessing
 import os
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -28,12 +30,21 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from .grid import DEFAULT_GAIN_KEY, Point, SweepSpec, parse_list
-from .point import error_row, measure_point
+from numpy.linalg import LinAlgError
+from tqdm import tqdm
+
+from drillcosim.cosim.master.errors import UserError
+from drillcosim.cosim.scenario.build import scene_recipes
+from drillcosim.cosim.scenario.config import key_paths, load_config
+from drillcosim.cosim.scenario.scene_fmus import ensure_recipes
+
+from .grid import DEFAULT_GAIN_KEY, Point, SweepSpec
+from .point import PointOptions, default_gain_key, error_row, measure_point, point_config
 from .table import ResultTable, verdict_counts
+from .verdict import scene_judging_window
 
 __all__ = ["StudyPoint", "SweepOutcome", "SweepSpec", "execute_points", "execute_sweep",
-           "judging_note", "parse_list", "point_row"]
+           "judging_note", "point_row", "sweep_spec"]
 
 #: A point measurement: ``measure(**point.kwargs()) -> dict`` (module-level, picklable).
 Measure = Callable[..., dict]
@@ -117,8 +128,6 @@ def _lost_row(point: StudyPoint, reason: str) -> dict[str, Any]:
 def _local(points: Sequence[StudyPoint], measure: Measure, workers: int
            ) -> Iterator[dict[str, Any]]:
     """Process pool; a dead worker breaks the pool: restart it, retry each point once."""
-    import multiprocessing
-
     attempts: dict[str, int] = {}
     todo: list[StudyPoint] = list(points)
     while todo:
@@ -199,8 +208,6 @@ def execute_points(points: Sequence[StudyPoint], table: ResultTable, measure: Me
     int
         Points run (the others were in the table already).
     """
-    from tqdm import tqdm
-
     lock = table.lock()
     try:
         for name, content in (meta or {}).items():
@@ -231,17 +238,13 @@ def execute_points(points: Sequence[StudyPoint], table: ResultTable, measure: Me
 def _build_fmus(points: Sequence[Point]) -> None:
     """Build (or find cached) the project FMUs the points run (default folder), one point of
     each kind, so workers do not all build them at the same time."""
-    from drillcosim.cosim.scenario.scene_fmus import ensure_recipes
-    from drillcosim.cosim.scenario.scene_system import scene_recipes
-
-    from .point import point_scene
-
     recipes = {}
     for p in {p.kind: p for p in points}.values():
         kw = p.kwargs()
-        sc, _over = point_scene(p.scene, p.gain, p.delay, p.step, p.stop_time, kw["open_loop"],
-                                kw["overrides"], p.gain_key)
-        recipes.update({r.name: r for r in scene_recipes(sc).values()})
+        config = point_config(p.scene, p.gain, p.delay, p.step, p.stop_time, kw["open_loop"],
+                              kw["overrides"], p.gain_key)
+        recipes.update({r.name: r for i, r in scene_recipes(config).items()
+                        if i not in config.fmu_files})
     ensure_recipes(list(recipes.values()))
 
 
@@ -287,33 +290,38 @@ def execute_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int |
                         time.perf_counter() - wall0, counts)
 
 
-def sweep_from_args(scene: str, gain: str, delay: str, step: str, stop_time: float | None,
-                    engine: str = "fmu", sets: Mapping[str, Any] | None = None,
-                    options: Mapping[str, float] | None = None,
-                    gain_key: str | None = None) -> SweepSpec:
-    """Build a :class:`SweepSpec` from command-line strings (LIST syntax, see
-    :mod:`cosim.study.grid`); the stop time defaults to the scene's ``[cosim]``, the gain key
-    to :func:`cosim.study.point.default_gain_key`. A sweep of the strain gain runs the open-loop
+def sweep_spec(scene: str, gains: Sequence[float], delays: Sequence[float],
+               steps: Sequence[float], stop_time: float | None, engine: str = "fmu",
+               overrides: Mapping[str, Any] | None = None,
+               options: Mapping[str, float] | None = None,
+               gain_key: str | None = None) -> SweepSpec:
+    """A checked :class:`SweepSpec`: the stop time defaults to the scene's, the gain key to
+    :func:`cosim.study.point.default_gain_key`. A sweep of the strain gain runs the open-loop
     references (the control benefit); a sweep of another controller's gain has none (a
-    top-drive controller in torque mode is the drive: without it the string is not driven)."""
-    from drillcosim.cosim.scenario.scene_system import cosim_settings
-    from drillcosim.plant.scene import load_scene
+    top-drive controller in torque mode is the drive: without it the string is not driven).
 
-    from .point import default_gain_key
-
-    gains = parse_list(gain, "--gain", minimum=0.0)
-    delays = parse_list(delay, "--delay", minimum=0.0)
-    steps = parse_list(step, "--step", positive=True)
+    Raises
+    ------
+    UserError
+        Bad values or combinations (e.g. a stop time some step does not divide), before
+        anything runs.
+    """
+    over = key_paths(overrides)
     if stop_time is None:
-        stop_time = cosim_settings(load_scene(scene, overrides=dict(sets or {}) or None)
-                                   ).stop_time
-    key = default_gain_key(scene, sets) if gain_key is None else gain_key
-    spec = SweepSpec(scene, gains, delays, steps, float(stop_time), engine,
-                     dict(sets or {}), key == DEFAULT_GAIN_KEY, dict(options or {}), key)
+        stop_time = load_config(scene, over).cosim.stop_time
+    key = default_gain_key(scene, over) if gain_key is None else gain_key
+    values = {}
+    for what, seq, low in (("gains", gains, 0.0), ("delays", delays, 0.0), ("steps", steps, None)):
+        vals = [float(v) for v in seq]
+        if not vals or any(not math.isfinite(v) or (v < low if low is not None else v <= 0)
+                           for v in vals):
+            raise UserError(f"{what} = {list(seq)!r}: at least one finite value, each "
+                            f"{'>= 0' if low is not None else '> 0'}")
+        values[what] = sorted(set(vals))
+    spec = SweepSpec(scene, values["gains"], values["delays"], values["steps"], float(stop_time),
+                     engine, over, key == DEFAULT_GAIN_KEY, dict(options or {}), key)
     spec.points()                   # bad combinations fail here, before anything runs
     return spec
-
-
 
 
 def judging_note(spec: SweepSpec) -> str:
@@ -322,11 +330,6 @@ def judging_note(spec: SweepSpec) -> str:
     See :func:`cosim.study.verdict.scene_judging_window`; closed-loop points of such a sweep
     that do not diverge are ``undecided``.
     """
-    import numpy as np
-
-    from .point import PointOptions
-    from .verdict import scene_judging_window
-
     if spec.gain_key != DEFAULT_GAIN_KEY:
         return (f"the verdicts judge the strain loop's growth; a sweep of {spec.gain_key} is "
                 "read from its stick_slip_severity / stick_fraction columns (--maps: "
@@ -335,7 +338,7 @@ def judging_note(spec: SweepSpec) -> str:
     try:
         window = scene_judging_window(spec.scene, spec.overrides, opts.highpass,
                                       opts.fit_fraction)
-    except (ValueError, np.linalg.LinAlgError) as exc:
+    except (ValueError, LinAlgError) as exc:
         return f"no judging window for {spec.scene} ({exc}); growth verdicts are unchecked"
     if spec.stop_time >= window.min_stop_time:
         return ""

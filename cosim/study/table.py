@@ -37,7 +37,7 @@ from drillcosim.cosim.master.files import atomic_write
 
 from .verdict import VERDICTS, judge
 
-__all__ = ["COLUMNS", "DERIVED", "ResultTable", "derive", "read_table", "verdict_counts"]
+__all__ = ["COLUMNS", "DERIVED", "ResultTable", "derive", "read_table", "rows_csv", "verdict_counts"]
 
 #: Column order of the table (units: gain that of the sweep's gain key (N/strain for the strain
 #: gain), times s, deflections m, force N, power W, growth rates 1/s, stick-slip measures 1).
@@ -309,3 +309,17 @@ def read_table(folder_or_file: str | os.PathLike) -> list[dict[str, Any]]:
 
         return pq.read_table(p).to_pylist()
     return ResultTable(p.parent if p.suffix == ".csv" else p).rows
+
+
+def rows_csv(rows: Sequence[Mapping[str, Any]]) -> str:
+    """CSV text of dict rows (the first row's keys as columns; NaN empty, floats by repr)."""
+    if not rows:
+        return ""
+    cols = list(rows[0])
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(cols)
+    for r in rows:
+        w.writerow(["" if isinstance(r[c], float) and math.isnan(r[c]) else
+                    (repr(r[c]) if isinstance(r[c], float) else r[c]) for c in cols])
+    return buf.getvalue()

@@ -33,6 +33,13 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+import scipy.linalg
+
+from drillcosim.cosim.scenario.config import key_paths, load_config
+
+from .stability import coupled_plant
+
 __all__ = ["GROWTH_MARGIN", "NOISE_FACTOR", "SETTLE_TIME_CONSTANTS", "VERDICTS", "JudgingWindow",
            "judge", "judging_window", "scene_judging_window"]
 
@@ -116,8 +123,6 @@ def judging_window(eigenvalues, start_up: float, highpass: float, fit_fraction: 
     -------
     JudgingWindow
     """
-    import numpy as np
-
     lam = np.asarray(eigenvalues, dtype=complex)
     seen = lam[(np.abs(lam.imag) >= highpass) & (lam.real < 0)]
     if seen.size == 0:
@@ -132,18 +137,10 @@ def judging_window(eigenvalues, start_up: float, highpass: float, fit_fraction: 
 @functools.lru_cache(maxsize=16)
 def _cached_window(scene: str, overrides: str, highpass: float, fit_fraction: float
                    ) -> JudgingWindow:
-    from drillcosim.plant.scene import load_scene
-
-    from .stability import coupled_plant
-
-    over = json.loads(overrides) if overrides else None
-    sc = load_scene(scene, overrides=over)
-    import scipy.linalg
-
+    config = load_config(scene, json.loads(overrides) if overrides else None)
     # a closed-loop point switches the controller on whatever the scene file says
-    start_up = max(sc.plant.top_drive.ramp_time, float(sc.controller.get("switch_on_time", 0.0)))
-
-    A = coupled_plant(sc)[0]
+    start_up = max(config.scene.plant.top_drive.ramp_time, config.controller.switch_on_time)
+    A = coupled_plant(config.scene)[0]
     return judging_window(scipy.linalg.eigvals(A), start_up, highpass, fit_fraction)
 
 
@@ -157,11 +154,11 @@ def scene_judging_window(scene: str, overrides: Mapping[str, Any] | None = None,
     scene : str
         Scene name or path.
     overrides : mapping, optional
-        Nested scene overrides (the sweep's ``--set``); ``[cosim]`` does not matter.
+        Scene keys by key path (the sweep's ``--set``); ``cosim.*`` does not matter.
     highpass, fit_fraction : float
         The point options of the growth fit (:class:`cosim.study.point.PointOptions`).
     """
-    over = {k: v for k, v in (overrides or {}).items() if k != "cosim"}
+    over = {k: v for k, v in key_paths(overrides).items() if not k.startswith("cosim.")}
     return _cached_window(str(scene), json.dumps(over, sort_keys=True) if over else "",
                           float(highpass), float(fit_fraction))
 

@@ -180,7 +180,15 @@ class LawSlave(DcsSlave):
       refused until a reset or a new instance;
     * a fixed parameter changed after initialization, an invalid tunable one, a bad input:
       fmi2Error from that doStep, state unchanged;
-    * FMU state: the registered variables plus the law's state and the initialization flags.
+    * FMU state: the registered variables plus the law's state and the initialization flags;
+    * compiled step (the wrapper's accelerator, ``fmu_src/wrapper``): the law's, made at the
+      first request after initialization (where numba is loaded in the process by then: the
+      hosts instantiate every FMU, the plant's import loads it, before they initialize any),
+      offered while the instance is initialized and its parameters are the ones last
+      validated; a parameter
+      set through FMI makes the next doStep run in Python, which validates and applies it, and
+      the compiled step is offered again after it. A step the compiled law leaves to Python (a
+      refused input, a new lag decay) runs :meth:`do_step`: the same status and message.
     """
 
     TUNABLE: ClassVar[tuple[str, ...]] = ()
@@ -197,6 +205,9 @@ class LawSlave(DcsSlave):
         self._tunable_values: tuple[Any, ...] | None = None
         #: values of parameters that are not attributes (e.g. generated names), by name
         self.param_values: dict[str, Any] = {}
+        self._law: Any = None
+        self._step: Any = None  # the compiled step of self._step_law_obj (None: none)
+        self._step_law_obj: Any = None
 
     # ------------------------------------------------------------ for subclasses
     def _params_from_variables(self) -> Any:  # pragma: no cover - each adapter has its own
@@ -254,6 +265,28 @@ class LawSlave(DcsSlave):
         except ValueError as exc:
             return self._error(f"at t = {current_time!r}: {exc}; step rejected")
         return None
+
+    # ---------------------------------------------------------- compiled step
+    def _fmi2_compiled_step(self) -> tuple[int, int] | None:
+        """The law's compiled step for the wrapper, or None (see the class docstring)."""
+        if (not self._initialized or self._init_error is not None
+                or self._snapshot(self.FIXED) != self._fixed_values
+                or self._snapshot(self.TUNABLE) != self._tunable_values):
+            return None
+        if self._step_law_obj is not self._law:  # once per law (per initialization)
+            self._step_law_obj = self._law
+            self._step = self._law.compiled_step(self.inputs, self.outputs)
+        step = self._step
+        if step is None:
+            return None
+        step.refresh()  # the law's parameters may have been replaced
+        return step.function, step.context
+
+    def _fmi2_compiled_step_failed(self, code: int, t: float, h: float) -> None:
+        """A step the compiled law left to Python (nothing changed): :meth:`do_step`. An
+        internal failure raises (fmi2Error with its traceback)."""
+        self._step.check(code, t, h)
+        return self.do_step(t, h)
 
     # ------------------------------------------------------------- FMU state
     def _get_fmu_state(self) -> dict[str, Any]:

@@ -4,24 +4,30 @@ The C sources beside this file (one job per file, see ``dcs_wrapper.h``) replace
 0.7.0's prebuilt C++ binary, which can return only fmi2OK, fmi2Discard and fmi2Fatal, needs
 libpython preloaded in a C host, and releases an instance's Python objects twice after an
 exception. The build (``python -m drillcosim.fmu_src.build``) compiles them against the running
-Python's headers into ``binaries/linux64/<modelIdentifier>.so``; the rest of the FMU (slave
+Python's headers with ``Py_LIMITED_API`` = 3.10 into ``binaries/linux64/<modelIdentifier>.so``:
+one binary for CPython 3.10 to 3.13 (:func:`python_range`), every C-API function resolved with
+``dlsym`` at run time, no structure whose layout differs per version; the rest of the FMU (slave
 module, ``resources/``, modelDescription.xml) is pythonfmu's. The FMI 2.0 declarations come
 from the official headers in ``fmi2/`` (BSD 2-Clause, see ``fmi2/LICENSE.txt``).
 
 Which Python runs the slave
 ---------------------------
-* In a Python host (fmpy, libcosimpy) the running interpreter; it must be the major.minor the
-  wrapper is compiled for (else fmi2Instantiate fails with one message saying so).
+* In a Python host (fmpy, libcosimpy) the running interpreter; it must be CPython 3.10 to 3.13
+  (else fmi2Instantiate fails with one message saying so).
 * In a host without Python (a C/C++ tool), at fmi2Instantiate, the first that fits of:
   ``$DRILLCOSIM_PYTHON``; a config file ``drillcosim.conf`` with a line
   ``python = /path/to/python3``, in the FMU's unzip folder, then in
-  ``$XDG_CONFIG_HOME/drillcosim/`` (``~/.config/drillcosim/``); every ``python3`` and
-  ``python3.M`` on ``PATH``; last, the interpreter that built the FMU. Each is checked in a
-  child process (``python -E``: version, shared libpython, ``import`` of the modules listed in
+  ``$XDG_CONFIG_HOME/drillcosim/`` (``~/.config/drillcosim/``); on ``PATH``, folder by folder:
+  ``python3``, ``python3.<building minor>``, then ``python3.13`` down to ``python3.10``; last,
+  the interpreter that built the FMU. Each is checked in a child process (``python -E -X utf8``:
+  version, shared libpython, ``import`` of the modules listed in
   ``resources/python_requires.txt``). None fits: fmi2Instantiate returns NULL with ONE message
   listing each candidate and what it lacked, and how to fix it. The chosen libpython is loaded
-  and started with ``PyConfig.use_environment = 0``, so a host's ``PYTHONHOME``/``PYTHONPATH``
-  change nothing (``dcs_python.c``, ``dcs_discover.c``; ``docs/interop.md``).
+  and started through the stable ABI with the environment ignored (``Py_IgnoreEnvironmentFlag``),
+  so a host's ``PYTHONHOME``/``PYTHONPATH`` change nothing, no signal handlers, and the host's
+  ``LC_CTYPE`` restored after the start (``dcs_python.c``, ``dcs_discover.c``;
+  ``docs/interop.md``). ``drillcosim doctor`` runs the same search without starting anything
+  (the exported ``drillcosim_doctor``; :mod:`.doctor`).
 
 The status protocol (what a slave method's outcome becomes)
 -----------------------------------------------------------
@@ -78,7 +84,9 @@ Other behaviour
   passed to the logger, OK messages only with debug logging on (and the category enabled by
   ``fmi2SetDebugLogging``, no categories = all).
 * The FMI calling sequence is a state-mask table (``fmi2_functions.c``): a call in a state
-  that does not allow it is fmi2Error naming the state; NULL/freed components: fmi2Error.
+  that does not allow it is fmi2Error naming the state; NULL/freed/foreign components and FMU
+  states: fmi2Error (handles are looked up in registries of the live ones, ``dcs_registry.c``,
+  never probed through a pointer that may be freed).
 * ``fmi2Reset``: ``slave.reset()`` if it exists, else a new slave object replaces the old one.
 * FMU state: the object of ``slave._get_fmu_state()`` is held by the C state (freed by
   ``fmi2FreeFMUstate``); serialization through ``_fmu_state_to_bytes``/``_fmu_state_from_bytes``.
@@ -91,29 +99,40 @@ Other behaviour
 from __future__ import annotations
 
 import os
-import shutil
-import subprocess
 import sys
 import sysconfig
 import zipfile
 from collections.abc import Sequence
 from pathlib import Path
 
-__all__ = ["HEADERS", "SOURCES", "compile_shared", "compile_wrapper", "install_native_wrapper", "sources"]
+# the one place the project runs a C compiler (shared with the master's native loop)
+from drillcosim._toolchain import CFLAGS, compile_shared
+
+__all__ = ["CFLAGS", "HEADERS", "SOURCES", "compile_shared", "compile_wrapper",
+           "install_native_wrapper", "python_range", "sources"]
 
 HERE = Path(__file__).resolve().parent
 #: The C sources of the wrapper, compiled together. Named, not globbed: an installed copy can
 #: carry stray files (setuptools reuses a checkout's ``build/lib``, where a file deleted from
 #: the sources stays), and a stray ``.c`` would be linked in.
 SOURCES: tuple[Path, ...] = tuple(HERE / n for n in (
-    "dcs_discover.c", "dcs_instance.c", "dcs_python.c", "dcs_slave.c", "dcs_state.c",
-    "fmi2_functions.c"))
+    "dcs_discover.c", "dcs_instance.c", "dcs_python.c", "dcs_registry.c", "dcs_slave.c",
+    "dcs_state.c", "fmi2_functions.c"))
 #: The official FMI 2.0.5 headers and our internal ones.
 HEADERS: tuple[Path, ...] = tuple(HERE / n for n in (
     "dcs_discover.h", "dcs_python.h", "dcs_wrapper.h", "fmi2/fmi2FunctionTypes.h",
     "fmi2/fmi2Functions.h", "fmi2/fmi2TypesPlatform.h"))
-CFLAGS = ("-std=c99", "-O2", "-DNDEBUG", "-Wall", "-Wextra", "-Werror", "-shared", "-fPIC",
-          "-fvisibility=hidden")
+
+
+def python_range() -> tuple[int, int]:
+    """(oldest, newest) minor version of CPython 3 the wrapper runs on, read from
+    ``dcs_python.h`` (``DCS_PY_MINOR_MIN`` / ``DCS_PY_MINOR_MAX``: the one place they are set)."""
+    import re
+
+    text = (HERE / "dcs_python.h").read_text()
+    low, high = (int(re.search(rf"#define DCS_PY_MINOR_{k} (\d+)", text).group(1))
+                 for k in ("MIN", "MAX"))
+    return low, high
 
 
 def sources() -> list[Path]:
@@ -126,11 +145,14 @@ def _c_string(text: str) -> str:
     return text.replace("\\", "\\\\").replace('"', '\\"')
 
 
-def compile_wrapper(out: Path | str, cc: str | None = None) -> Path:
-    """Compile the wrapper for the running Python into the shared library ``out``.
+def compile_wrapper(out: Path | str, cc: str | None = None, flags: Sequence[str] = (),
+                    include: Path | str | None = None) -> Path:
+    """Compile the wrapper into the shared library ``out``: one binary for CPython 3.10-3.13.
 
-    The running interpreter is recorded as the last Python candidate (see the module
-    docstring); nothing else of this machine is compiled in.
+    The running Python's headers are used with ``Py_LIMITED_API`` = 3.10 (the compiler refuses
+    anything outside the stable ABI); the running interpreter is recorded as the last Python
+    candidate and its minor version as the preferred one among a PATH folder's names (see the
+    module docstring); nothing else of this machine is compiled in.
 
     Parameters
     ----------
@@ -138,6 +160,10 @@ def compile_wrapper(out: Path | str, cc: str | None = None) -> Path:
         Target ``.so`` (its name is irrelevant; FMUs copy it to ``<id>.so``).
     cc : str, optional
         C compiler (default ``$CC`` or ``gcc``).
+    flags : sequence of str
+        Extra compiler flags (e.g. sanitizers), after :data:`CFLAGS`.
+    include : path-like, optional
+        Python headers to compile against (default: the running Python's).
 
     Returns
     -------
@@ -149,49 +175,13 @@ def compile_wrapper(out: Path | str, cc: str | None = None) -> Path:
     RuntimeError
         If there is no compiler, or it fails or prints a warning (its output is included).
     """
-    include = sysconfig.get_paths()["include"]
+    include = include or sysconfig.get_paths()["include"]
     return compile_shared(
         "the native wrapper", SOURCES, out,
         flags=(f"-I{include}", f"-I{HERE}",
-               f"-DDCS_BUILD_PYTHON=\"{_c_string(sys.executable)}\""),
+               f"-DDCS_BUILD_PYTHON=\"{_c_string(sys.executable)}\"",
+               f"-DDCS_BUILD_MINOR={sys.version_info.minor}", *flags),
         libs=("-ldl", "-lpthread"), cc=cc)
-
-
-def compile_shared(what: str, sources: Sequence[Path], out: Path | str, *,
-                   flags: Sequence[str] = (), libs: Sequence[str] = (),
-                   cc: str | None = None) -> Path:
-    """Compile C ``sources`` into the shared library ``out`` with :data:`CFLAGS` (the one place
-    the project runs a C compiler: the wrapper and the C-coded FMUs share flags and checks).
-
-    Parameters
-    ----------
-    what : str
-        What is compiled, for messages (e.g. "the native wrapper").
-    sources : sequence of Path
-        C files.
-    out : path-like
-        Target ``.so``.
-    flags, libs : sequence of str
-        Extra compiler flags (before the sources) and libraries (after them).
-    cc : str, optional
-        C compiler (default ``$CC`` or ``gcc``).
-
-    Raises
-    ------
-    RuntimeError
-        No compiler, or it failed or printed a warning (its command and output included).
-    """
-    out = Path(out)
-    cc = cc or os.environ.get("CC") or "gcc"
-    if shutil.which(cc) is None:
-        raise RuntimeError(f"C compiler {cc!r} not found: building {what} needs one "
-                           f"(Debian: apt install gcc; or set $CC)")
-    cmd = [cc, *CFLAGS, *flags, *map(str, sources), "-o", str(out), *libs]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0 or proc.stderr.strip():
-        raise RuntimeError(f"compiling {what} failed:\n{' '.join(cmd)}\n"
-                           f"{proc.stdout}{proc.stderr}")
-    return out
 
 
 def install_native_wrapper(fmu: Path | str, class_name: str, library: Path | str,

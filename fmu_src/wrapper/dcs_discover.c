@@ -6,18 +6,21 @@
  *   2. a config file with a line "python = /path/to/python3": first
  *      <FMU unzip folder>/drillcosim.conf (can be shipped inside the .fmu), then
  *      $XDG_CONFIG_HOME/drillcosim/drillcosim.conf (default ~/.config/drillcosim/...);
- *   3. every "python3" and "python3.M" on $PATH (M: the minor version the wrapper is built for),
- *      in PATH order;
+ *   3. on $PATH, folder by folder in PATH order: "python3", then "python3.B" (B: the minor
+ *      version that built the FMU), then "python3.M" for the other supported M, newest first;
  *   4. the interpreter that built the FMU (the only absolute path of the building machine).
  * An explicit choice (1 or 2) that does not fit ends the search: the FMU never runs in
  * another Python than the one named.
  *
+ * The first candidate that fits is used: CPython 3.10 to 3.13 (any of them: the wrapper uses
+ * the stable ABI only; the building version is preferred only among the names of one PATH
+ * folder), a shared libpython, every module the FMU requires importable.
  * Each candidate is checked in a child process started with posix_spawn (no fork of a possibly
  * threaded host), stdin /dev/null, stdout and stderr into a pipe, default signal dispositions,
  * killed after CHECK_TIMEOUT_MS:
- *     <candidate> -E -c CHECK_SCRIPT <major.minor> <module> ...
- * -E ignores PYTHONHOME, PYTHONPATH and every other PYTHON* variable, the same rule as the
- * embedded interpreter's PyConfig.use_environment = 0 (dcs_python.c): what the child sees is
+ *     <candidate> -E -X utf8 -c CHECK_SCRIPT <min minor> <max minor> <module> ...
+ * -E ignores PYTHONHOME, PYTHONPATH and every other PYTHON* variable and -X utf8 is the UTF-8
+ * mode, the two settings of the embedded interpreter (dcs_python.c): what the child sees is
  * what the FMU will see. The child reports its version, sys.executable, its shared libpython
  * and the required modules it cannot import.
  */
@@ -43,17 +46,17 @@
 extern char **environ;
 
 #define CHECK_TIMEOUT_MS 120000
-#define MAX_PATH_CANDIDATES 8
+#define MAX_PATH_CANDIDATES 16
 #define MAX_MODULES 16
 #define CONFIG_NAME "drillcosim.conf"
 
-/* Runs in the candidate (Python >= 3.6 syntax); argv: want, modules. */
+/* Runs in the candidate (Python >= 3.6 syntax); argv: min minor, max minor, modules. */
 static const char CHECK_SCRIPT[] =
     "import sys\n"
     "v = sys.version_info\n"
     "print('dcs:version=%d.%d.%d' % (v[0], v[1], v[2]))\n"
     "print('dcs:executable=' + (sys.executable or ''))\n"
-    "if '%d.%d' % (v[0], v[1]) == sys.argv[1]:\n"
+    "if v[0] == 3 and int(sys.argv[1]) <= v[1] <= int(sys.argv[2]):\n"
     "    import os, sysconfig\n"
     "    d = sysconfig.get_config_var('LIBDIR') or ''\n"
     "    lib = ''\n"
@@ -63,7 +66,7 @@ static const char CHECK_SCRIPT[] =
     "            lib = os.path.join(d, n)\n"
     "            break\n"
     "    print('dcs:libpython=' + lib)\n"
-    "    for m in sys.argv[2:]:\n"
+    "    for m in sys.argv[3:]:\n"
     "        try:\n"
     "            __import__(m)\n"
     "        except Exception as e:\n"
@@ -114,11 +117,11 @@ static int read_child(pid_t pid, int fd, char *out, size_t nout, char *why, size
 
 /* Run the check script in `exe`; its merged stdout/stderr lands in out (NUL-terminated).
  * Returns the child's wait status, -1 if it could not be started (why set). */
-static int run_child(const char *exe, const char *want, const char *requires, char *out,
+static int run_child(const char *exe, const DcsWant *want, const char *requires, char *out,
                      size_t nout, char *why, size_t nwhy)
 {
-    char mods[1024];
-    char *argv[5 + MAX_MODULES + 1];
+    char mods[1024], lo[16], hi[16];
+    char *argv[8 + MAX_MODULES + 1];
     char *save = NULL, *tok;
     int argc = 0, fds[2], rc, wstatus = -1;
     pid_t pid = -1;
@@ -127,12 +130,17 @@ static int run_child(const char *exe, const char *want, const char *requires, ch
     sigset_t none, reset;
 
     snprintf(mods, sizeof mods, "%s", requires);
+    snprintf(lo, sizeof lo, "%d", want->min_minor);
+    snprintf(hi, sizeof hi, "%d", want->max_minor);
     argv[argc++] = (char *)exe;
     argv[argc++] = (char *)"-E";
+    argv[argc++] = (char *)"-X";
+    argv[argc++] = (char *)"utf8";
     argv[argc++] = (char *)"-c";
     argv[argc++] = (char *)CHECK_SCRIPT;
-    argv[argc++] = (char *)want;
-    for (tok = strtok_r(mods, " \t\r\n", &save); tok != NULL && argc < 5 + MAX_MODULES;
+    argv[argc++] = lo;
+    argv[argc++] = hi;
+    for (tok = strtok_r(mods, " \t\r\n", &save); tok != NULL && argc < 8 + MAX_MODULES;
          tok = strtok_r(NULL, " \t\r\n", &save))
         argv[argc++] = tok;
     argv[argc] = NULL;
@@ -241,12 +249,15 @@ static int field(const char *out, const char *key, char *dst, size_t n)
     return found;
 }
 
-/* Last line of the child's output that is not ours (an error of the candidate itself). */
-static void last_foreign_line(const char *out, char *dst, size_t n)
+/* The line of the child's output that is not ours and says what went wrong: the last one after
+ * a Python traceback (the exception), else the first (e.g. "pyenv: python3.13: command not
+ * found" of a pyenv shim, whose later lines are advice). */
+static void foreign_line(const char *out, char *dst, size_t n)
 {
     const char *p = out, *line_end;
+    int traceback = strstr(out, "Traceback (most recent call last)") != NULL;
     dst[0] = '\0';
-    while (*p) {
+    while (*p && (traceback || dst[0] == '\0')) {
         line_end = strchr(p, '\n');
         if (line_end == NULL)
             line_end = p + strlen(p);
@@ -257,7 +268,7 @@ static void last_foreign_line(const char *out, char *dst, size_t n)
 }
 
 /* Check one interpreter; 0 if it fits (py filled), else -1 with the reason in why. */
-static int check_candidate(const char *exe, const char *want, const char *requires,
+static int check_candidate(const char *exe, const DcsWant *want, const char *requires,
                            DcsPython *py, char *why, size_t nwhy)
 {
     static char out[65536];
@@ -272,22 +283,23 @@ static int check_candidate(const char *exe, const char *want, const char *requir
     } else if ((wstatus = run_child(exe, want, requires, out, sizeof out, why, nwhy)) == -1) {
         /* why set by run_child */
     } else if (strstr(out, "dcs:done") == NULL) {
-        last_foreign_line(out, line, sizeof line);
+        foreign_line(out, line, sizeof line);
         snprintf(why, nwhy, "does not run as a Python 3 interpreter (exit status %d%s%s)",
                  WIFEXITED(wstatus) ? WEXITSTATUS(wstatus) : -1, line[0] ? ": " : "", line);
     } else {
         const char *m;
-        size_t nlen = strlen(want);
+        int major = 0, minor = -1;
         field(out, "version", py->version, sizeof py->version);
         field(out, "executable", py->executable, sizeof py->executable);
-        if (strncmp(py->version, want, nlen) != 0 || py->version[nlen] != '.') {
-            snprintf(why, nwhy, "Python %s, but the FMU's wrapper is compiled for Python %s",
-                     py->version, want);
+        if (sscanf(py->version, "%d.%d", &major, &minor) != 2 || major != 3 ||
+            minor < want->min_minor || minor > want->max_minor) {
+            snprintf(why, nwhy, "Python %s, but the FMU runs on CPython 3.%d to 3.%d",
+                     py->version, want->min_minor, want->max_minor);
         } else if (!field(out, "libpython", py->libpython, sizeof py->libpython) ||
                    py->libpython[0] == '\0') {
             snprintf(why, nwhy, "Python %s without a shared libpython (install it, e.g. "
-                     "Debian's libpython%s, or use a Python built with --enable-shared)",
-                     py->version, want);
+                     "Debian's libpython3.%d, or use a Python built with --enable-shared)",
+                     py->version, minor);
         } else if ((m = strstr(out, "dcs:missing=")) != NULL) {
             Text t = {NULL, 0, 0};
             while (m != NULL) {
@@ -311,7 +323,8 @@ static int check_candidate(const char *exe, const char *want, const char *requir
 
 /* ------------------------------------------------------------------ the order */
 typedef struct {
-    const char *want, *requires;
+    const DcsWant *want;
+    const char *requires, *used;
     DcsLoad load;
     void *ctx;
     Text report;
@@ -360,8 +373,8 @@ static void try_candidate(Search *s, const char *label, const char *exe, int exp
     if (check_candidate(exe, s->want, s->requires, &py, why, sizeof why) == 0) {
         if (s->load(&py, s->ctx, why, sizeof why, &s->stop) == 0) {
             s->found = 1;
-            text_add(&s->report, "  %s %s: Python %s (%s), used\n", label, exe, py.version,
-                     py.executable);
+            text_add(&s->report, "  %s %s: Python %s (%s), %s\n", label, exe, py.version,
+                     py.executable, s->used);
         }
     }
     if (!s->found)
@@ -434,21 +447,32 @@ static void try_config_files(Search *s, const char *unzip_dir)
                  n > 1 ? ", " : "", n > 1 ? files[1] : "");
 }
 
+/* The names tried in one PATH folder, in order (see the top of this file); their count. */
+static int path_names(const DcsWant *want, char names[][32], int max)
+{
+    int n = 0, minor;
+    snprintf(names[n++], 32, "python3");
+    if (want->prefer_minor >= want->min_minor && want->prefer_minor <= want->max_minor)
+        snprintf(names[n++], 32, "python3.%d", want->prefer_minor);
+    for (minor = want->max_minor; minor >= want->min_minor && n < max; minor--)
+        if (minor != want->prefer_minor)
+            snprintf(names[n++], 32, "python3.%d", minor);
+    return n;
+}
+
 static void try_path(Search *s)
 {
     const char *path = getenv("PATH");
-    char names[2][32], exe[DCS_PATH_MAX];
+    char names[16][32], exe[DCS_PATH_MAX];
     char *copy, *save = NULL, *dir;
-    int n_found = 0, k;
-    snprintf(names[0], sizeof names[0], "python3");
-    snprintf(names[1], sizeof names[1], "python%s", s->want);
+    int n_found = 0, k, n_names = path_names(s->want, names, 16);
     copy = dcs_path_dup(path != NULL ? path : "");
     for (dir = copy != NULL ? strtok_r(copy, ":", &save) : NULL;
          dir != NULL && !s->stop && n_found < MAX_PATH_CANDIDATES;
          dir = strtok_r(NULL, ":", &save)) {
         if (dir[0] != '/') /* a relative PATH entry would depend on the host's cwd */
             continue;
-        for (k = 0; k < 2 && !s->stop && n_found < MAX_PATH_CANDIDATES; k++) {
+        for (k = 0; k < n_names && !s->stop && n_found < MAX_PATH_CANDIDATES; k++) {
             snprintf(exe, sizeof exe, "%s/%s", dir, names[k]);
             if (access(exe, X_OK) != 0 || seen_before(s, exe))
                 continue;
@@ -459,12 +483,14 @@ static void try_path(Search *s)
     }
     free(copy);
     if (n_found == 0)
-        text_add(&s->report, "  3. on PATH: no python3 or %s in %s\n", names[1],
+        text_add(&s->report, "  3. on PATH: no python3 or python3.%d to python3.%d in %s\n",
+                 s->want->min_minor, s->want->max_minor,
                  path != NULL && path[0] ? path : "(PATH is empty)");
 }
 
-int dcs_discover_python(const char *unzip_dir, const char *want, const char *requires,
-                        const char *build_python, DcsLoad load, void *ctx, char **report)
+int dcs_discover_python(const char *unzip_dir, const DcsWant *want, const char *requires,
+                        const char *build_python, DcsLoad load, void *ctx, const char *used,
+                        char **report)
 {
     Search *s = (Search *)calloc(1, sizeof *s);
     const char *env = getenv("DRILLCOSIM_PYTHON");
@@ -472,6 +498,7 @@ int dcs_discover_python(const char *unzip_dir, const char *want, const char *req
     if (s != NULL) {
         s->want = want;
         s->requires = requires;
+        s->used = used;
         s->load = load;
         s->ctx = ctx;
         if (env != NULL && env[0] != '\0') {

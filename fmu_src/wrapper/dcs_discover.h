@@ -8,6 +8,12 @@
 
 #define DCS_PATH_MAX 4096
 
+/* Which Pythons fit: 3.min_minor to 3.max_minor; prefer_minor (the building one, 0 if
+ * unknown) is tried first among the versioned names of a PATH folder. */
+typedef struct {
+    int min_minor, max_minor, prefer_minor;
+} DcsWant;
+
 /* A candidate interpreter as its child process described itself. */
 typedef struct {
     char executable[DCS_PATH_MAX]; /* sys.executable (a venv's python, not the shim) */
@@ -21,11 +27,13 @@ typedef struct {
 typedef int (*DcsLoad)(const DcsPython *py, void *ctx, char *why, size_t nwhy, int *stop);
 
 /* Try the candidates in the documented order (see dcs_discover.c) until one passes the child
- * check and loads. want: "3.11"; requires: import names separated by blanks; build_python:
+ * check and loads. want: the versions; requires: import names separated by blanks; build_python:
  * the interpreter that built the FMU ("" if unknown); unzip_dir: the FMU's unzip folder.
- * Returns 0 on success. On failure *report (malloc'd, the caller frees) lists each
- * candidate tried and what it lacked, one per line. */
-int dcs_discover_python(const char *unzip_dir, const char *want, const char *requires,
-                        const char *build_python, DcsLoad load, void *ctx, char **report);
+ * used: the word for the candidate that loaded ("used"). Returns 0 on success. *report
+ * (malloc'd, the caller frees) lists each candidate tried and what it lacked (or that it is
+ * used), one per line. */
+int dcs_discover_python(const char *unzip_dir, const DcsWant *want, const char *requires,
+                        const char *build_python, DcsLoad load, void *ctx, const char *used,
+                        char **report);
 
 #endif

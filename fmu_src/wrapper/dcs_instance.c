@@ -16,7 +16,7 @@
 
 #include "dcs_wrapper.h"
 
-#define DCS_MAGIC 0x44435346u /* "DCSF" */
+static DcsRegistry g_instances = DCS_REGISTRY_INIT;
 
 char *dcs_strdup(const char *s)
 {
@@ -28,19 +28,37 @@ char *dcs_strdup(const char *s)
     return d;
 }
 
+char *dcs_format(const char *fmt, ...)
+{
+    va_list ap;
+    char *out = NULL;
+    int n;
+    va_start(ap, fmt);
+    n = vsnprintf(NULL, 0, fmt, ap);
+    va_end(ap);
+    if (n >= 0)
+        out = (char *)malloc((size_t)n + 1);
+    if (out != NULL) {
+        va_start(ap, fmt);
+        vsnprintf(out, (size_t)n + 1, fmt, ap);
+        va_end(ap);
+    }
+    return out;
+}
+
 DcsInstance *dcs_instance_new(fmi2String name, const fmi2CallbackFunctions *functions,
                               int visible, int logging_on)
 {
     DcsInstance *in = (DcsInstance *)calloc(1, sizeof *in);
     if (in != NULL) {
-        in->magic = DCS_MAGIC;
         in->state = DCS_INSTANTIATED;
         in->name = dcs_strdup(name);
         in->logger = functions->logger;
         in->env = functions->componentEnvironment;
         in->visible = visible;
         in->logging_on = logging_on;
-        if (in->name == NULL) {
+        if (in->name == NULL || dcs_registry_add(&g_instances, in) != 0) {
+            free(in->name);
             free(in);
             in = NULL;
         }
@@ -50,8 +68,7 @@ DcsInstance *dcs_instance_new(fmi2String name, const fmi2CallbackFunctions *func
 
 DcsInstance *dcs_instance_of(fmi2Component c)
 {
-    DcsInstance *in = (DcsInstance *)c;
-    return in != NULL && in->magic == DCS_MAGIC ? in : NULL;
+    return dcs_registry_contains(&g_instances, c) ? (DcsInstance *)c : NULL;
 }
 
 static void clear_categories(DcsInstance *in)
@@ -67,7 +84,7 @@ static void clear_categories(DcsInstance *in)
 void dcs_instance_free(DcsInstance *in)
 {
     size_t i;
-    in->magic = 0;
+    dcs_registry_remove(&g_instances, in);
     clear_categories(in);
     for (i = 0; i < in->n_messages; i++) {
         free(in->messages[i].category);

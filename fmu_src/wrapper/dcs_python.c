@@ -2,39 +2,61 @@
  * Attaching to, or starting, the Python interpreter the slaves run in.
  *
  * - Python host (fmpy, libcosimpy): the C-API symbols are found in the process (RTLD_DEFAULT)
- *   and its running interpreter is used; a Python of another major.minor than the one this
- *   library is compiled for gives one clear message.
+ *   and its running interpreter is used; it must be CPython 3.DCS_PY_MINOR_MIN to
+ *   3.DCS_PY_MINOR_MAX (one clear message otherwise).
  * - Host without Python (a C/C++ tool): a Python is found by dcs_discover.c (candidates checked
- *   in child processes), its shared libpython is dlopen()ed with RTLD_GLOBAL (extension modules
- *   such as numpy need its symbols globally) and started with
- *       program_name = the candidate's sys.executable (a venv's pyvenv.cfg is honoured),
- *       use_environment = 0 (PYTHONHOME, PYTHONPATH, ... of the host are ignored: the child
- *                            check ran with -E, the same rule),
- *       install_signal_handlers = 0, and in the pre-configuration configure_locale = 0,
- *                            coerce_c_locale = 0, utf8_mode = 1 (the host's signal handlers,
- *                            locale and environment are left alone), parse_argv = 0;
+ *   in child processes started as `python -E -X utf8`), its shared libpython is dlopen()ed
+ *   with RTLD_GLOBAL (extension modules such as numpy need its symbols globally) and started
+ *   through the stable ABI only (no PyConfig: its layout differs per version):
+ *       Py_IgnoreEnvironmentFlag = 1  PYTHONHOME, PYTHONPATH, ... of the host are ignored
+ *                                     (the child check ran with -E, the same rule);
+ *       Py_UTF8Mode = 1               file names and text in UTF-8 whatever the host's locale
+ *                                     (the child ran with -X utf8);
+ *       Py_SetProgramName(the candidate's sys.executable)  its prefix, and a venv's
+ *                                     pyvenv.cfg, are found from there;
+ *       Py_InitializeEx(0)            no signal handlers installed;
  *   then the GIL is released with PyEval_SaveThread(). The interpreter is never finalised.
+ *   What the stable ABI cannot express: Python's start-up sets LC_CTYPE from the environment
+ *   (PyPreConfig.configure_locale); the wrapper saves the host's LC_CTYPE before and restores
+ *   it right after, so the host's locale is left as it was. And Py_InitializeEx ends the
+ *   process on a failure instead of returning it: the child check has started the same
+ *   interpreter the same way just before, so a failure there is reported first.
  * Every FMI call then takes the GIL with PyGILState_Ensure/Release (dcs_slave.c).
  * A failure before any libpython was loaded is retried at the next fmi2Instantiate (the user
  * may have fixed the environment); one after that is final for the process.
+ *
+ * drillcosim_doctor (exported) runs the same discovery without starting anything and returns
+ * its report: `drillcosim doctor` calls it through ctypes.
  */
 #include "dcs_python.h"
 
 #include <dlfcn.h>
+#include <locale.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <wchar.h>
 
 #include "dcs_discover.h"
 
 #ifndef DCS_BUILD_PYTHON
 #define DCS_BUILD_PYTHON ""
 #endif
+#ifndef DCS_BUILD_MINOR
+#define DCS_BUILD_MINOR 0
+#endif
 
-#define DCS_DEFINE(ret, name, args) ret(*p_##name) args;
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wdeprecated-declarations"
+#define DCS_DEFINE(name) __typeof__(name) *p_##name;
 DCS_PYAPI(DCS_DEFINE)
 #undef DCS_DEFINE
+__typeof__(Py_UTF8Mode) *p_Py_UTF8Mode;
+#pragma GCC diagnostic pop
+int *p_Py_IgnoreEnvironmentFlag;
+int (*p_PyObject_GetBuffer)(PyObject *, DcsBuffer *, int);
+void (*p_PyBuffer_Release)(DcsBuffer *);
 
 DcsNames dcs_py;
 
@@ -48,62 +70,125 @@ int dcs_python_started(void)
     return g_ready;
 }
 
+/* One symbol into *slot (a data pointer; function pointers are copied bytewise, as POSIX
+ * allows for dlsym results). 0 if found, else -1 with why set (the first missing one). */
+static int resolve_one(void *handle, const char *name, void *slot, size_t size, char *why,
+                       size_t nwhy, int rc)
+{
+    void *sym = dlsym(handle, name);
+    memcpy(slot, &sym, size);
+    if (sym == NULL && rc == 0)
+        snprintf(why, nwhy, "Python C-API symbol %s not found", name);
+    return sym == NULL ? -1 : rc;
+}
+
 static int resolve_api(void *handle, char *why, size_t nwhy)
 {
     int rc = 0;
-#define DCS_RESOLVE(ret, name, args) \
-    p_##name = (ret(*) args)dlsym(handle, #name); \
-    if (p_##name == NULL && rc == 0) { \
-        snprintf(why, nwhy, "Python C-API symbol %s not found", #name); \
-        rc = -1; \
-    }
+#define DCS_RESOLVE(name) \
+    rc = resolve_one(handle, #name, (void *)&p_##name, sizeof p_##name, why, nwhy, rc);
     DCS_PYAPI(DCS_RESOLVE)
+    DCS_RESOLVE(Py_UTF8Mode)
+    DCS_RESOLVE(Py_IgnoreEnvironmentFlag)
+    DCS_RESOLVE(PyObject_GetBuffer)
+    DCS_RESOLVE(PyBuffer_Release)
 #undef DCS_RESOLVE
     return rc;
 }
 
-/* "3.11" of this build, and whether version (e.g. "3.11.7 (main, ...)") is one of it. */
-static const char *wanted_version(void)
+/* The minor version of a Py_GetVersion() text ("3.12.1 (main, ...)"), -1 if not Python 3. */
+static int minor_of(const char *version)
 {
-    static char want[16];
-    snprintf(want, sizeof want, "%d.%d", PY_MAJOR_VERSION, PY_MINOR_VERSION);
-    return want;
+    int major = 0, minor = -1;
+    if (sscanf(version, "%d.%d", &major, &minor) != 2 || major != 3)
+        minor = -1;
+    return minor;
 }
 
 static int version_fits(const char *version)
 {
-    size_t n = strlen(wanted_version());
-    return strncmp(version, wanted_version(), n) == 0 && version[n] == '.';
+    int minor = minor_of(version);
+    return minor >= DCS_PY_MINOR_MIN && minor <= DCS_PY_MINOR_MAX;
+}
+
+/* Py_GetVersion() of the libpython behind handle ("?" without one): asked before anything
+ * else is resolved, so a version out of range is named as such. */
+static const char *version_of(void *handle)
+{
+    const char *(*get)(void) = NULL;
+    void *sym = dlsym(handle, "Py_GetVersion");
+    memcpy(&get, &sym, sizeof get);
+    return get != NULL ? get() : "?";
+}
+
+/* UTF-8 bytes -> wchar_t (UTF-32 on Linux), invalid bytes as U+DC80..U+DCFF (surrogateescape,
+ * as Python decodes file names). 0 on success. Runs before Python exists: Py_DecodeLocale
+ * would need PyMem_RawFree, not in the limited API of 3.10. */
+static int utf8_to_wide(const char *s, wchar_t *out, size_t n)
+{
+    const unsigned char *p = (const unsigned char *)s;
+    size_t k = 0;
+    while (*p && k + 1 < n) {
+        unsigned c = p[0], cp = 0, len = 0, i;
+        if (c < 0x80) {
+            cp = c;
+            len = 1;
+        } else if ((c & 0xE0) == 0xC0 && c >= 0xC2) {
+            cp = c & 0x1F;
+            len = 2;
+        } else if ((c & 0xF0) == 0xE0) {
+            cp = c & 0x0F;
+            len = 3;
+        } else if ((c & 0xF8) == 0xF0 && c <= 0xF4) {
+            cp = c & 0x07;
+            len = 4;
+        }
+        for (i = 1; i < len && len > 1; i++) {
+            if ((p[i] & 0xC0) != 0x80) {
+                len = 0;
+                break;
+            }
+            cp = (cp << 6) | (p[i] & 0x3F);
+        }
+        if (len > 2 && (cp < (len == 3 ? 0x800u : 0x10000u) || cp > 0x10FFFF ||
+                        (cp >= 0xD800 && cp <= 0xDFFF)))
+            len = 0; /* overlong, out of range or a surrogate */
+        if (len == 0) {
+            out[k++] = (wchar_t)(0xDC00 + p[0]);
+            p++;
+        } else {
+            out[k++] = (wchar_t)cp;
+            p += len;
+        }
+    }
+    out[k] = L'\0';
+    return *p == '\0' ? 0 : -1;
 }
 
 static int start_interpreter(const char *executable, char *why, size_t nwhy)
 {
-    PyPreConfig pre;
-    PyConfig config;
-    PyStatus st;
+    static wchar_t program[DCS_PATH_MAX]; /* Py_SetProgramName keeps the pointer */
+    char *saved = NULL;
+    const char *current = setlocale(LC_CTYPE, NULL);
     int rc = 0;
-    p_PyPreConfig_InitPythonConfig(&pre);
-    pre.use_environment = 0;
-    pre.configure_locale = 0; /* no setlocale(), no LC_CTYPE coercion in the host's environ */
-    pre.coerce_c_locale = 0;
-    pre.utf8_mode = 1;        /* file names and text: UTF-8 whatever the host's locale */
-    pre.parse_argv = 0;
-    st = p_Py_PreInitialize(&pre);
-    p_PyConfig_InitPythonConfig(&config);
-    config.use_environment = 0;
-    config.install_signal_handlers = 0;
-    config.parse_argv = 0;
-    if (!p_PyStatus_Exception(st))
-        st = p_PyConfig_SetBytesString(&config, &config.program_name, executable);
-    if (!p_PyStatus_Exception(st))
-        st = p_Py_InitializeFromConfig(&config);
-    p_PyConfig_Clear(&config);
-    if (p_PyStatus_Exception(st)) {
-        snprintf(why, nwhy, "starting it in this process failed: %s",
-                 st.err_msg != NULL ? st.err_msg : "unknown error");
+    if (utf8_to_wide(executable, program, sizeof program / sizeof program[0]) != 0) {
+        snprintf(why, nwhy, "its path is too long: %.200s...", executable);
         rc = -1;
     } else {
-        p_PyEval_SaveThread(); /* the GIL is taken per call with PyGILState_Ensure */
+        saved = current != NULL ? dcs_strdup(current) : NULL;
+        *p_Py_IgnoreEnvironmentFlag = 1;
+        *p_Py_UTF8Mode = 1;
+        p_Py_SetProgramName(program);
+        p_Py_InitializeEx(0);
+        if (saved != NULL) /* Python set LC_CTYPE from the environment: the host's again */
+            setlocale(LC_CTYPE, saved);
+        free(saved);
+        if (!p_Py_IsInitialized()) {
+            snprintf(why, nwhy, "starting it in this process failed");
+            rc = -1;
+        } else {
+            p_PyEval_SaveThread(); /* the GIL is taken per call with PyGILState_Ensure */
+        }
     }
     return rc;
 }
@@ -119,11 +204,11 @@ static int load_candidate(const DcsPython *py, void *ctx, char *why, size_t nwhy
         const char *e = dlerror();
         snprintf(why, nwhy, "Python %s, but its libpython %s cannot be loaded: %s", py->version,
                  py->libpython, e != NULL ? e : "unknown error");
-    } else if (resolve_api(lib, why, nwhy) != 0) {
+    } else if (!version_fits(version_of(lib))) {
+        snprintf(why, nwhy, "its libpython %s is Python %.20s, not 3.%d to 3.%d",
+                 py->libpython, version_of(lib), DCS_PY_MINOR_MIN, DCS_PY_MINOR_MAX);
         dlclose(lib);
-    } else if (!version_fits(p_Py_GetVersion())) {
-        snprintf(why, nwhy, "its libpython %s is Python %.20s, not %s", py->libpython,
-                 p_Py_GetVersion(), wanted_version());
+    } else if (resolve_api(lib, why, nwhy) != 0) {
         dlclose(lib);
     } else {
         *stop = 1; /* from here on this libpython stays in the process */
@@ -133,9 +218,34 @@ static int load_candidate(const DcsPython *py, void *ctx, char *why, size_t nwhy
     return rc;
 }
 
+/* DcsLoad of the doctor: nothing is loaded; the first candidate that passes is the one. */
+static int pretend_load(const DcsPython *py, void *ctx, char *why, size_t nwhy, int *stop)
+{
+    (void)py;
+    (void)ctx;
+    (void)why;
+    (void)nwhy;
+    *stop = 1;
+    return 0;
+}
+
+int dcs_isinstance(PyObject *o, PyObject *type)
+{
+    int r = p_PyObject_IsInstance(o, type);
+    if (r < 0)
+        p_PyErr_Clear();
+    return r > 0;
+}
+
+static PyObject *builtin(PyObject *builtins, const char *name)
+{
+    return builtins != NULL ? p_PyObject_GetAttrString(builtins, name) : NULL;
+}
+
 static int make_names(char *why, size_t nwhy)
 {
     PyGILState_STATE g = p_PyGILState_Ensure();
+    PyObject *builtins = p_PyImport_ImportModule("builtins");
     int ok = 1;
 #define N(field, text) if ((dcs_py.field = p_PyUnicode_InternFromString(text)) == NULL) ok = 0;
     N(setup_experiment, "setup_experiment")
@@ -171,9 +281,15 @@ static int make_names(char *why, size_t nwhy)
     dcs_py.true_ = p_PyBool_FromLong(1);
     dcs_py.false_ = p_PyBool_FromLong(0);
     dcs_py.traceback = p_PyImport_ImportModule("traceback");
+    dcs_py.int_type = builtin(builtins, "int");
+    dcs_py.str_type = builtin(builtins, "str");
+    dcs_py.bytes_type = builtin(builtins, "bytes");
+    dcs_py.list_type = builtin(builtins, "list");
     if (dcs_py.none == NULL || dcs_py.true_ == NULL || dcs_py.false_ == NULL ||
-        dcs_py.traceback == NULL)
+        dcs_py.traceback == NULL || dcs_py.int_type == NULL || dcs_py.str_type == NULL ||
+        dcs_py.bytes_type == NULL || dcs_py.list_type == NULL)
         ok = 0;
+    dcs_decref(builtins);
     if (!ok) {
         snprintf(why, nwhy, "cannot create the wrapper's Python constants");
         p_PyErr_Clear();
@@ -183,51 +299,70 @@ static int make_names(char *why, size_t nwhy)
 }
 
 /* Requirements of the FMU (resources/python_requires.txt: import names), "" if none. */
-static void requirements(const DcsInstance *in, char *out, size_t n)
+static void requirements(const char *resources, char *out, size_t n)
 {
-    char *line = dcs_read_resource_line(in->resources, "python_requires.txt");
+    char *line = dcs_read_resource_line(resources, "python_requires.txt");
     snprintf(out, n, "%s", line != NULL ? line : "");
     free(line);
+}
+
+/* The discovery for the FMU unzipped at unzip_dir: 0 if a candidate was used (by load), else
+ * -1; *text (malloc'd, NULL if out of memory) is the report, followed on failure by how to
+ * fix it. */
+static int discover(const char *unzip_dir, DcsLoad load, const char *used, char **text)
+{
+    char requires[512], resources[DCS_PATH_MAX], *report = NULL, *fix = NULL;
+    const char *xdg = getenv("XDG_CONFIG_HOME");
+    const char *cfg = xdg != NULL && xdg[0] == '/' ? xdg : "~/.config";
+    const char *req;
+    DcsWant want = {DCS_PY_MINOR_MIN, DCS_PY_MINOR_MAX, DCS_BUILD_MINOR};
+    int rc;
+    snprintf(resources, sizeof resources, "%s/resources", unzip_dir);
+    requirements(resources, requires, sizeof requires);
+    req = requires[0] ? requires : "nothing";
+    rc = dcs_discover_python(unzip_dir, &want, requires, DCS_BUILD_PYTHON, load, NULL, used,
+                             &report);
+    if (rc != 0)
+        fix = dcs_format("How to fix: install %s into a CPython 3.%d to 3.%d on PATH "
+                         "(python3.X -m pip install %s), or name such a Python: "
+                         "$DRILLCOSIM_PYTHON=/path/to/python3, or a line 'python = "
+                         "/path/to/python3' in %s/drillcosim/drillcosim.conf. PYTHONHOME and "
+                         "PYTHONPATH are ignored. `drillcosim doctor FMU` prints this report; "
+                         "see docs/interop.md of drillcosim.", req, DCS_PY_MINOR_MIN,
+                         DCS_PY_MINOR_MAX, req, cfg);
+    *text = dcs_format("%sthis FMU runs its model in CPython 3.%d to 3.%d%s%s; in a host "
+                       "process without a Python of its own it looks for one, in this "
+                       "order:\n%s%s", rc != 0 ? "no usable Python found: " : "",
+                       DCS_PY_MINOR_MIN, DCS_PY_MINOR_MAX, requires[0] ? " with " : "",
+                       requires, report != NULL ? report : "  (out of memory)\n",
+                       fix != NULL ? fix : "");
+    free(fix);
+    free(report);
+    return rc;
 }
 
 /* Find and start a Python for a host without one. On failure *message (malloc'd) is the ONE
  * message listing every candidate tried, what it lacked and how to fix it. */
 static int start_in_plain_host(DcsInstance *in, char **message)
 {
-    char requires[512], unzip[4096], *slash, *report = NULL;
-    const char *want = wanted_version();
-    const char *xdg = getenv("XDG_CONFIG_HOME");
-    int rc, n;
-    requirements(in, requires, sizeof requires);
+    char unzip[DCS_PATH_MAX], *slash, *text = NULL;
+    int rc;
     snprintf(unzip, sizeof unzip, "%s", in->resources);
     slash = strrchr(unzip, '/');
     if (slash != NULL && slash != unzip)
         *slash = '\0'; /* <unzip>/resources -> <unzip> */
-    rc = dcs_discover_python(unzip, want, requires, DCS_BUILD_PYTHON, load_candidate, NULL,
-                             &report);
+    rc = discover(unzip, load_candidate, "used", &text);
     if (rc != 0) {
-        const char *fmt =
-            "%s: fmi2Instantiate: no usable Python found. This FMU runs its model in Python "
-            "%s%s%s; the host process has no Python of its own, so the FMU looks for one, in "
-            "this order:\n%s"
-            "How to fix: install %s into a Python %s on PATH (python%s -m pip install %s), or "
-            "name a Python %s that has them: $DRILLCOSIM_PYTHON=/path/to/python3, or a line "
-            "'python = /path/to/python3' in %s/drillcosim/drillcosim.conf. PYTHONHOME and "
-            "PYTHONPATH are ignored. See docs/interop.md of drillcosim.";
-        const char *rep = report != NULL ? report : "  (out of memory)\n";
-        const char *req = requires[0] ? requires : "nothing";
-        const char *cfg = xdg != NULL && xdg[0] == '/' ? xdg : "~/.config";
-        n = snprintf(NULL, 0, fmt, in->name, want, requires[0] ? " with " : "", requires, rep,
-                     req, want, want, req, want, cfg);
-        *message = n > 0 ? (char *)malloc((size_t)n + 1) : NULL;
+        size_t n = strlen(in->name) + (text != NULL ? strlen(text) : 0) + 64;
+        *message = (char *)malloc(n);
         if (*message != NULL)
-            snprintf(*message, (size_t)n + 1, fmt, in->name, want, requires[0] ? " with " : "",
-                     requires, rep, req, want, want, req, want, cfg);
+            snprintf(*message, n, "%s: fmi2Instantiate: %s", in->name,
+                     text != NULL ? text : "no usable Python found (out of memory)");
     } else {
-        dcs_log(in, fmi2OK, "logAll", "%s: fmi2Instantiate: the host has no Python; "
-                "candidates:\n%s", in->name, report != NULL ? report : "");
+        dcs_log(in, fmi2OK, "logAll", "%s: fmi2Instantiate: the host has no Python; %s",
+                in->name, text != NULL ? text : "");
     }
-    free(report);
+    free(text);
     return rc;
 }
 
@@ -243,14 +378,16 @@ int dcs_python_ready(DcsInstance *in)
         rc = -1;
     } else if (dlsym(RTLD_DEFAULT, "Py_IsInitialized") != NULL) {
         g_loaded = 1; /* the process's own libpython: nothing else can be tried */
-        rc = resolve_api(RTLD_DEFAULT, why, sizeof why);
-        if (rc == 0 && !version_fits(p_Py_GetVersion())) {
+        if (!version_fits(version_of(RTLD_DEFAULT))) {
             snprintf(why, sizeof why, "this process runs Python %.20s, but the FMU's wrapper "
-                     "is compiled for Python %s: load the FMU from a Python %s process (or "
-                     "rebuild it with this Python: python -m drillcosim.fmu_src.build)",
-                     p_Py_GetVersion(), wanted_version(), wanted_version());
+                     "runs on CPython 3.%d to 3.%d: load the FMU from a process of one of "
+                     "these versions", version_of(RTLD_DEFAULT), DCS_PY_MINOR_MIN,
+                     DCS_PY_MINOR_MAX);
             rc = -1;
-        } else if (rc == 0 && !p_Py_IsInitialized()) {
+        } else {
+            rc = resolve_api(RTLD_DEFAULT, why, sizeof why);
+        }
+        if (rc == 0 && !p_Py_IsInitialized()) {
             /* a host that links libpython without starting it: start it as a plain host */
             rc = start_in_plain_host(in, &message);
         }
@@ -279,5 +416,23 @@ int dcs_python_ready(DcsInstance *in)
                      : message != NULL ? message : "fmi2Instantiate: Python cannot be started");
     free(message);
     pthread_mutex_unlock(&g_lock);
+    return rc;
+}
+
+/* The doctor: the discovery of a host without Python for the FMU unzipped at unzip_dir,
+ * without loading or starting anything; its report (and how to fix a failure) into
+ * out[size] (truncated to fit). Returns 1 if a Python would be found, 0 if not, -1 for bad
+ * arguments. Safe in any process (a Python host included): it only runs child processes. */
+FMI2_Export int drillcosim_doctor(const char *unzip_dir, char *out, size_t size)
+{
+    char *text = NULL;
+    int rc = -1;
+    if (unzip_dir != NULL && out != NULL && size > 0) {
+        pthread_mutex_lock(&g_lock); /* the discovery's buffers are shared */
+        rc = discover(unzip_dir, pretend_load, "would be used", &text) == 0 ? 1 : 0;
+        pthread_mutex_unlock(&g_lock);
+        snprintf(out, size, "%s", text != NULL ? text : "(out of memory)\n");
+        free(text);
+    }
     return rc;
 }

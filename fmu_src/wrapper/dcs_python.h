@@ -1,77 +1,132 @@
 /*
- * The Python C-API as the wrapper sees it: function pointers looked up with dlsym().
+ * The Python C-API as the wrapper sees it: the stable ABI of CPython 3.10 to 3.13, every
+ * function looked up with dlsym() at run time.
  *
- * The library has no link-time dependency on libpython and references no Python data symbol
- * (Py_None, PyFloat_Type, ...): it loads in any host. Only macros that read object fields
- * (PyList_GET_ITEM, PyBytes_AS_STRING, Py_TYPE flags) are used directly.
+ * One binary for every supported version: the header is included with Py_LIMITED_API set to
+ * 3.10, so the compiler refuses anything outside the limited API of 3.10 (macros that read
+ * object fields, PyConfig and its version-dependent layout); each function pointer takes its
+ * type from the header's own declaration (a name missing from the limited API does not
+ * compile). The library has no link-time dependency on libpython and references no Python
+ * symbol: it loads in any host.
+ *
+ * Two things are not in the limited API of 3.10 and are declared here by hand:
+ *   - the buffer protocol (Py_buffer, PyObject_GetBuffer, PyBuffer_Release): part of the
+ *     stable ABI since 3.11 (its layout frozen there) and the same layout in 3.10 (unchanged
+ *     since 3.3; tests/test_python_versions.py compares it with each installed version's
+ *     headers);
+ *   - the legacy global configuration variable Py_IgnoreEnvironmentFlag (a plain int every
+ *     3.x libpython exports, read by Py_InitializeEx; deprecated since 3.12, PEP 741's
+ *     replacement exists from 3.14 on): the only version-independent way to start an
+ *     interpreter that ignores PYTHONHOME/PYTHONPATH (dcs_python.c). Its sibling Py_UTF8Mode
+ *     is in the limited API.
+ * Free-threaded builds (3.13t) are not supported (their object header differs).
  */
 #ifndef DCS_PYTHON_H
 #define DCS_PYTHON_H
 
-#define PY_SSIZE_T_CLEAN
+#define Py_LIMITED_API 0x030A0000
 #include <Python.h>
 
 #include "dcs_wrapper.h"
 
-#define DCS_PYAPI(X) \
-    X(int, Py_IsInitialized, (void)) \
-    X(const char *, Py_GetVersion, (void)) \
-    X(void, PyPreConfig_InitPythonConfig, (PyPreConfig *)) \
-    X(PyStatus, Py_PreInitialize, (const PyPreConfig *)) \
-    X(void, PyConfig_InitPythonConfig, (PyConfig *)) \
-    X(PyStatus, PyConfig_SetBytesString, (PyConfig *, wchar_t **, const char *)) \
-    X(PyStatus, Py_InitializeFromConfig, (const PyConfig *)) \
-    X(void, PyConfig_Clear, (PyConfig *)) \
-    X(int, PyStatus_Exception, (PyStatus)) \
-    X(PyThreadState *, PyEval_SaveThread, (void)) \
-    X(PyGILState_STATE, PyGILState_Ensure, (void)) \
-    X(void, PyGILState_Release, (PyGILState_STATE)) \
-    X(void, Py_IncRef, (PyObject *)) \
-    X(void, Py_DecRef, (PyObject *)) \
-    X(PyObject *, Py_BuildValue, (const char *, ...)) \
-    X(PyObject *, PyImport_ImportModule, (const char *)) \
-    X(PyObject *, PySys_GetObject, (const char *)) \
-    X(PyObject *, PyObject_GetAttr, (PyObject *, PyObject *)) \
-    X(int, PyObject_SetAttr, (PyObject *, PyObject *, PyObject *)) \
-    X(int, PyObject_HasAttr, (PyObject *, PyObject *)) \
-    X(PyObject *, PyObject_Call, (PyObject *, PyObject *, PyObject *)) \
-    X(PyObject *, PyObject_VectorcallMethod, (PyObject *, PyObject *const *, size_t, \
-                                              PyObject *)) \
-    X(PyObject *, PyObject_Str, (PyObject *)) \
-    X(int, PyObject_IsTrue, (PyObject *)) \
-    X(int, PyObject_GetBuffer, (PyObject *, Py_buffer *, int)) \
-    X(void, PyBuffer_Release, (Py_buffer *)) \
-    X(PyObject *, PyUnicode_InternFromString, (const char *)) \
-    X(PyObject *, PyUnicode_FromString, (const char *)) \
-    X(PyObject *, PyUnicode_DecodeFSDefault, (const char *)) \
-    X(const char *, PyUnicode_AsUTF8AndSize, (PyObject *, Py_ssize_t *)) \
-    X(PyObject *, PyUnicode_Join, (PyObject *, PyObject *)) \
-    X(PyObject *, PyLong_FromUnsignedLong, (unsigned long)) \
-    X(PyObject *, PyLong_FromLong, (long)) \
-    X(long, PyLong_AsLong, (PyObject *)) \
-    X(void *, PyLong_AsVoidPtr, (PyObject *)) \
-    X(PyObject *, PyFloat_FromDouble, (double)) \
-    X(double, PyFloat_AsDouble, (PyObject *)) \
-    X(PyObject *, PyBool_FromLong, (long)) \
-    X(PyObject *, PyList_New, (Py_ssize_t)) \
-    X(int, PyList_Insert, (PyObject *, Py_ssize_t, PyObject *)) \
-    X(int, PyList_SetSlice, (PyObject *, Py_ssize_t, Py_ssize_t, PyObject *)) \
-    X(PyObject *, PySequence_Fast, (PyObject *, const char *)) \
-    X(PyObject *, PyTuple_New, (Py_ssize_t)) \
-    X(PyObject *, PyDict_New, (void)) \
-    X(int, PyDict_SetItemString, (PyObject *, const char *, PyObject *)) \
-    X(PyObject *, PyBytes_FromStringAndSize, (const char *, Py_ssize_t)) \
-    X(PyObject *, PyErr_Occurred, (void)) \
-    X(void, PyErr_Fetch, (PyObject **, PyObject **, PyObject **)) \
-    X(void, PyErr_NormalizeException, (PyObject **, PyObject **, PyObject **)) \
-    X(void, PyErr_Clear, (void)) \
-    X(void, PyErr_Restore, (PyObject *, PyObject *, PyObject *))
+/* The oldest and newest minor version of Python 3 this wrapper runs on. */
+#define DCS_PY_MINOR_MIN 10
+#define DCS_PY_MINOR_MAX 13
 
-#define DCS_DECLARE(ret, name, args) extern ret(*p_##name) args;
+/* Py_buffer of the stable ABI (3.11+; identical in 3.10). */
+typedef struct {
+    void *buf;
+    PyObject *obj;
+    Py_ssize_t len;
+    Py_ssize_t itemsize;
+    int readonly;
+    int ndim;
+    char *format;
+    Py_ssize_t *shape;
+    Py_ssize_t *strides;
+    Py_ssize_t *suboffsets;
+    void *internal;
+} DcsBuffer;
+
+#define DCS_PYBUF_WRITABLE 0x0001
+#define DCS_PYBUF_FORMAT 0x0004
+#define DCS_PYBUF_ND 0x0008
+#define DCS_PYBUF_STRIDES (0x0010 | DCS_PYBUF_ND)
+#define DCS_PYBUF_C_CONTIGUOUS (0x0020 | DCS_PYBUF_STRIDES)
+
+/* Functions of the limited API of 3.10, in the order they are resolved. */
+#define DCS_PYAPI(X) \
+    X(Py_IsInitialized) \
+    X(Py_GetVersion) \
+    X(Py_SetProgramName) \
+    X(Py_InitializeEx) \
+    X(PyEval_SaveThread) \
+    X(PyGILState_Ensure) \
+    X(PyGILState_Release) \
+    X(Py_IncRef) \
+    X(Py_DecRef) \
+    X(Py_BuildValue) \
+    X(PyImport_ImportModule) \
+    X(PySys_GetObject) \
+    X(PyObject_GetAttr) \
+    X(PyObject_GetAttrString) \
+    X(PyObject_SetAttr) \
+    X(PyObject_HasAttr) \
+    X(PyObject_Call) \
+    X(PyObject_CallMethodObjArgs) \
+    X(PyObject_Str) \
+    X(PyObject_IsTrue) \
+    X(PyObject_IsInstance) \
+    X(PyUnicode_InternFromString) \
+    X(PyUnicode_FromString) \
+    X(PyUnicode_DecodeFSDefault) \
+    X(PyUnicode_AsUTF8AndSize) \
+    X(PyUnicode_Join) \
+    X(PyLong_FromUnsignedLong) \
+    X(PyLong_FromLong) \
+    X(PyLong_AsLong) \
+    X(PyLong_AsVoidPtr) \
+    X(PyFloat_FromDouble) \
+    X(PyFloat_AsDouble) \
+    X(PyBool_FromLong) \
+    X(PyList_New) \
+    X(PyList_Size) \
+    X(PyList_GetItem) \
+    X(PyList_SetItem) \
+    X(PyList_Insert) \
+    X(PyList_SetSlice) \
+    X(PySequence_Tuple) \
+    X(PyTuple_New) \
+    X(PyTuple_Size) \
+    X(PyTuple_GetItem) \
+    X(PyDict_New) \
+    X(PyDict_SetItemString) \
+    X(PyBytes_FromStringAndSize) \
+    X(PyBytes_Size) \
+    X(PyBytes_AsString) \
+    X(PyErr_Occurred) \
+    X(PyErr_Fetch) \
+    X(PyErr_NormalizeException) \
+    X(PyErr_Clear) \
+    X(PyErr_Restore)
+
+/* Deprecated names (Py_SetProgramName in 3.11, PyErr_Fetch in 3.12, ...) are still exported
+ * by every supported version; the declarations only borrow their types. */
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wdeprecated-declarations"
+#define DCS_DECLARE(name) extern __typeof__(name) *p_##name;
 DCS_PYAPI(DCS_DECLARE)
 #undef DCS_DECLARE
+extern __typeof__(Py_UTF8Mode) *p_Py_UTF8Mode;
+#pragma GCC diagnostic pop
 
-/* Interned method and attribute names, and singletons (created once, never released). */
+/* Declared by hand (see the top of this file). */
+extern int *p_Py_IgnoreEnvironmentFlag;
+extern int (*p_PyObject_GetBuffer)(PyObject *, DcsBuffer *, int);
+extern void (*p_PyBuffer_Release)(DcsBuffer *);
+
+/* Interned method and attribute names, singletons and builtin types (created once, never
+ * released). */
 typedef struct {
     PyObject *setup_experiment, *enter_initialization_mode, *exit_initialization_mode,
         *do_step, *terminate, *reset, *get_real, *get_integer, *get_boolean, *get_string,
@@ -80,9 +135,13 @@ typedef struct {
         *compiled_step_failed, *get_log_queue, *status,
         *category, *msg, *format_exception;
     PyObject *none, *true_, *false_, *empty, *traceback;
+    PyObject *int_type, *str_type, *bytes_type, *list_type; /* for isinstance */
 } DcsNames;
 
 extern DcsNames dcs_py;
+
+/* isinstance(o, t) for a builtin type of dcs_py (0 on an error, which is cleared). */
+int dcs_isinstance(PyObject *o, PyObject *type);
 
 /* The slave object and its protocol, for dcs_state.c (dcs_slave.c; GIL held). */
 PyObject *dcs_slave_object(DcsInstance *in);

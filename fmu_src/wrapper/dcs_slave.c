@@ -50,7 +50,7 @@ struct DcsSlave {
     PyObject *cls, *obj, *log_queue;
     PyObject *str_keep;   /* the sequence behind the strings of the last fmi2GetString */
     int has_status;       /* the slave defines _fmi2_status (read after every call) */
-    Py_buffer in_view, out_view;
+    DcsBuffer in_view, out_view;
     int has_buffers;
     double *in, *out;
     int *slot;            /* slot[vr]: k > 0 output k-1, k < 0 input -k-1, 0 neither */
@@ -65,9 +65,9 @@ struct DcsSlave {
 static void drain_log(DcsInstance *in)
 {
     PyObject *q = in->slave != NULL ? in->slave->log_queue : NULL;
-    Py_ssize_t i, n = q != NULL && PyList_Check(q) ? PyList_GET_SIZE(q) : 0;
+    Py_ssize_t i, n = q != NULL && dcs_isinstance(q, dcs_py.list_type) ? p_PyList_Size(q) : 0;
     for (i = 0; i < n; i++) {
-        PyObject *item = PyList_GET_ITEM(q, i);
+        PyObject *item = p_PyList_GetItem(q, i); /* borrowed */
         PyObject *st = p_PyObject_GetAttr(item, dcs_py.status);
         PyObject *cat = p_PyObject_GetAttr(item, dcs_py.category);
         PyObject *msg = p_PyObject_GetAttr(item, dcs_py.msg);
@@ -101,10 +101,9 @@ static fmi2Status log_exception(DcsInstance *in, const char *fn)
     p_PyErr_Fetch(&type, &value, &tb);
     p_PyErr_NormalizeException(&type, &value, &tb);
     if (type != NULL) {
-        PyObject *args[4] = {dcs_py.traceback, type, value ? value : dcs_py.none,
-                             tb ? tb : dcs_py.none};
-        lines = p_PyObject_VectorcallMethod(dcs_py.format_exception, args,
-                                            4 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
+        lines = p_PyObject_CallMethodObjArgs(dcs_py.traceback, dcs_py.format_exception, type,
+                                             value ? value : dcs_py.none,
+                                             tb ? tb : dcs_py.none, NULL);
         if (lines != NULL)
             text = p_PyUnicode_Join(dcs_py.empty, lines);
         if (text == NULL) {
@@ -141,7 +140,7 @@ static fmi2Status status_of(DcsInstance *in, PyObject *res, int is_step, const c
         status = fmi2OK;
     } else if (res == dcs_py.false_) {
         status = is_step ? fmi2Discard : fmi2Error;
-    } else if (PyLong_Check(res)) {
+    } else if (dcs_isinstance(res, dcs_py.int_type)) {
         long v = p_PyLong_AsLong(res);
         if (p_PyErr_Occurred() || v < 0 || v > 4) {
             p_PyErr_Clear();
@@ -181,31 +180,28 @@ static fmi2Status status_of(DcsInstance *in, PyObject *res, int is_step, const c
 static fmi2Status refresh_compiled(DcsInstance *in, fmi2Status status, const char *fn)
 {
     DcsSlave *s = in->slave;
-    PyObject *self_only[1], *res, *seq = NULL;
+    PyObject *res = NULL, *seq = NULL;
     void *fn_ptr = NULL, *ctx = NULL;
     const char *why = NULL;
-    if (s == NULL || !s->has_compiled || status == fmi2Fatal)
-        return status;
-    s->step = NULL;
-    s->step_context = NULL;
-    self_only[0] = s->obj;
-    res = p_PyObject_VectorcallMethod(dcs_py.compiled_step, self_only,
-                                      1 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
-    if (res == NULL) {
-        fmi2Status st = log_exception(in, "_fmi2_compiled_step");
-        return st > status ? st : status;
-    }
-    if (res != dcs_py.none) {
-        seq = p_PySequence_Fast(res, "");
-        if (seq == NULL || PySequence_Fast_GET_SIZE(seq) != 2) {
-            why = "not None or a pair (function address, context address)";
-        } else {
-            fn_ptr = p_PyLong_AsVoidPtr(PySequence_Fast_GET_ITEM(seq, 0));
-            ctx = p_PyLong_AsVoidPtr(PySequence_Fast_GET_ITEM(seq, 1));
-            if (p_PyErr_Occurred() || fn_ptr == NULL)
-                why = "the function address is not a non-zero integer";
+    if (s != NULL && s->has_compiled && status != fmi2Fatal) {
+        s->step = NULL;
+        s->step_context = NULL;
+        res = p_PyObject_CallMethodObjArgs(s->obj, dcs_py.compiled_step, NULL);
+        if (res == NULL) {
+            fmi2Status st = log_exception(in, "_fmi2_compiled_step");
+            status = st > status ? st : status;
+        } else if (res != dcs_py.none) {
+            seq = p_PySequence_Tuple(res);
+            if (seq == NULL || p_PyTuple_Size(seq) != 2) {
+                why = "not None or a pair (function address, context address)";
+            } else {
+                fn_ptr = p_PyLong_AsVoidPtr(p_PyTuple_GetItem(seq, 0));
+                ctx = p_PyLong_AsVoidPtr(p_PyTuple_GetItem(seq, 1));
+                if (p_PyErr_Occurred() || fn_ptr == NULL)
+                    why = "the function address is not a non-zero integer";
+            }
+            p_PyErr_Clear();
         }
-        p_PyErr_Clear();
     }
     if (why != NULL) {
         dcs_log(in, fmi2Error, "logStatusError", "%s: %s: the slave's _fmi2_compiled_step(): "
@@ -228,20 +224,22 @@ fmi2Status dcs_slave_leave(DcsInstance *in, fmi2Status status, const char *fn)
     return status;
 }
 
+/* slave.<name>(*args) (at most 3 arguments), a new reference or NULL. */
+static PyObject *call(PyObject *obj, PyObject *name, PyObject **args, size_t nargs)
+{
+    PyObject *a[3] = {NULL, NULL, NULL};
+    size_t i;
+    for (i = 0; i < nargs && i < 3; i++)
+        a[i] = args[i];
+    /* the argument list ends at the first NULL */
+    return p_PyObject_CallMethodObjArgs(obj, name, a[0], a[1], a[2], NULL);
+}
+
 /* slave.<name>(*args) -> status. */
 static fmi2Status call_method(DcsInstance *in, PyObject *name, PyObject **args, size_t nargs,
                               int is_step, const char *fn)
 {
-    PyObject *buf[4];
-    size_t i;
-    buf[0] = in->slave->obj;
-    for (i = 0; i < nargs && i < 3; i++)
-        buf[i + 1] = args[i];
-    return status_of(in,
-                     p_PyObject_VectorcallMethod(name, buf,
-                                                 (nargs + 1) | PY_VECTORCALL_ARGUMENTS_OFFSET,
-                                                 NULL),
-                     is_step, fn);
+    return status_of(in, call(in->slave->obj, name, args, nargs), is_step, fn);
 }
 
 /* ------------------------------------------------------------- creating the slave */
@@ -252,20 +250,21 @@ static PyObject *import_class(DcsInstance *in, const char *module, const char *c
     PyObject *entry = p_PyUnicode_DecodeFSDefault(in->resources);
     PyObject *mod = NULL, *cls = NULL, *cname;
     int inserted = 0;
-    if (entry != NULL && path != NULL && PyList_Check(path)) {
+    int is_list = path != NULL && dcs_isinstance(path, dcs_py.list_type);
+    if (entry != NULL && is_list) {
         dcs_incref(path); /* the module may rebind sys.path */
         inserted = p_PyList_Insert(path, 0, entry) == 0;
         if (!inserted)
             dcs_decref(path);
     }
-    if (entry != NULL && (inserted || path == NULL || !PyList_Check(path)))
+    if (entry != NULL && (inserted || !is_list))
         mod = p_PyImport_ImportModule(module);
     if (inserted) { /* remove exactly the entry inserted above, keep any error */
         PyObject *type, *value, *tb;
         Py_ssize_t i;
         p_PyErr_Fetch(&type, &value, &tb);
-        for (i = 0; i < PyList_GET_SIZE(path); i++) {
-            if (PyList_GET_ITEM(path, i) == entry) {
+        for (i = 0; i < p_PyList_Size(path); i++) {
+            if (p_PyList_GetItem(path, i) == entry) {
                 if (p_PyList_SetSlice(path, i, i + 1, NULL) != 0)
                     p_PyErr_Clear();
                 break;
@@ -299,11 +298,11 @@ static void release_buffers(DcsSlave *s)
 }
 
 /* One float64 buffer of n values; 0 on success, else -1 and *why. */
-static int get_view(PyObject *obj, Py_buffer *view, Py_ssize_t n, const char **why)
+static int get_view(PyObject *obj, DcsBuffer *view, Py_ssize_t n, const char **why)
 {
     int rc = -1;
-    if (p_PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE)
-        != 0) {
+    if (p_PyObject_GetBuffer(obj, view, DCS_PYBUF_C_CONTIGUOUS | DCS_PYBUF_FORMAT |
+                             DCS_PYBUF_WRITABLE) != 0) {
         *why = "not a C-contiguous writable buffer";
     } else {
         const char *f = view->format != NULL ? view->format : "B";
@@ -320,13 +319,13 @@ static int get_view(PyObject *obj, Py_buffer *view, Py_ssize_t n, const char **w
     return rc;
 }
 
-/* Fill slot[] from a fast sequence of value references (sign: -1 inputs, +1 outputs). */
+/* Fill slot[] from a tuple of value references (sign: -1 inputs, +1 outputs). */
 static int add_slots(DcsSlave *s, PyObject *seq, int sign, const char **why)
 {
-    Py_ssize_t i, n = PySequence_Fast_GET_SIZE(seq);
+    Py_ssize_t i, n = p_PyTuple_Size(seq);
     int rc = 0;
     for (i = 0; i < n && rc == 0; i++) {
-        long vr = p_PyLong_AsLong(PySequence_Fast_GET_ITEM(seq, i));
+        long vr = p_PyLong_AsLong(p_PyTuple_GetItem(seq, i));
         if (vr < 0 || vr >= MAX_BUFFER_VR) {
             *why = "a value reference is not an integer in [0, 1e6)";
             rc = -1;
@@ -356,30 +355,28 @@ static int add_slots(DcsSlave *s, PyObject *seq, int sign, const char **why)
  * also for a slave without them; else -1, logged. */
 static int bind_buffers(DcsInstance *in, DcsSlave *s, PyObject *obj)
 {
-    PyObject *self_only[1] = {obj}, *res = NULL, *seq = NULL, *in_vrs = NULL, *out_vrs = NULL;
+    PyObject *res = NULL, *seq = NULL, *in_vrs = NULL, *out_vrs = NULL;
     const char *why = NULL;
     int rc = 0;
     if (p_PyObject_HasAttr(obj, dcs_py.real_buffers)) {
-        res = p_PyObject_VectorcallMethod(dcs_py.real_buffers, self_only,
-                                          1 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
+        res = p_PyObject_CallMethodObjArgs(obj, dcs_py.real_buffers, NULL);
         if (res != NULL)
-            seq = p_PySequence_Fast(res, "_fmi2_real_buffers must return a 4-tuple");
+            seq = p_PySequence_Tuple(res);
         rc = seq != NULL ? 0 : -1;
     }
-    if (seq != NULL && PySequence_Fast_GET_SIZE(seq) != 4) {
+    if (seq != NULL && p_PyTuple_Size(seq) != 4) {
         why = "it must return (input_vrs, inputs, output_vrs, outputs)";
         rc = -1;
     } else if (seq != NULL) {
-        PyObject **item = PySequence_Fast_ITEMS(seq);
-        in_vrs = p_PySequence_Fast(item[0], "input value references must be a sequence");
-        out_vrs = p_PySequence_Fast(item[2], "output value references must be a sequence");
+        in_vrs = p_PySequence_Tuple(p_PyTuple_GetItem(seq, 0));
+        out_vrs = p_PySequence_Tuple(p_PyTuple_GetItem(seq, 2));
         if (in_vrs == NULL || out_vrs == NULL) {
             rc = -1;
-        } else if (get_view(item[1], &s->in_view, PySequence_Fast_GET_SIZE(in_vrs), &why)
-                   != 0) {
+        } else if (get_view(p_PyTuple_GetItem(seq, 1), &s->in_view, p_PyTuple_Size(in_vrs),
+                            &why) != 0) {
             rc = -1;
-        } else if (get_view(item[3], &s->out_view, PySequence_Fast_GET_SIZE(out_vrs), &why)
-                   != 0) {
+        } else if (get_view(p_PyTuple_GetItem(seq, 3), &s->out_view, p_PyTuple_Size(out_vrs),
+                            &why) != 0) {
             p_PyBuffer_Release(&s->in_view);
             rc = -1;
         } else {
@@ -427,11 +424,8 @@ static int construct(DcsInstance *in, DcsSlave *s)
     }
     if (rc == 0)
         obj = p_PyObject_Call(s->cls, args, kwargs);
-    if (obj != NULL) {
-        PyObject *self_only[1] = {obj};
-        q = p_PyObject_VectorcallMethod(dcs_py.get_log_queue, self_only,
-                                        1 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
-    }
+    if (obj != NULL)
+        q = p_PyObject_CallMethodObjArgs(obj, dcs_py.get_log_queue, NULL);
     rc = q != NULL ? 0 : -1;
     if (rc == 0)
         rc = bind_buffers(in, &fresh, obj) == 0 ? 0 : -2; /* -2: already logged */
@@ -570,19 +564,13 @@ fmi2Status dcs_slave_call(DcsInstance *in, DcsCall call)
     return status;
 }
 
-fmi2Status dcs_slave_do_step(DcsInstance *in, double t, double h)
+/* The Python part of a step: do_step(t, h), or _fmi2_compiled_step_failed(code, t, h) after
+ * a compiled step returned code != 0. */
+static fmi2Status do_step_in_python(DcsInstance *in, double t, double h, int code)
 {
-    DcsSlave *s = in->slave;
-    int code = 0;
-    PyGILState_STATE gil;
+    PyGILState_STATE gil = p_PyGILState_Ensure();
     PyObject *args[3] = {NULL, NULL, NULL};
     fmi2Status status;
-    if (s->step != NULL) {
-        code = s->step(s->step_context, t, h); /* no GIL, no Python */
-        if (code == 0)
-            return fmi2OK;
-    }
-    gil = p_PyGILState_Ensure();
     args[0] = p_PyFloat_FromDouble(t);
     args[1] = p_PyFloat_FromDouble(h);
     if (code != 0)
@@ -600,6 +588,18 @@ fmi2Status dcs_slave_do_step(DcsInstance *in, double t, double h)
     dcs_decref(args[2]);
     status = dcs_slave_leave(in, status, "fmi2DoStep");
     p_PyGILState_Release(gil);
+    return status;
+}
+
+fmi2Status dcs_slave_do_step(DcsInstance *in, double t, double h)
+{
+    DcsSlave *s = in->slave;
+    int compiled = s->step != NULL, code = 0;
+    fmi2Status status = fmi2OK;
+    if (compiled)
+        code = s->step(s->step_context, t, h); /* no GIL, no Python */
+    if (!compiled || code != 0)
+        status = do_step_in_python(in, t, h, code);
     return status;
 }
 
@@ -665,8 +665,9 @@ static PyObject *vr_list(const fmi2ValueReference vr[], size_t nvr)
         if (v == NULL) {
             dcs_decref(l);
             l = NULL;
-        } else {
-            PyList_SET_ITEM(l, (Py_ssize_t)i, v);
+        } else if (p_PyList_SetItem(l, (Py_ssize_t)i, v) != 0) { /* steals v */
+            dcs_decref(l);
+            l = NULL;
         }
     }
     return l;
@@ -693,7 +694,7 @@ static fmi2Status convert_out(DcsInstance *in, PyObject *seq, const fmi2ValueRef
     fmi2Status status = fmi2OK;
     size_t i;
     for (i = 0; i < nvr && status < fmi2Error; i++) {
-        PyObject *item = PySequence_Fast_GET_ITEM(seq, (Py_ssize_t)i);
+        PyObject *item = p_PyTuple_GetItem(seq, (Py_ssize_t)i); /* borrowed */
         switch (type) {
         case DCS_REAL:
             ((fmi2Real *)out)[i] = p_PyFloat_AsDouble(item);
@@ -712,7 +713,8 @@ static fmi2Status convert_out(DcsInstance *in, PyObject *seq, const fmi2ValueRef
             ((fmi2Boolean *)out)[i] = p_PyObject_IsTrue(item) > 0 ? fmi2True : fmi2False;
             break;
         case DCS_STRING: {
-            const char *s = PyUnicode_Check(item) ? p_PyUnicode_AsUTF8AndSize(item, NULL) : NULL;
+            const char *s = dcs_isinstance(item, dcs_py.str_type)
+                            ? p_PyUnicode_AsUTF8AndSize(item, NULL) : NULL;
             if (s == NULL && !p_PyErr_Occurred()) {
                 dcs_log(in, fmi2Error, "logStatusError", "%s: %s: value of vr %u is not a "
                         "str", in->name, fn, vr[i]);
@@ -736,20 +738,18 @@ static fmi2Status get_through_python(DcsInstance *in, const fmi2ValueReference v
     PyObject *vrs, *res = NULL, *seq = NULL;
     vrs = vr_list(vr, nvr);
     if (vrs != NULL) {
-        PyObject *args[2] = {in->slave->obj, vrs};
-        res = p_PyObject_VectorcallMethod(getter_name(type), args,
-                                          2 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
+        res = p_PyObject_CallMethodObjArgs(in->slave->obj, getter_name(type), vrs, NULL);
         dcs_decref(vrs);
     }
     if (res != NULL) {
-        seq = p_PySequence_Fast(res, "get_* must return a sequence");
+        seq = p_PySequence_Tuple(res); /* get_* must return a sequence */
         dcs_decref(res);
     }
     if (seq == NULL) {
         status = log_exception(in, fn);
-    } else if ((size_t)PySequence_Fast_GET_SIZE(seq) != nvr) {
+    } else if ((size_t)p_PyTuple_Size(seq) != nvr) {
         dcs_log(in, fmi2Error, "logStatusError", "%s: %s: the slave returned %zd values for "
-                "%zu value references", in->name, fn, PySequence_Fast_GET_SIZE(seq), nvr);
+                "%zu value references", in->name, fn, p_PyTuple_Size(seq), nvr);
         status = fmi2Error;
     } else {
         if (type == DCS_STRING) { /* the strings live as long as the sequence */
@@ -808,9 +808,8 @@ static fmi2Status set_through_python(DcsInstance *in, const fmi2ValueReference v
     vals = p_PyList_New((Py_ssize_t)nvr);
     for (i = 0; vrs != NULL && vals != NULL && i < nvr; i++) {
         PyObject *v = value_in(values, i, type);
-        if (v == NULL)
+        if (v == NULL || p_PyList_SetItem(vals, (Py_ssize_t)i, v) != 0) /* steals v */
             break;
-        PyList_SET_ITEM(vals, (Py_ssize_t)i, v);
     }
     if (vrs == NULL || vals == NULL || i < nvr) {
         status = log_exception(in, fn);

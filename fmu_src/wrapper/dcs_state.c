@@ -11,18 +11,17 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define STATE_MAGIC 0x44435353u /* "DCSS" */
-
 typedef struct {
-    unsigned magic;
     PyObject *obj;
     PyObject *bytes; /* cached serialization */
 } DcsFmuState;
 
+/* The live states of this library (any instance's): a handle is valid only if listed. */
+static DcsRegistry g_states = DCS_REGISTRY_INIT;
+
 static DcsFmuState *as_state(fmi2FMUstate s)
 {
-    DcsFmuState *st = (DcsFmuState *)s;
-    return st != NULL && st->magic == STATE_MAGIC ? st : NULL;
+    return dcs_registry_contains(&g_states, s) ? (DcsFmuState *)s : NULL;
 }
 
 static void drop(DcsFmuState *st)
@@ -39,8 +38,10 @@ static fmi2Status store(DcsInstance *in, fmi2FMUstate *state, PyObject *obj, con
     fmi2Status status = fmi2OK;
     if (st == NULL) {
         st = (DcsFmuState *)calloc(1, sizeof *st);
-        if (st != NULL)
-            st->magic = STATE_MAGIC;
+        if (st != NULL && dcs_registry_add(&g_states, st) != 0) {
+            free(st);
+            st = NULL;
+        }
     } else {
         drop(st);
     }
@@ -58,9 +59,8 @@ static fmi2Status store(DcsInstance *in, fmi2FMUstate *state, PyObject *obj, con
 fmi2Status dcs_state_get(DcsInstance *in, fmi2FMUstate *state)
 {
     PyGILState_STATE gil = p_PyGILState_Ensure();
-    PyObject *self_only[1] = {dcs_slave_object(in)};
-    PyObject *obj = p_PyObject_VectorcallMethod(dcs_py.get_fmu_state, self_only,
-                                                1 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
+    PyObject *obj = p_PyObject_CallMethodObjArgs(dcs_slave_object(in), dcs_py.get_fmu_state,
+                                                 NULL);
     fmi2Status status;
     if (obj == NULL) {
         status = dcs_slave_exception(in, "fmi2GetFMUstate");
@@ -85,10 +85,9 @@ fmi2Status dcs_state_set(DcsInstance *in, fmi2FMUstate state)
                 in->name);
     } else {
         PyGILState_STATE gil = p_PyGILState_Ensure();
-        PyObject *args[2] = {dcs_slave_object(in), st->obj};
         status = dcs_slave_status(
-            in, p_PyObject_VectorcallMethod(dcs_py.set_fmu_state, args,
-                                            2 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL),
+            in, p_PyObject_CallMethodObjArgs(dcs_slave_object(in), dcs_py.set_fmu_state,
+                                             st->obj, NULL),
             "fmi2SetFMUstate");
         status = dcs_slave_leave(in, status, "fmi2SetFMUstate");
         p_PyGILState_Release(gil);
@@ -100,11 +99,10 @@ fmi2Status dcs_state_free(DcsInstance *in, fmi2FMUstate *state)
 {
     DcsFmuState *st = state != NULL ? as_state(*state) : NULL;
     fmi2Status status = fmi2OK;
-    if (st != NULL) {
+    if (st != NULL && dcs_registry_remove(&g_states, st)) {
         PyGILState_STATE gil = p_PyGILState_Ensure();
         drop(st);
         p_PyGILState_Release(gil);
-        st->magic = 0;
         free(st);
         *state = NULL;
     } else if (state != NULL && *state != NULL) {
@@ -120,12 +118,11 @@ static PyObject *state_bytes(DcsInstance *in, DcsFmuState *st, const char *fn,
                              fmi2Status *status)
 {
     if (st->bytes == NULL) {
-        PyObject *args[2] = {dcs_slave_object(in), st->obj};
-        PyObject *b = p_PyObject_VectorcallMethod(dcs_py.to_bytes, args,
-                                                  2 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
+        PyObject *b = p_PyObject_CallMethodObjArgs(dcs_slave_object(in), dcs_py.to_bytes,
+                                                   st->obj, NULL);
         if (b == NULL) {
             *status = dcs_slave_exception(in, fn);
-        } else if (!PyBytes_Check(b)) {
+        } else if (!dcs_isinstance(b, dcs_py.bytes_type)) {
             dcs_decref(b);
             dcs_log(in, fmi2Error, "logStatusError", "%s: %s: _fmu_state_to_bytes did not "
                     "return bytes", in->name, fn);
@@ -149,7 +146,7 @@ fmi2Status dcs_state_size(DcsInstance *in, fmi2FMUstate state, size_t *size)
         PyGILState_STATE gil = p_PyGILState_Ensure();
         PyObject *b = state_bytes(in, st, "fmi2SerializedFMUstateSize", &status);
         if (b != NULL)
-            *size = (size_t)PyBytes_GET_SIZE(b);
+            *size = (size_t)p_PyBytes_Size(b);
         dcs_slave_drain(in);
         p_PyGILState_Release(gil);
     }
@@ -168,13 +165,13 @@ fmi2Status dcs_state_serialize(DcsInstance *in, fmi2FMUstate state, fmi2Byte out
     } else {
         PyGILState_STATE gil = p_PyGILState_Ensure();
         PyObject *b = state_bytes(in, st, "fmi2SerializeFMUstate", &status);
-        size_t n = b != NULL ? (size_t)PyBytes_GET_SIZE(b) : 0;
+        size_t n = b != NULL ? (size_t)p_PyBytes_Size(b) : 0;
         if (b != NULL && size < n) {
             dcs_log(in, fmi2Error, "logStatusError", "%s: fmi2SerializeFMUstate: buffer of "
                     "%zu bytes, %zu needed", in->name, size, n);
             status = fmi2Error;
         } else if (b != NULL) {
-            memcpy(out, PyBytes_AS_STRING(b), n);
+            memcpy(out, p_PyBytes_AsString(b), n);
         }
         dcs_slave_drain(in);
         p_PyGILState_Release(gil);
@@ -194,9 +191,8 @@ fmi2Status dcs_state_deserialize(DcsInstance *in, const fmi2Byte bytes[], size_t
         PyGILState_STATE gil = p_PyGILState_Ensure();
         PyObject *obj = NULL, *b = p_PyBytes_FromStringAndSize(bytes, (Py_ssize_t)size);
         if (b != NULL) {
-            PyObject *args[2] = {dcs_slave_object(in), b};
-            obj = p_PyObject_VectorcallMethod(dcs_py.from_bytes, args,
-                                              2 | PY_VECTORCALL_ARGUMENTS_OFFSET, NULL);
+            obj = p_PyObject_CallMethodObjArgs(dcs_slave_object(in), dcs_py.from_bytes, b,
+                                               NULL);
             dcs_decref(b);
         }
         if (obj == NULL)

@@ -8,11 +8,14 @@
  *   dcs_discover.c    finding a Python for a host without one (checked in child processes)
  *   dcs_slave.c       the pythonfmu slave object: calls, the status protocol, values, buffers
  *   dcs_state.c       FMU state objects and their serialization
+ *   dcs_registry.c    the sets of live instances and states (handles are looked up, never
+ *                     probed through a pointer that may be freed)
  * Only dcs_python.c, dcs_slave.c and dcs_state.c include Python.h (dcs_python.h).
  */
 #ifndef DCS_WRAPPER_H
 #define DCS_WRAPPER_H
 
+#include <pthread.h>
 #include <stddef.h>
 
 #include "fmi2/fmi2Functions.h"
@@ -40,7 +43,6 @@ typedef struct DcsSlave DcsSlave; /* Python side of an instance (dcs_slave.c) */
 typedef int (*DcsCompiledStep)(void *context, double t, double h);
 
 typedef struct {
-    unsigned magic;
     DcsState state;
     char *name;
     char *resources; /* file system path of resources/, no trailing slash */
@@ -56,16 +58,30 @@ typedef struct {
     DcsSlave *slave;
 } DcsInstance;
 
+/* ------------------------------------------------------------- dcs_registry.c */
+/* A mutex-guarded set of pointers (the live handles of one kind). */
+typedef struct {
+    pthread_mutex_t lock;
+    const void **slots;
+    size_t cap, n;
+} DcsRegistry;
+#define DCS_REGISTRY_INIT {PTHREAD_MUTEX_INITIALIZER, NULL, 0, 0}
+int dcs_registry_add(DcsRegistry *r, const void *p);      /* 0, or -1 out of memory */
+int dcs_registry_contains(DcsRegistry *r, const void *p); /* 1 if p is in r */
+int dcs_registry_remove(DcsRegistry *r, const void *p);   /* 1 if p was in r (removed) */
+
 /* ------------------------------------------------------------- dcs_instance.c */
 DcsInstance *dcs_instance_new(fmi2String name, const fmi2CallbackFunctions *functions,
                               int visible, int logging_on);
-DcsInstance *dcs_instance_of(fmi2Component c); /* NULL unless a live instance */
+DcsInstance *dcs_instance_of(fmi2Component c); /* NULL unless a live instance (registry) */
 void dcs_instance_free(DcsInstance *in);
 int dcs_set_categories(DcsInstance *in, int logging_on, size_t n, const fmi2String categories[]);
 char *dcs_uri_to_path(const char *uri);
 char *dcs_read_resource_line(const char *resources, const char *file);
 char *dcs_own_model_identifier(void);
 char *dcs_strdup(const char *s);
+/* printf into a new string (malloc'd; NULL if out of memory). */
+char *dcs_format(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 /* Queue a message (any thread, GIL or not); delivered by dcs_flush without the GIL. */
 void dcs_log(DcsInstance *in, fmi2Status status, const char *category, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));

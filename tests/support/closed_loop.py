@@ -9,7 +9,6 @@ export. Our master records every output at every base step, from t = 0.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,8 +17,8 @@ import numpy as np
 from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.master.ssp import export_ssp
 from drillcosim.cosim.master.system import SystemSpec
-from drillcosim.cosim.scenario.scene_system import scene_system
-from drillcosim.plant.scene import load_scene
+from drillcosim.cosim.scenario.build import build_system
+from drillcosim.cosim.scenario.config import load_config
 
 __all__ = ["STEP", "STOP", "ClosedLoop", "closed_loop"]
 
@@ -62,9 +61,11 @@ class ClosedLoop:
 def closed_loop(plant_fmu: Path, controller_fmu: Path, folder: Path, step: float = STEP,
                 stop: float = STOP, name: str = "closed_loop") -> ClosedLoop:
     """Build, export and run the comparison loop with the given FMUs."""
-    sc = load_scene("paper_closed_loop")
-    sc = dataclasses.replace(sc, cosim={"step": step, "stop_time": stop, "algorithm": "jacobi"})
-    ss = scene_system(sc, plant_fmu=plant_fmu, controller_fmu=controller_fmu)
+    config = load_config("paper_closed_loop", {
+        "cosim.step": step, "cosim.stop_time": stop, "cosim.algorithm": "jacobi",
+        "cosim.order": ["plant", "controller"]}, plant_fmu=plant_fmu,
+        controller_fmu=controller_fmu)
+    ss = build_system(config, "fmu")
     system = ss.system
     assert system.algorithm == "jacobi"
     assert all(c.delay == 0 and c.coupling == "zoh" for c in system.connections)

@@ -9,10 +9,14 @@
  * time and the outputs, "%.17g" comma-separated. Communication points are k * STEP, each step
  * size the difference of two (as fmpy.simulate_fmu steps). Exit status: 0 all calls OK, 3 fmi2Instantiate
  * returned NULL, 4 a call returned fmi2Error or worse, 2 bad usage or a missing library.
- * The logger prints "[instance status category] message" to stderr.
+ * The logger prints "[instance status category] message" to stderr. After fmi2Instantiate
+ * the host prints "HOST locale=<LC_CTYPE> sigint=<default|changed>" to stderr: what an FMU
+ * that starts Python in the process left of the host's locale and signal handlers.
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
+#include <locale.h>
+#include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -78,6 +82,13 @@ int main(int argc, char **argv)
         c = fmi2Instantiate("chost", fmi2CoSimulation, "", uri, &cb, fmi2False, fmi2True);
         if (c == NULL)
             return 3;
+        {
+            struct sigaction sa;
+            const char *loc = setlocale(LC_CTYPE, NULL);
+            sigaction(SIGINT, NULL, &sa);
+            fprintf(stderr, "HOST locale=%s sigint=%s\n", loc != NULL ? loc : "?",
+                    sa.sa_handler == SIG_DFL ? "default" : "changed");
+        }
         st = fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0);
         if (st < fmi2Error)
             st = fmi2EnterInitializationMode(c);

@@ -61,8 +61,13 @@ def problems(fmu: Path) -> list[str]:
         return [f"unreadable: {exc!r}"]
     ident = md.coSimulation.modelIdentifier
     found = []
-    for member in (f"binaries/{platform}/{ident}.so", "resources/slavemodule.txt",
-                   f"resources/{project_build.PYTHONFMU_VENDORED}/fmi2slave.py"):
+    members = [f"binaries/{platform}/{ident}.so", "resources/slavemodule.txt"]
+    try:  # the vendored pythonfmu, under the name of this build
+        pfmu = project_build.shipped_modules(fmu)[project_build.PYTHONFMU_VENDORED]
+        members.append(f"resources/{pfmu}/fmi2slave.py")
+    except (KeyError, ValueError):
+        found.append(f"{project_build.BUILD_INFO} missing or unreadable")
+    for member in members:
         if member not in names:
             found.append(f"{member} missing")
     found += [f"fmpy validation: {p}" for p in validate_fmu(str(fmu))]

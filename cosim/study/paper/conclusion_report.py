@@ -1,4 +1,4 @@
-"""Maps and tables of the conclusion study (:mod:`cosim.study.conclusion`).
+"""Maps and tables of the conclusion study (:mod:`cosim.study.paper.conclusion`).
 
 * ``conclusion_stability.png``: per sites-per-span panel, each (delay, gain) point's verdict
   from the simulation (:func:`cosim.study.verdict.judge` against the gain-0 run of the same
@@ -16,10 +16,16 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from drillcosim.cosim.master.files import atomic_write
+import numpy as np
 
+from drillcosim.cosim.master.files import atomic_write
+from drillcosim.cosim.scenario.config import load_config
+
+from ..ensemble import ensemble_stat
+from ..table import rows_csv
+from ..verdict import GROWTH_MARGIN, NOISE_FACTOR, judge
+from .calibration import CalibrationTable, PlantChoice
 from .conclusion import DELAYS, GAINS, PER_SPAN, SCENE, ConclusionTable
-from .verdict import GROWTH_MARGIN, NOISE_FACTOR, judge
 
 __all__ = ["answer", "conclusion_rows", "conclusion_markdown", "member_ensembles",
            "open_ensemble", "plot_benefit", "plot_stability", "report"]
@@ -34,12 +40,7 @@ def open_ensemble(confirm_rows: Sequence[Mapping[str, Any]], scene: str = SCENE
     """The open-loop ensemble of the scene's calibrated set (the calibration's confirm stage):
     mean and sd over its members of the long/short span RMS [m] (sqrt(mean^2 + std^2) of the
     steady window) and the long span's contact time [s]; empty if the set is not there."""
-    from drillcosim.plant.scene import load_scene
-
-    from .calibration import PlantChoice
-    from .ensemble import ensemble_stat
-
-    p = load_scene(scene).plant
+    p = load_config(scene).scene.plant
     label = PlantChoice(p.bit.weight_on_bit, p.top_drive.axial_stiffness,
                         p.damping.lateral_ratio, p.unbalance.body, p.gravity).label
     ok = [r for r in confirm_rows if r["group"] == label and r["status"] == "ok"]
@@ -100,8 +101,6 @@ def member_ensembles(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     """Per configuration run with more than one member: member count, completed members,
     long-span RMS mean and sd [m] (over the completed), long contact time mean [s], the largest
     growth rate [1/s], and ``benefit_long`` = 1 - mean RMS / the gain-0 ensemble's mean RMS."""
-    from .ensemble import ensemble_stat
-
     groups: dict[tuple[float, float, float], list[Mapping[str, Any]]] = {}
     for r in rows:
         groups.setdefault((r["per_span"], r["gain"], r["delay"]), []).append(r)
@@ -179,7 +178,6 @@ def plot_stability(rows: Sequence[Mapping[str, Any]], path: Path) -> Path:
 
 def plot_benefit(rows: Sequence[Mapping[str, Any]], path: Path) -> Path:
     """Long-span benefit (colour, value written) per sites-per-span; unstable crossed out."""
-    import numpy as np
 
     from drillcosim.cosim.scenario.plots import save_figure
 
@@ -252,9 +250,6 @@ def report(out_dir: str | Path, figures: str | Path | None = None) -> str:
     """Write the CSV and the two maps into ``figures`` (default ``out_dir/report``); return
     the markdown (table and the answer). The open-loop ensemble is read from the sibling
     ``confirm`` table of the calibration, if there."""
-    from .calibration import CalibrationTable
-    from .calibration_report import rows_csv
-
     out = Path(out_dir)
     fig_dir = Path(figures) if figures is not None else out / "report"
     fig_dir.mkdir(parents=True, exist_ok=True)

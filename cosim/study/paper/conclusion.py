@@ -4,9 +4,10 @@ The paper concludes that more actuation sites per span with lower gains would co
 whirl better, and that delay limits the gain. This study runs the calibrated closed loop
 (``paper_calibrated_closed_loop``) with 1, 2 or 3 sites per span (:func:`site_joints`), gains
 :data:`GAINS` and actuator delays :data:`DELAYS` (0 to 2 ms at the 0.25 ms communication
-step), through the one master with its in-process slaves
-(:func:`cosim.scenario.inprocess.inprocess_system`: the controller FMU serves two sites, so
-the FMUs cannot run 4 or 6 sites yet), and measures per point
+step), through the one builder with its in-process engine
+(:func:`cosim.scenario.build.build_system`, ``engine="inprocess"``: the FMUs built for a
+layout give the same numbers, ``tests/test_conclusion_fmus.py``, at the cost of the FMI
+boundary), and measures per point
 
 * stability: ``status`` (diverged or not), the strain envelope's ``growth_rate`` [1/s]
   (:func:`cosim.study.point.metrics`), next to the linear prediction of the sampled loop
@@ -15,7 +16,7 @@ the FMUs cannot run 4 or 6 sites yet), and measures per point
   third of the run: :func:`cosim.study.scene_stats.run_statistics`, RMS = sqrt(mean^2 +
   std^2)) and contact time [s], against the gain-0 run of the same system (the first point)
   and the open loop's 12-member ensemble of the calibration's confirm stage
-  (:mod:`cosim.study.conclusion_report`).
+  (:mod:`cosim.study.paper.conclusion_report`).
 
 Each point is one run (member 0, unperturbed); the open-loop ensemble gives the spread one
 run has.
@@ -32,12 +33,20 @@ from pathlib import Path
 from typing import Any
 
 from drillcosim.cosim.master.files import atomic_write
+from drillcosim.cosim.scenario.config import SceneConfig, load_config
+from drillcosim.cosim.scenario.summary import span_info
+from drillcosim.plant.model import DrillstringModel
 
-from .table import ResultTable, full_row
+from ..ensemble import lateral_perturbation
+from ..point import PointOptions, metrics, simulate_point
+from ..scene_stats import run_statistics
+from ..stability import LoopModel
+from ..sweep import execute_points
+from ..table import ResultTable, full_row
 
 __all__ = ["DELAYS", "ENSEMBLES", "EXTRA", "GAINS", "MEMBERS", "PER_SPAN", "SCENE",
            "ConclusionTable", "SitePoint", "conclusion_points", "measure_sites", "predictions",
-           "run_conclusion", "site_joints"]
+           "run_conclusion", "site_config", "site_joints"]
 
 SCENE = "paper_calibrated_closed_loop"
 PER_SPAN = (1, 2, 3)
@@ -140,49 +149,40 @@ class ConclusionTable(ResultTable):
         return [full_row(r, self.columns, self.text_columns) for r in rows]
 
 
-def site_scene(scene: str, per_span: int, gain: float, delay: float, step: float,
-               stop_time: float):
-    """The loaded scene of a point (``[actuators] joints`` from :func:`site_joints`)."""
-    from drillcosim.plant.scene import load_scene
-
-    base = load_scene(scene)
-    joints = list(site_joints(base.plant, per_span))
-    return load_scene(scene, overrides={
-        "actuators": {"joints": joints},
-        "controller": {"enabled": True, "gain": float(gain)},
-        "cosim": {"step": float(step), "stop_time": float(stop_time),
-                  "actuator_delay": float(delay)}})
+def site_config(scene: str, per_span: int, gain: float, delay: float, step: float,
+                stop_time: float) -> SceneConfig:
+    """The configuration of a point (``actuators.joints`` from :func:`site_joints`, the
+    controller on at ``gain``)."""
+    plant = load_config(scene).scene.plant
+    joints = site_joints(plant, per_span)
+    over = {"controller.enabled": True, "controller.gain": float(gain), "cosim.step": float(step),
+            "cosim.stop_time": float(stop_time), "cosim.actuator_delay": float(delay)}
+    if joints != plant.actuator_joints:  # the scene's own layout needs no override (its FMUs)
+        over["actuators.joints"] = list(joints)
+    return load_config(scene, over)
 
 
 def measure_sites(scene: str, per_span: int, gain: float, delay: float, step: float,
                   stop_time: float, member: int = 0) -> dict[str, Any]:
-    """Run one point in process (:func:`~cosim.scenario.inprocess.inprocess_system`) and
-    measure it (module docstring; columns :data:`RESULT_COLUMNS`)."""
-    from drillcosim.cosim.scenario.inprocess import inprocess_system
-    from drillcosim.cosim.scenario.scene_system import span_info
-
-    from .point import PointOptions, metrics, run_system
-    from .scene_stats import run_statistics
-
+    """Run one point in process and measure it (module docstring; columns
+    :data:`RESULT_COLUMNS`)."""
     wall0 = time.perf_counter()
-    sc = site_scene(scene, per_span, gain, delay, step, stop_time)
-    ss, slaves = inprocess_system(sc)
+    config = site_config(scene, per_span, gain, delay, step, stop_time)
+    offset = None
     if member:
-        from .ensemble import lateral_perturbation
-
-        sim = slaves["plant"].sim
-        sim.y = sim.y + lateral_perturbation(sim.model, EPS, SEED, member)
+        model = DrillstringModel(config.scene.plant, "full3d")
+        offset = lateral_perturbation(model, EPS, SEED, member)
     opts = PointOptions(rms_fraction=STEADY_FRACTION)
-    data, reason = run_system(ss, slaves, opts)
+    data, reason = simulate_point(config, opts, "inprocess", None, offset)
     t = data["time"]
     diverged = bool(reason)
-    spans = {b: str(v["span"]) for b, v in span_info(sc).items()}
-    m = metrics(data, spans, len(sc.plant.actuator_joints), opts, diverged)
-    st = run_statistics(data, sc) if not diverged else {}
+    spans = {b: str(v["span"]) for b, v in span_info(config.scene).items()}
+    m = metrics(data, spans, config.n_sites, opts, diverged)
+    st = run_statistics(data, config) if not diverged else {}
     row: dict[str, Any] = {
         "status": "diverged" if diverged else "ok", "reason": reason,
         "end_time": float(t[-1]) if len(t) else 0.0,
-        "joints": " ".join(str(j) for j in sc.plant.actuator_joints),
+        "joints": " ".join(str(j) for j in config.scene.plant.actuator_joints),
         "growth_rate": m["growth_rate"], "growth_noise": m["growth_noise"],
         "peak_force": m["peak_force"], "peak_power": m["peak_power"]}
     for span in ("long", "short"):
@@ -215,12 +215,10 @@ def predictions(per_span: Sequence[int] = PER_SPAN, gains: Sequence[float] = GAI
                 ) -> list[dict[str, float]]:
     """The linear prediction of the sampled loop per point: ``growth_rate`` [1/s]
     (``ln(rho) / H``) and the critical gain [N/strain] at each delay."""
-    from .stability import LoopModel
-
     pairs = [(g, d) for d in delays for g in gains] + [e for e in EXTRA if e[1] in delays]
     out = []
     for n in per_span:
-        lm = LoopModel.from_scene(site_scene(scene, n, 1.0, 0.0, step, STOP_TIME))
+        lm = LoopModel.from_scene(site_config(scene, n, 1.0, 0.0, step, STOP_TIME))
         kc = {d: lm.critical_gain(step, float(d), gain_min=1e5, gain_max=1e11, per_decade=4)
               for d in delays}
         for g, d in pairs:
@@ -234,12 +232,10 @@ def run_conclusion(out_dir: str | Path, *, workers: int | None = None, scheduler
                    progress: bool | None = None, points: Sequence[SitePoint] | None = None
                    ) -> list[dict[str, Any]]:
     """Run (or resume) the grid into ``out_dir`` and write ``prediction.json``; returns rows."""
-    from .sweep import execute_points
-
     pts = list(points) if points is not None else conclusion_points()
     table = ConclusionTable(out_dir)
-    meta = {"scene": SCENE, "engine": "in-process slaves of the one master "
-            "(cosim.scenario.inprocess.inprocess_system)", "per_span": list(PER_SPAN),
+    meta = {"scene": SCENE, "engine": "inprocess (cosim.scenario.build.build_system)",
+            "per_span": list(PER_SPAN),
             "gains": list(GAINS), "delays_s": list(DELAYS), "step_s": STEP,
             "stop_time_s": STOP_TIME, "steady_fraction": STEADY_FRACTION}
     execute_points(pts, table, measure_sites, workers=workers, scheduler=scheduler,

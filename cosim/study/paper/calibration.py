@@ -49,8 +49,22 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from .scene_stats import ID_COLUMNS, STAT_COLUMNS, TEXT_COLUMNS, ScenePoint, SceneTable, aggregate
-from .table import full_row
+from drillcosim.cosim.master.errors import UserError
+from drillcosim.cosim.scenario.config import load_config
+from drillcosim.plant import layout
+from drillcosim.plant.model import DrillstringModel
+
+from ..scene_stats import (
+    ID_COLUMNS,
+    STAT_COLUMNS,
+    TEXT_COLUMNS,
+    ScenePoint,
+    SceneTable,
+    aggregate,
+    measure_scene,
+)
+from ..sweep import execute_points
+from ..table import full_row
 
 __all__ = ["BASE_SCENE", "PAPER_FIXED", "CalibrationTable", "PlantChoice", "RANGES", "STAGES",
            "TARGETS", "TODAY", "best_set", "calibration_points", "coarse_sets", "collar_weight",
@@ -76,11 +90,7 @@ STAGE_MEMBERS = {"coarse": 2, "refine": 4, "confirm": 12}
 
 def collar_weight(scene: str = BASE_SCENE, gravity: float = 9.81) -> float:
     """Weight of the modelled collar section, n m g [N] (48.7 kN for the paper scenes)."""
-    from drillcosim.plant.model import DrillstringModel
-    from drillcosim.plant.scene import load_scene
-
-    sc = load_scene(scene)
-    m = DrillstringModel(sc.plant, "full3d")
+    m = DrillstringModel(load_config(scene).scene.plant, "full3d")
     return m.n * m.derived.mass * gravity
 
 
@@ -139,12 +149,11 @@ class PlantChoice:
                                  f"[{lo:g}, {hi:g}] {unit}")
 
     def overrides(self) -> dict[str, Any]:
-        """Nested scene overrides of :data:`BASE_SCENE`."""
-        return {"gravity": float(self.gravity),
-                "bit": {"weight_on_bit": float(self.weight_on_bit)},
-                "top_drive": {"axial_stiffness": float(self.top_axial_stiffness)},
-                "damping": {"lateral_ratio": float(self.lateral_ratio)},
-                "unbalance": {"body": int(self.unbalance_body)}}
+        """The set as scene keys of :data:`BASE_SCENE` by key path."""
+        return {"gravity": float(self.gravity), "bit.weight_on_bit": float(self.weight_on_bit),
+                "top_drive.axial_stiffness": float(self.top_axial_stiffness),
+                "damping.lateral_ratio": float(self.lateral_ratio),
+                "unbalance.body": int(self.unbalance_body)}
 
     @property
     def label(self) -> str:
@@ -188,18 +197,14 @@ def hanging_weight_on_bit(top_axial_stiffness: float, gravity: float = 9.81,
     float
         [N] (24.6 kN at 1e9 N/m, ~half the 48.7 kN weight; 36.5 kN at 2e7 N/m).
     """
-    from drillcosim.plant import layout
-    from drillcosim.plant.model import DrillstringModel
-    from drillcosim.plant.scene import load_scene
-
     def rock(wob: float) -> float:
-        sc = load_scene(scene, overrides={"gravity": gravity, "bit": {"weight_on_bit": wob},
-                                          "top_drive": {"axial_stiffness": top_axial_stiffness}})
-        m = DrillstringModel(sc.plant, "full3d")
+        plant = load_config(scene, {"gravity": gravity, "bit.weight_on_bit": wob,
+                                    "top_drive.axial_stiffness": top_axial_stiffness}).scene.plant
+        m = DrillstringModel(plant, "full3d")
         m.initial_state()
         return float(m.p[layout.ZBIT0])
 
-    sc = load_scene(scene)
+    sc = load_config(scene).scene
     z0, z1 = rock(0.0), rock(1e3)
     return (sc.plant.pipe.length - z0) / ((z1 - z0) / 1e3)
 
@@ -368,7 +373,7 @@ def stage_sets(stage: str, out_dir: str | Path) -> list[PlantChoice]:
 
 def _rows(folder: Path, stage: str) -> list[dict[str, Any]]:
     if not (folder / "results.csv").exists():
-        raise FileNotFoundError(f"{folder}/results.csv: run the '{stage}' stage first "
+        raise UserError(f"{folder}/results.csv: run the '{stage}' stage first "
                                 f"(drillcosim calibrate {stage} --out {folder.parent})")
     return CalibrationTable(folder).rows
 
@@ -393,9 +398,6 @@ def run_stage(stage: str, out_dir: str | Path, *, members: int | None = None,
     list of dict
         :func:`rank` of the stage's table.
     """
-    from .scene_stats import measure_scene
-    from .sweep import execute_points
-
     sets = stage_sets(stage, out_dir)
     k = STAGE_MEMBERS[stage] if members is None else int(members)
     points = calibration_points(sets, k)

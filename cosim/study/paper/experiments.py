@@ -3,7 +3,7 @@ calibrated ones, as ensembles.
 
 :data:`EXPERIMENTS` lists each experiment's scene pair (``paper_<x>`` and
 ``paper_calibrated_<x>``, the latter extending the former with the calibrated plant of
-:mod:`cosim.study.calibration`). :func:`run_experiments` runs ``members`` ensemble members of
+:mod:`cosim.study.paper.calibration`). :func:`run_experiments` runs ``members`` ensemble members of
 each (member 0 unperturbed: the numbers of ``drillcosim run <scene>``) through the sweep
 executors into a :class:`~cosim.study.scene_stats.SceneTable`; :func:`comparison_rows` reduces
 them to the paper's quantities, each next to the paper's value, as ensemble mean +- standard
@@ -18,8 +18,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .ensemble import ensemble_stat
-from .scene_stats import ScenePoint, SceneTable, aggregate
+from ..ensemble import ensemble_stat
+from ..scene_stats import ScenePoint, SceneTable, aggregate, measure_scene
+from ..sweep import execute_points
 
 __all__ = ["EXPERIMENTS", "FAMILIES", "Experiment", "comparison_rows", "experiment_points",
            "markdown_table", "run_experiments"]
@@ -76,9 +77,6 @@ def run_experiments(out_dir: str | Path, members: int = 6, *, workers: int | Non
                     scheduler: Any = None, progress: bool | None = None,
                     families: Sequence[str] = FAMILIES) -> list[dict[str, Any]]:
     """Run (or resume) every experiment's ensemble into ``out_dir``; returns the table rows."""
-    from .scene_stats import measure_scene
-    from .sweep import execute_points
-
     points = experiment_points(members, families)
     table = SceneTable(out_dir)
     meta = {"members": members, "families": list(families),

@@ -1,8 +1,8 @@
 """``drillcosim calibrate``: run the calibration stages and the paper's experiments, and write
 the report (markdown tables on stdout, PNG figures and CSV tables in a folder).
 
-Stages: :mod:`cosim.study.calibration` (``coarse``, ``refine``, ``confirm``; ``all`` runs the
-three) and :mod:`cosim.study.experiments` (``experiments``). ``report`` reads the tables of a
+Stages: :mod:`cosim.study.paper.calibration` (``coarse``, ``refine``, ``confirm``; ``all`` runs the
+three) and :mod:`cosim.study.paper.experiments` (``experiments``). ``report`` reads the tables of a
 study folder and writes
 
 * ``calibration_<stage>.csv`` - per parameter set: the ensemble mean, sd and se of every
@@ -20,15 +20,18 @@ and prints the markdown tables of ``docs/paper_comparison.md``.
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from drillcosim.cosim.master.files import atomic_write
+import numpy as np
 
+from drillcosim.cosim.master.files import atomic_write
+from drillcosim.plant.signals import PLANT, body_signal, ref
+
+from ..scene_stats import SceneTable, simulate_member
+from ..table import rows_csv
 from .calibration import (
     BASE_SCENE,
     KNOB_COLUMNS,
@@ -39,60 +42,14 @@ from .calibration import (
     TODAY,
     CalibrationTable,
     PlantChoice,
+    hanging_weight_on_bit,
     rank,
-    run_stage,
 )
-from .experiments import EXPERIMENTS, FAMILIES, comparison_rows, markdown_table, run_experiments
-from .scene_stats import SceneTable
+from .experiments import EXPERIMENTS, FAMILIES, comparison_rows, markdown_table
 
-__all__ = ["calibrate", "report", "rows_csv"]
+__all__ = ["report"]
 
 MM = 1e3
-
-
-def calibrate(stage: str, out_dir: str | Path = "out/calibration", *,
-              members: int | None = None, workers: int | None = None, scheduler: Any = None,
-              progress: bool | None = None, figures: str | Path | None = None) -> str:
-    """Run a stage (or the report) of the study in ``out_dir``; returns the text to print.
-
-    Parameters
-    ----------
-    stage : {"coarse", "refine", "confirm", "all", "experiments", "conclusion", "report"}
-    out_dir : path-like
-        Study folder: ``coarse/``, ``refine/``, ``confirm/``, ``experiments/``,
-        ``conclusion/`` tables (``conclusion``: :mod:`cosim.study.conclusion`, the sites per
-        span x gain x delay study on the calibrated closed loop, and its maps).
-    members : int, optional
-        Ensemble members per set (default: the stage's).
-    workers, scheduler, progress
-        As for :func:`cosim.study.sweep.execute_sweep`.
-    figures : path-like, optional
-        ``report``: output folder (default ``out_dir/report``).
-    """
-    out = Path(out_dir)
-    if stage in (*STAGES, "all"):
-        text = []
-        for st in (STAGES if stage == "all" else (stage,)):
-            ranked = run_stage(st, out, members=members, workers=workers, scheduler=scheduler,
-                               progress=progress)
-            text += [f"{st}: {len(ranked)} sets in {out / st}; best first:",
-                     ranking_markdown(ranked, 5)]
-        return "\n".join(text)
-    if stage == "experiments":
-        rows = run_experiments(out / "experiments", 6 if members is None else members,
-                               workers=workers, scheduler=scheduler, progress=progress)
-        return markdown_table(comparison_rows(rows))
-    if stage == "conclusion":
-        from .conclusion import run_conclusion
-        from .conclusion_report import report as conclusion_report
-
-        run_conclusion(out / "conclusion", workers=workers, scheduler=scheduler,
-                       progress=progress)
-        return conclusion_report(out / "conclusion", figures)
-    if stage == "report":
-        return report(out, figures)
-    raise ValueError(f"stage = {stage!r}: one of {', '.join((*STAGES, 'all', 'experiments'))}"
-                     ", conclusion, report")
 
 
 # -- tables ---------------------------------------------------------------------------------
@@ -149,26 +106,11 @@ def oat_markdown(ranked: Sequence[Mapping[str, Any]], best: PlantChoice) -> str:
     return "\n".join(lines) + "\n"
 
 
-def rows_csv(rows: Sequence[Mapping[str, Any]]) -> str:
-    """CSV text of dict rows (the first row's keys as columns; NaN empty, floats by repr)."""
-    if not rows:
-        return ""
-    cols = list(rows[0])
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(cols)
-    for r in rows:
-        w.writerow(["" if isinstance(r[c], float) and math.isnan(r[c]) else
-                    (repr(r[c]) if isinstance(r[c], float) else r[c]) for c in cols])
-    return buf.getvalue()
-
-
 # -- figures --------------------------------------------------------------------------------
 def plot_grid(ranked: Sequence[Mapping[str, Any]], path: Path) -> Path:
     """Mean objective of the coarse grid: WOB x damping ratio per top spring (columns) and
     gravity (rows), the better unbalance body per cell; the best cell circled."""
     import matplotlib.pyplot as plt
-    import numpy as np
     from matplotlib.colors import LogNorm
 
     from drillcosim.cosim.scenario.plots import save_figure
@@ -231,8 +173,6 @@ def _oat_sets(ranked: Sequence[Mapping[str, Any]], best: PlantChoice, knob: str
 def hanging_family(ranked: Sequence[Mapping[str, Any]], best: PlantChoice
                    ) -> list[Mapping[str, Any]]:
     """The refine sets of the paper's hook-load mechanism (WOB from the top spring)."""
-    from .calibration import hanging_weight_on_bit
-
     out = []
     for a in ranked:
         if a["gravity"] == 9.81 and a["lateral_ratio"] == best.lateral_ratio and \
@@ -283,9 +223,7 @@ def plot_sensitivity(ranked: Sequence[Mapping[str, Any]], best: PlantChoice, pat
 
 
 def _traces(scene: str, overrides: Mapping[str, Any] | None, members: int, stop: float):
-    from .scene_stats import run_member
-
-    return [run_member(scene, stop, overrides=overrides, member=k)[0] for k in range(members)]
+    return [simulate_member(scene, stop, overrides=overrides, member=k)[0] for k in range(members)]
 
 
 def plot_traces(best: PlantChoice, path: Path, members: int = 4) -> Path:
@@ -303,7 +241,7 @@ def plot_traces(best: PlantChoice, path: Path, members: int = 4) -> Path:
         for j, (body, span) in enumerate(((11, "long"), (26, "short"))):
             ax = axes[i, j]
             for k, d in enumerate(runs):
-                ax.plot(d["time"], d[f"plant.body{body}_radial_deflection"] * MM,
+                ax.plot(d["time"], d[ref(PLANT, body_signal(body, "radial_deflection"))] * MM,
                         lw=1.0 if k == 0 else 0.5, alpha=1.0 if k == 0 else 0.6,
                         label="member 0" if k == 0 else (f"members 1-{members - 1}"
                                                          if k == 1 else None))

@@ -1,0 +1,306 @@
+"""The one builder: a :class:`~.config.SceneConfig` becomes a co-simulation system and its slaves.
+
+:func:`build_system` makes the system every caller runs (``drillcosim run``, the API, sweeps,
+ensembles, the calibration, the conclusion study, SSP export) with up to three instances:
+``plant``, ``controller`` (the strain controller, when ``[controller] enabled``) and
+``top_drive_controller`` (when ``[top_drive_controller] enabled``), connected by name both ways
+(:mod:`.interface`; names from :mod:`plant.signals`):
+
+* sensors: ``plant.strain<s>_<C|E>`` -> ``controller.strain<s>_<C|E>``,
+  ``plant.top_rotary_speed`` / ``plant.top_torque`` -> ``top_drive_controller.*`` (delay
+  ``sensor_delay``);
+* actuators: ``controller.actuator<s>_force_<C|E>`` -> ``plant.actuator<s>_force_<C|E>``,
+  ``top_drive_controller.top_drive_torque`` -> ``plant.top_drive_torque`` (delay
+  ``actuator_delay``).
+
+Two engines, one system:
+
+``"fmu"``
+    FMU files: the user's (:attr:`~.config.SceneConfig.fmu_files`), else the project's, taken
+    from ``build/fmus/`` (or ``fmu_dir``) and built there if missing or stale
+    (:mod:`.scene_fmus`). The plant FMU gets the scene (``scene``: the shipped name, or the
+    file's absolute path) and the plant-parameter overrides as its parameters (scalars only);
+    the controller FMUs get their typed parameters encoded for FMI (:func:`controller_start_values`).
+``"inprocess"``
+    The same models as in-process slaves (:mod:`.inprocess`), built from the configuration: no
+    FMU file is read, the FMI boundary is saved, the numbers are the FMUs' bit for bit.
+
+Either way the system is checked before the first step (causality, type, unit, nothing
+connected twice, start values; every problem one line, :class:`InterfaceError`), and
+:meth:`Master.simulate <cosim.master.master.Master.simulate>` runs it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from drillcosim.controller import MODES, ControllerParams
+from drillcosim.cosim.master.interface import FmuInterface, Port, read_interface
+from drillcosim.cosim.master.slave import Slave
+from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec
+from drillcosim.plant.scene import Scene, scenes_dir
+from drillcosim.plant.signals import (
+    AXES,
+    CONTACT_QUANTITIES,
+    CONTROLLER,
+    PLANT,
+    TOP_DRIVE,
+    actuator_force,
+    actuator_power,
+    body_signal,
+    fmi_unit,
+    ref,
+    site_channels,
+    strain,
+)
+
+from .config import ConfigError, SceneConfig, plant_parameter_paths
+from .inprocess import inprocess_slaves
+from .interface import InterfaceWarning, wire_system
+from .scene_fmus import (
+    TOP_DRIVE_CONTROLLER,
+    controller_recipe,
+    embedded_scene_name,
+    ensure_recipes,
+    plant_recipe,
+    recipe_named,
+)
+
+__all__ = ["ENGINES", "NO_LIMIT", "BuiltSystem", "build_system", "controller_start_values",
+           "scene_recipes", "scene_reference"]
+
+#: How the instances run: FMU files, or the same models in process.
+ENGINES = ("fmu", "inprocess")
+NO_LIMIT = 1e30            #: the controller FMU's "no symmetric force limit"
+
+
+@dataclass(frozen=True)
+class BuiltSystem:
+    """A configuration ready to run.
+
+    Attributes
+    ----------
+    config : SceneConfig
+    engine : {"fmu", "inprocess"}
+    system : SystemSpec
+        Instances, connections (with the delays and coupling) and the master's settings.
+    slaves : dict of str -> Slave
+        Ready-made in-process slaves by instance (``inprocess``; single use: a run closes
+        them); empty for ``fmu`` (the execution loads the FMU files).
+    outputs : tuple of str
+        ``'instance.variable'`` to record: per contact body X, Y, radial deflection and contact
+        force; per site the strains and the actuator power; the bit and top-drive scalars;
+        the scene's ``outputs``; then the controllers' outputs.
+    units : dict of str -> str
+        Every output of every instance (what can be recorded) and its unit (``"1"`` for a
+        strain, ``""`` if undeclared), as the instances declare them.
+    """
+
+    config: SceneConfig
+    engine: str
+    system: SystemSpec
+    slaves: dict[str, Slave]
+    outputs: tuple[str, ...]
+    units: dict[str, str]
+
+
+def scene_reference(scene: Scene) -> str:
+    """Value of the plant FMU's ``scene`` parameter: the name if shipped, else the absolute path."""
+    src = Path(scene.source)
+    if not src.is_file():
+        return scene.name
+    shipped = scenes_dir() / f"{src.stem}.toml"
+    if shipped.is_file() and shipped.resolve() == src.resolve():
+        return src.stem
+    return str(src.resolve())
+
+
+def scene_recipes(config: SceneConfig) -> dict[str, Any]:
+    """The project FMUs the system runs where the configuration names no FMU file, by instance:
+    ``{"plant": FmuRecipe, "controller": ..., "top_drive_controller": ...}`` (controllers only
+    when enabled). Building them ahead: :func:`.scene_fmus.ensure_recipes`."""
+    recipes: dict[str, Any] = {PLANT: plant_recipe(config.scene)}
+    if config.controller.enabled:
+        recipes[CONTROLLER] = controller_recipe(config.scene, config.n_sites,
+                                                config.controller.gain_matrix)
+    if config.top_drive.enabled:
+        recipes[TOP_DRIVE] = recipe_named(TOP_DRIVE_CONTROLLER)
+    return recipes
+
+
+def controller_start_values(params: ControllerParams, n_sites: int) -> dict[str, Any]:
+    """The strain controller's parameters encoded for its FMU (the one place that happens):
+    ``gain`` [N], ``mode`` (Integer: index in :data:`controller.MODES`), ``force_limit`` [N],
+    ``symmetric_force_limit`` [N] (inf -> :data:`NO_LIMIT`), ``switch_on_time`` [s],
+    ``lag_time_constant`` [s], ``enabled``, and the relative gains ``gain_matrix_<i>_<j>`` [1]
+    (the identity when there is no matrix)."""
+    sym = params.symmetric_force_limit
+    out: dict[str, Any] = {
+        "gain": params.gain, "mode": MODES.index(params.mode), "force_limit": params.force_limit,
+        "symmetric_force_limit": NO_LIMIT if math.isinf(sym) else sym,
+        "switch_on_time": params.switch_on_time, "lag_time_constant": params.lag_time_constant,
+        "enabled": params.enabled}
+    n = n_sites
+    matrix = params.gain_matrix or tuple(tuple(float(i == j) for j in range(n)) for i in range(n))
+    for i, row in enumerate(matrix, start=1):
+        for j, value in enumerate(row, start=1):
+            out[f"gain_matrix_{i}_{j}"] = value
+    return out
+
+
+def _recorded(config: SceneConfig, declared: list[str]) -> list[str]:
+    """The plant outputs to record, those the plant declares (in this order)."""
+    plant = config.scene.plant
+    wanted = [body_signal(b, q) for b in plant.contact_bodies for q in CONTACT_QUANTITIES]
+    for s in range(1, config.n_sites + 1):
+        wanted += [strain(s, a) for a in AXES] + [actuator_power(s)]
+    wanted += ["bit_axial_force", "bit_torque", "hook_load", "top_rotary_speed",
+               "bit_rotary_speed", "total_energy", *config.scene.outputs]
+    if plant.top_drive.mode != "prescribed":
+        wanted.append("top_torque")
+    have = set(declared)
+    out: list[str] = []
+    for n in wanted:
+        if n in have and n not in out:
+            out.append(n)
+    return out
+
+
+def _slave_interface(instance: str, slave: Slave, inputs: list[str], units: Mapping[str, str]
+                     ) -> FmuInterface:
+    """An in-process slave's variables as the interface check sees an FMU's."""
+    ports = {n: Port(n, "input", "Real", fmi_unit(units.get(n, ""))) for n in inputs}
+    ports.update({n: Port(n, "output", "Real", fmi_unit(units.get(n, ""))) for n in slave.outputs})
+    return FmuInterface(instance, Path(f"<in-process {instance}>"), ports)
+
+
+def _inprocess_faces(config: SceneConfig, slaves: Mapping[str, Slave]) -> dict[str, FmuInterface]:
+    model = slaves[PLANT].sim.model
+    faces = {PLANT: _slave_interface(PLANT, slaves[PLANT], list(model.acting_inputs),
+                                     {**model.output_units, **model.input_units})}
+    if CONTROLLER in slaves:
+        units = {}
+        for s, a in site_channels(range(1, config.n_sites + 1)):
+            units[strain(s, a)], units[actuator_force(s, a)] = "1", "N"
+        faces[CONTROLLER] = _slave_interface(CONTROLLER, slaves[CONTROLLER],
+                                             slaves[CONTROLLER].inputs, units)
+    if TOP_DRIVE in slaves:
+        faces[TOP_DRIVE] = _slave_interface(
+            TOP_DRIVE, slaves[TOP_DRIVE], slaves[TOP_DRIVE].inputs,
+            {n: model.output_units.get(n, model.input_units.get(n))
+             for n in (*slaves[TOP_DRIVE].inputs, *slaves[TOP_DRIVE].outputs)})
+    return faces
+
+
+def _plant_fmu_parameters(config: SceneConfig, face: FmuInterface, built_for_scene: bool
+                          ) -> dict[str, Any]:
+    params: dict[str, Any] = {}
+    if "scene" in face.ports:
+        # a plant FMU built for this scene carries the scene file: name it as the FMU does, so
+        # the system (and an SSP written from it) holds no path of this machine
+        params["scene"] = (embedded_scene_name(config.scene) if built_for_scene
+                           else scene_reference(config.scene))
+    else:
+        warnings.warn(InterfaceWarning(
+            f"{face.label} has no 'scene' parameter: the plant tables of {config.source} are "
+            "not applied to it"), stacklevel=3)
+    for path, value in plant_parameter_paths(config.overrides).items():
+        if not isinstance(value, (bool, int, float, str)):
+            raise ConfigError(f"{config.source}: {path} = {value!r} is not a scalar and cannot "
+                              "be passed to the plant FMU; put it in a scene file, or run the "
+                              "models in process (engine 'inprocess')")
+        params[path] = value
+    return params
+
+
+def _lacking(config: SceneConfig, face: FmuInterface) -> list[str]:
+    """Keys of the instance's scene table set explicitly that its FMU does not declare
+    (``gain_matrix``: its entries ``gain_matrix_1_1`` ...)."""
+    table = {CONTROLLER: "controller", TOP_DRIVE: "top_drive_controller"}[face.instance]
+    port = {"gain_matrix": "gain_matrix_1_1"}
+    return [f"{face.label} has no parameter '{key}' for [{table}] {key} of {config.source}"
+            for key in config.set_keys.get(face.instance, ()) if port.get(key, key) not in face.ports]
+
+
+def build_system(config: SceneConfig, engine: str = "fmu", *,
+                 fmu_dir: str | Path | None = None) -> BuiltSystem:
+    """Build the co-simulation system of a configuration and check it.
+
+    Parameters
+    ----------
+    config : SceneConfig
+        From :func:`.config.load_config`.
+    engine : {"fmu", "inprocess"}
+        FMU files, or the same models in process (module docstring).
+    fmu_dir : path-like, optional
+        Folder of the project's FMUs (``fmu`` engine; default ``build/fmus/``); missing or stale
+        ones are built there (the default ones, or those built for the scene's layout).
+
+    Returns
+    -------
+    BuiltSystem
+
+    Raises
+    ------
+    ConfigError
+        A bad engine, or a plant override a plant FMU cannot take (one line).
+    cosim.master.interface.InterfaceError
+        The instances do not fit (one line per problem, each naming both and the variable).
+    FileNotFoundError
+        A project FMU is missing and cannot be built.
+
+    Warns
+    -----
+    InterfaceWarning
+        Plant inputs no controller feeds (they keep their start value), or a plant FMU without
+        a ``scene`` parameter.
+    """
+    if engine not in ENGINES:
+        raise ConfigError(f"engine = {engine!r} is not allowed; allowed: {', '.join(ENGINES)}")
+    instances = config.instances
+    controllers = instances[1:]
+    cosim = config.cosim
+    if engine == "inprocess":
+        slaves = inprocess_slaves(config)
+        faces = _inprocess_faces(config, slaves)
+        params: dict[str, dict[str, Any]] = {i: {} for i in instances}
+        lacking: list[str] = []
+    else:
+        slaves = {}
+        recipes = scene_recipes(config)
+        need = [recipes[i] for i in instances if i not in config.fmu_files]
+        built = ensure_recipes(need, fmu_dir) if need else {}
+        paths = {i: config.fmu_files.get(i) or built[recipes[i].name] for i in instances}
+        faces = {i: read_interface(i, paths[i]) for i in instances}
+        built_for_scene = PLANT not in config.fmu_files and bool(recipes[PLANT].base)
+        params = {PLANT: _plant_fmu_parameters(config, faces[PLANT], built_for_scene)}
+        start = {CONTROLLER: controller_start_values(config.controller, config.n_sites),
+                 TOP_DRIVE: dataclasses.asdict(config.top_drive)}
+        for i in controllers:
+            params[i] = {k: v for k, v in start[i].items() if k in faces[i].ports}
+        lacking = [p for i in controllers for p in _lacking(config, faces[i])]
+    fmus = [FmuSpec(PLANT, faces[PLANT].path, params[PLANT])]
+    fmus += [FmuSpec(i, faces[i].path, params[i], cosim.controller_ticks) for i in controllers]
+    wiring = wire_system(faces[PLANT], [faces[i] for i in controllers], fmus, lacking)
+    # what the plant receives (forces, torque) is delayed by actuator_delay, what the
+    # controllers receive (strains, speeds) by sensor_delay
+    delay = {PLANT: cosim.actuator_delay, **dict.fromkeys(controllers, cosim.sensor_delay)}
+    receiver = {ref(i, n): i for i in instances for n in faces[i].inputs()}
+    connections = [Connection(s, t, delay[receiver[t]], cosim.coupling)
+                   for s, t in wiring.connections]
+    recorded = [(PLANT, n) for n in _recorded(config, faces[PLANT].outputs())]
+    fed_by = {ref(i, n): (i, n) for i in controllers for n in faces[i].outputs()}
+    recorded += [fed_by[s] for s, _t in wiring.connections if s in fed_by]
+    outputs = tuple(ref(i, n) for i, n in recorded)
+    units = {ref(i, n): faces[i].ports[n].unit or "" for i in instances
+             for n in faces[i].outputs()}
+    order = tuple(i for i in cosim.order if i in instances) if controllers else (PLANT,)
+    system = SystemSpec(fmus, connections, cosim.step, cosim.algorithm, order, 0.0,
+                        cosim.stop_time)
+    return BuiltSystem(config, engine, system, slaves, outputs, units)

@@ -1,0 +1,204 @@
+"""The result of a simulated scene: recorded data with units, summary, plots, files.
+
+:class:`Result` is what :func:`drillcosim.simulate` returns and what ``drillcosim run``
+writes (:meth:`Result.save`):
+
+* ``results.csv`` - every recorded variable at the output interval, header line
+  ``time,plant.body11_X,...`` (readable by ``numpy.loadtxt(..., delimiter=",", skiprows=1)``;
+  17 significant digits: the numbers of the run, exactly);
+* ``summary.json`` - :attr:`Result.summary` (:mod:`.summary`);
+* the PNGs of :meth:`Result.plot` (:mod:`.plots`): ``orbit.png``, ``orbit_steady.png``,
+  ``deflection_contact.png``, ``actuators.png`` (``axial_torsional.png`` for the chain).
+"""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import tempfile
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drillcosim.cosim.master.files import AtomicFile
+
+from .config import SceneConfig
+from .summary import span_info, summarize, write_json
+
+__all__ = ["Figures", "Result", "seconds_text"]
+
+
+def seconds_text(seconds: float) -> str:
+    """A wall time [s] for a one-line message: 3 significant digits, whole seconds from 1000 s."""
+    return f"{seconds:.3g}" if seconds < 1000 else f"{seconds:.0f}"
+
+
+class Figures(list):
+    """PNG files of a run (a list of paths); a notebook shows them inline."""
+
+    def _repr_html_(self) -> str:
+        return "".join(f'<img src="data:image/png;base64,'
+                       f'{base64.b64encode(Path(p).read_bytes()).decode()}" title="{Path(p).name}"/>'
+                       for p in self)
+
+
+@dataclass(frozen=True, eq=False)
+class Result:
+    """A simulated scene.
+
+    Attributes
+    ----------
+    config : SceneConfig
+        What ran (scene, controllers, co-simulation settings, overrides).
+    engine : {"fmu", "inprocess"}
+    data : numpy.ndarray
+        Structured array, shape (n_rows,): ``time`` [s], then one field per recorded variable
+        ``'instance.variable'`` (e.g. ``plant.body11_radial_deflection`` [m]).
+    units : dict of str -> str
+        The unit of each field of ``data`` (``"1"``: dimensionless, e.g. a strain).
+    stop_time : float
+        Requested stop time [s].
+    end_time : float
+        Simulated time reached [s] (< ``stop_time`` if the run stopped early).
+    wall_time : float
+        Wall-clock time of the stepping loop [s].
+    real_time_factor : float
+        Simulated / wall time [1].
+    failure : dict or None
+        Why the run stopped early, ``{"time_s", "quantity", "value", "message"}``; None if it
+        completed.
+    csv_path : Path or None
+        The ``results.csv`` streamed during the run, if any.
+    """
+
+    config: SceneConfig
+    engine: str
+    data: np.ndarray
+    units: dict[str, str]
+    stop_time: float
+    end_time: float
+    wall_time: float
+    real_time_factor: float
+    failure: dict[str, Any] | None = None
+    csv_path: Path | None = None
+
+    @property
+    def completed(self) -> bool:
+        """The run reached its stop time."""
+        return self.failure is None
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """The recorded variables ``'instance.variable'`` (``time`` aside)."""
+        return tuple(n for n in self.data.dtype.names if n != "time")
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        """One recorded column (``"time"`` or ``'instance.variable'``), as floats."""
+        return np.asarray(self.data[name], dtype=float)
+
+    def to_pandas(self):
+        """The recorded data as a ``pandas.DataFrame``: index ``time`` [s], one column per
+        variable ``'instance.variable'`` (units: :attr:`units`)."""
+        import pandas as pd  # an optional heavy import: only here
+
+        frame = pd.DataFrame({n: self.data[n] for n in self.columns},
+                             index=pd.Index(self.data["time"], name="time"))
+        frame.attrs["units"] = dict(self.units)
+        return frame
+
+    @cached_property
+    def spans(self) -> dict[int, dict[str, Any]]:
+        """Per contact body: its span's length [m] and ``'long'`` / ``'short'`` / ``'only'``."""
+        return span_info(self.config.scene)
+
+    @cached_property
+    def summary(self) -> dict[str, Any]:
+        """Peak and steady deflection, actuator effort, contact, stick-slip (the keys of
+        :mod:`.summary`), and the run's controllers and co-simulation settings."""
+        cfg = self.config
+        ctrl = cfg.controller
+        summary = summarize(self.data, scene=cfg.name, scene_file=cfg.source, spans=self.spans,
+                            n_sites=cfg.n_sites, stop_time=self.stop_time, step=cfg.cosim.step,
+                            output_interval=cfg.cosim.output_interval, wall_time=self.wall_time,
+                            real_time_factor=self.real_time_factor, end_time=self.end_time,
+                            switch_on_time=self._switch_on_time, diverged=self.failure)
+        summary["controller"] = dataclasses.asdict(ctrl)
+        if cfg.top_drive.enabled:
+            summary["top_drive_controller"] = dataclasses.asdict(cfg.top_drive)
+        summary["cosim"] = cfg.cosim.as_dict()
+        summary["engine"] = self.engine
+        return summary
+
+    @property
+    def _switch_on_time(self) -> float | None:
+        ctrl = self.config.controller
+        return ctrl.switch_on_time if ctrl.enabled else None
+
+    def plot(self, folder: str | Path | None = None, workers=None) -> Figures:
+        """Draw the run's figures as PNGs into ``folder`` (default: a new temporary folder).
+
+        ``workers``: a :class:`.plot_workers.PlotWorkers` started with the run (``drillcosim
+        run`` does), which draws the figures in parallel; default: drawn in this process.
+
+        Returns
+        -------
+        Figures
+            The PNG paths (a notebook shows them); none when fewer than two rows were recorded.
+        """
+        if len(self.data) < 2:
+            return Figures()
+        if workers is None:
+            from .plots import plot_run  # matplotlib: imported only when plotting
+        else:
+            plot_run = workers.plot_run
+
+        out = Path(folder) if folder is not None else Path(tempfile.mkdtemp(prefix="drillcosim_"))
+        out.mkdir(parents=True, exist_ok=True)
+        return Figures(plot_run(self.data, out, self.config.scene.plant.contact.clearance,
+                                self.spans, self.config.n_sites, title=self.config.name,
+                                switch_on_time=self._switch_on_time or None))
+
+    def save(self, folder: str | Path, plots: bool = True, workers=None) -> list[Path]:
+        """Write ``results.csv``, ``summary.json`` and (``plots``) the PNGs into ``folder``
+        (created if missing; each file written atomically). A ``results.csv`` the run streamed
+        into ``folder`` is kept as it is. ``workers``: as for :meth:`plot`.
+
+        Returns
+        -------
+        list of Path
+            The files written.
+        """
+        out = Path(folder)
+        out.mkdir(parents=True, exist_ok=True)
+        csv = out / "results.csv"
+        if self.csv_path is None or Path(self.csv_path).resolve() != csv.resolve():
+            flat = self.data.view(np.float64).reshape(len(self.data), -1) if len(self.data) \
+                else np.zeros((0, len(self.data.dtype.names)))
+            with AtomicFile(csv, "w", newline="") as fh:
+                fh.write(",".join(self.data.dtype.names) + "\n")
+                np.savetxt(fh, flat, delimiter=",", fmt="%.17g")
+        files = [csv, write_json(self.summary, out / "summary.json")]
+        if plots:
+            files += list(self.plot(out, workers))
+        return files
+
+    def message(self, folder: Path | None = None, files: list[Path] | None = None) -> str:
+        """One line: what ran and where the files are, or why the run stopped."""
+        where = f" in {folder}" if folder is not None else ""
+        if self.failure is not None:
+            return (f"run stopped at t = {self.end_time:.6g} s of {self.stop_time:g} s: "
+                    f"{self.failure['message']}" + (f"; partial results{where}" if where else ""))
+        pngs = [Path(f).name for f in files or () if str(f).endswith(".png")]
+        saved = (f"; results.csv, summary.json{' and plots ' + ', '.join(pngs) if pngs else ''}"
+                 f"{where}") if folder is not None else ""
+        return (f"{self.config.name}: {self.end_time:g} s simulated in "
+                f"{seconds_text(self.wall_time)} s (real-time factor "
+                f"{self.real_time_factor:.3g}){saved}")
+
+    def __repr__(self) -> str:
+        return (f"<drillcosim.Result {self.config.name!r} ({self.engine}): {len(self.data)} rows "
+                f"x {len(self.columns)} variables, {self.end_time:g} of {self.stop_time:g} s"
+                f"{'' if self.completed else ', stopped early: ' + self.failure['message']}>")

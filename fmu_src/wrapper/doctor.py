@@ -1,0 +1,175 @@
+"""``drillcosim doctor [FMU]``: which Python an FMU of ours would run in on this machine, and why.
+
+The search is not re-implemented here: the FMU's own binary exports ``drillcosim_doctor``
+(``dcs_python.c``), which runs the wrapper's discovery (``dcs_discover.c``: every candidate
+checked in a child process, nothing loaded or started) for the unzipped FMU and returns the
+report a C host would log at ``fmi2Instantiate``. This module unzips the FMU, calls it through
+ctypes and adds what holds for Python hosts (fmpy, libcosimpy): the FMU runs in the host's own
+interpreter, any CPython of the FMU's range with the required modules, and whether this Python
+is one.
+
+Exit status of the command: 0 when a host without Python would find a usable Python on this
+machine, 1 when not (the report says what to install); a file that is not an FMU of ours is bad
+input (one line, exit 2).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import importlib.util
+import json
+import sys
+import tempfile
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+__all__ = ["Diagnosis", "NotAnFmuError", "diagnose", "doctor_command"]
+
+REPORT_BYTES = 1 << 20  #: room for the C report (a few KB in practice)
+
+
+class NotAnFmuError(ValueError):
+    """The file named is not an FMU of ours (missing, not a zip, no binary, no doctor entry):
+    bad input, one line."""
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """The doctor's findings for one FMU.
+
+    Attributes
+    ----------
+    usable : bool
+        A host without Python would find a Python that runs the FMU.
+    c_host_report : str
+        The wrapper's discovery report (each candidate, what it lacked, which would be used,
+        and how to fix a failure), exactly as ``fmi2Instantiate`` words it.
+    cpython : str
+        The CPython versions the FMU runs in, e.g. ``"3.10-3.13"``.
+    requires : tuple of str
+        Modules a Python must import to run the FMU.
+    this_python : str
+        Whether the Python running the doctor could host the FMU (one line).
+    """
+
+    usable: bool
+    c_host_report: str
+    cpython: str
+    requires: tuple[str, ...]
+    this_python: str
+
+    def text(self, fmu: Path) -> str:
+        """The report printed by ``drillcosim doctor``."""
+        verdict = ("a Python is found: the FMU runs here" if self.usable
+                   else "no usable Python: the FMU does not run in a host without Python")
+        needs = " ".join(self.requires) or "nothing"
+        return "\n".join([
+            f"FMU {fmu}",
+            f"Verdict: {verdict}.",
+            "",
+            "In a host without Python of its own (a C/C++ FMI tool, fmusim, ...):",
+            self.c_host_report.rstrip(),
+            "",
+            "In a Python host (fmpy, libcosimpy, ...): the FMU runs in the host's own interpreter,",
+            f"which must be CPython {self.cpython} with these modules importable: {needs};",
+            "a host of another version gets one message at fmi2Instantiate.",
+            self.this_python,
+        ]) + "\n"
+
+
+def _model_identifier(fmu: Path, zf: zipfile.ZipFile) -> str:
+    try:
+        root = ET.fromstring(zf.read("modelDescription.xml"))
+    except (KeyError, ET.ParseError) as exc:
+        raise NotAnFmuError(f"{fmu}: not an FMU (no readable modelDescription.xml: {exc})") from None
+    cs = root.find("CoSimulation")
+    if cs is None or not cs.get("modelIdentifier"):
+        raise NotAnFmuError(f"{fmu}: not a co-simulation FMU (no CoSimulation modelIdentifier)")
+    return cs.get("modelIdentifier", "")
+
+
+def _this_python(cpython: str, requires: tuple[str, ...]) -> str:
+    low, high = (int(v.split(".")[1]) for v in cpython.split("-"))
+    version = sys.version.split()[0]
+    where = f"This Python ({version}, {sys.executable})"
+    if sys.implementation.name != "cpython" or not low <= sys.version_info.minor <= high:
+        return f"{where} cannot host it: not CPython {cpython}."
+    missing = [m for m in requires if importlib.util.find_spec(m) is None]
+    if missing:
+        return (f"{where} cannot host it: it lacks {', '.join(missing)} "
+                f"({sys.executable} -m pip install {' '.join(missing)}).")
+    return f"{where} can host it."
+
+
+def diagnose(fmu: Path | str) -> Diagnosis:
+    """Run the FMU's own Python discovery on this machine without starting anything.
+
+    Parameters
+    ----------
+    fmu : path-like
+        An FMU built by drillcosim's build (its binary carries our wrapper).
+
+    Returns
+    -------
+    Diagnosis
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        Not an FMU, not one of this platform, or not one whose binary is our wrapper.
+    """
+    fmu = Path(fmu)
+    if not fmu.is_file():
+        raise NotAnFmuError(f"{fmu}: no such FMU file")
+    try:
+        zf = zipfile.ZipFile(fmu)
+    except zipfile.BadZipFile:
+        raise NotAnFmuError(f"{fmu}: not an FMU (not a zip file)") from None
+    with zf, tempfile.TemporaryDirectory(prefix="dcs_doctor_") as tmp:
+        ident = _model_identifier(fmu, zf)
+        binary = f"binaries/linux64/{ident}.so"
+        if binary not in zf.namelist():
+            raise NotAnFmuError(f"{fmu}: no {binary} (no binary for linux64)")
+        zf.extractall(tmp)
+        try:
+            cpython = json.loads(zf.read("resources/dcs_build.json"))["cpython"]
+        except (KeyError, ValueError):
+            cpython = "3.10-3.13"  # an earlier build: its own report states its range
+        lib = ctypes.CDLL(str(Path(tmp) / binary))
+        entry = getattr(lib, "drillcosim_doctor", None)
+        if entry is None:
+            raise NotAnFmuError(f"{fmu}: its binary has no drillcosim_doctor: not an FMU built by "
+                             "drillcosim's build (or built before the doctor existed)")
+        entry.restype = ctypes.c_int
+        entry.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_size_t]
+        buf = ctypes.create_string_buffer(REPORT_BYTES)
+        rc = entry(str(Path(tmp)).encode(), buf, REPORT_BYTES)
+        requires_file = Path(tmp) / "resources" / "python_requires.txt"
+        requires = tuple(requires_file.read_text().split()) if requires_file.is_file() else ()
+    if rc < 0:
+        raise RuntimeError(f"drillcosim_doctor refused its arguments (returned {rc})")
+    # the FMU's own unzip folder is a temporary one here: name it as a host would have it
+    report = buf.value.decode("utf-8", "replace").replace(tmp, "<the FMU's unzip folder>")
+    return Diagnosis(usable=rc == 1, c_host_report=report, cpython=cpython, requires=requires,
+                     this_python=_this_python(cpython, requires))
+
+
+def doctor_command(fmu: Path | str | None) -> int:
+    """``drillcosim doctor [FMU]``: print the report; 0 if usable, 1 if not.
+
+    ``fmu`` defaults to the built ``DrillstringPlant.fmu`` (``drillcosim build``'s folder).
+    """
+    if fmu is None:
+        from drillcosim.fmu_src.build import default_out
+
+        fmu = default_out() / "DrillstringPlant.fmu"
+        if not fmu.is_file():
+            raise NotAnFmuError(f"{fmu} does not exist: build it with `drillcosim build`, "
+                                    "or name an FMU: drillcosim doctor FMU")
+    diagnosis = diagnose(fmu)
+    sys.stdout.write(diagnosis.text(Path(fmu)))
+    return 0 if diagnosis.usable else 1
