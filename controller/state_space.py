@@ -19,15 +19,16 @@ output after a communication step ``[t, t + h]`` is computed from the inputs set
 
 The workspace
 -------------
-The numbers of a controller live in one float64 array (:class:`Workspace`), so that a compiled
-step can take a single pointer (``fmu_src/wrapper``, "Compiled step"): a header, the state and
-the inputs side by side, the outputs, a scratch vector, the matrix ``[[C, D], [A, B]]``
-(row-major), the lower and the upper limits. :func:`advance` is the step on that array in the
-subset of Python that numba compiles in nopython mode (views, ``np.dot`` into a preallocated
-vector, loops; no allocation, no exceptions: it returns a status code);
-:meth:`StateSpaceController.step` is the numpy reference of the same law.
+The numbers of a controller live in one float64 array (:class:`Workspace`): a header, the state
+and the inputs side by side, the outputs, a scratch vector, the matrix ``[[C, D], [A, B]]``
+(row-major), the lower and the upper limits. One sample is one matrix-vector product
+``v = M [x; y]``. :meth:`StateSpaceController.step` is the numpy reference;
+:meth:`StateSpaceController.compiled_step` hands views of the workspace to the compiled step
+(:func:`controller.compiled.state_space_step`, a numba ``cfunc`` called without the GIL), which
+does the same (to rounding: both products are BLAS calls, from numpy's and from numba's BLAS).
 
-Only numpy and the standard library are imported (the package is vendored into FMUs).
+Only numpy and the standard library are imported (the package is vendored into FMUs; the
+compiled step is made only where numba is loaded, :mod:`controller.acceleration`).
 """
 
 from __future__ import annotations
@@ -41,23 +42,20 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["FORMAT", "HEADER", "STEP_OK", "STEP_BAD_INPUT", "STEP_BAD_STEP", "Signal",
-           "StateSpaceController", "StateSpaceParams", "Workspace", "advance",
-           "load_state_space", "state_space_from_mapping"]
+from .acceleration import compiled_law
+
+__all__ = ["FORMAT", "MULTIPLE_RTOL", "Signal", "StateSpaceController", "StateSpaceParams",
+           "Workspace", "load_state_space", "state_space_from_mapping"]
 
 #: ``format`` key of a state-space file (:meth:`StateSpaceParams.to_mapping`).
 FORMAT = "drillcosim.state_space/1"
 
-# header of the workspace: [size, n states, n inputs, n outputs, sample period, samples run]
-_SIZE, _NX, _NY, _NU, _TS, _COUNT = range(6)
-HEADER = 6
-#: Status codes of :func:`advance`.
-STEP_OK = 0
-STEP_BAD_INPUT = 1      # a non-finite input
-STEP_BAD_STEP = 2       # h not a non-negative finite integer multiple of the sample period
-_MAX_FLOAT = 1.7976931348623157e308
 #: Relative tolerance of "h is an integer multiple of the sample period".
 MULTIPLE_RTOL = 1e-9
+# header of the workspace: [size, n states, n inputs, n outputs, then the timing the compiled
+# step reads: sample period, samples run, MULTIPLE_RTOL]
+_SIZE, _NX, _NY, _NU, _TS, _COUNT, _RTOL = range(7)
+_HEADER = 7
 
 
 @dataclass(frozen=True)
@@ -332,6 +330,12 @@ class Workspace:
     ----------
     array : numpy.ndarray, shape (size,)
         The whole workspace; everything below is a view of it.
+    timing : numpy.ndarray, shape (3,)
+        The sample period [s], the samples run so far, :data:`MULTIPLE_RTOL`.
+    vector : numpy.ndarray, shape (n + m,)
+        ``w = [x; y]``.
+    scratch : numpy.ndarray, shape (p + n,)
+        ``v = M w`` of the last sample.
     state : numpy.ndarray, shape (n,)
     inputs : numpy.ndarray, shape (m,)
     outputs : numpy.ndarray, shape (p,)
@@ -345,10 +349,12 @@ class Workspace:
         n, m, p = params.n_states, len(params.inputs), len(params.outputs)
         sizes = {"state": n, "inputs": m, "outputs": p, "scratch": p + n,
                  "matrix": (p + n) * (n + m), "lower": p, "upper": p}
-        total = HEADER + sum(sizes.values())
+        total = _HEADER + sum(sizes.values())
         self.array = np.zeros(total)
-        self.array[[_SIZE, _NX, _NY, _NU, _TS]] = (total, n, m, p, params.sample_period)
-        at = HEADER
+        self.array[[_SIZE, _NX, _NY, _NU, _TS, _RTOL]] = (total, n, m, p, params.sample_period,
+                                                          MULTIPLE_RTOL)
+        self.timing = self.array[_TS:_RTOL + 1]
+        at = _HEADER
         for name, size in sizes.items():
             view = self.array[at:at + size]
             setattr(self, name, view.reshape(p + n, n + m) if name == "matrix" else view)
@@ -357,66 +363,12 @@ class Workspace:
         self.C, self.D, self.A, self.B = mat[:p, :n], mat[:p, n:], mat[p:, :n], mat[p:, n:]
         for name in ("A", "B", "C", "D", "lower", "upper"):
             getattr(self, name)[...] = getattr(params, name)
-        self.vector = self.array[HEADER:HEADER + n + m]   # w = [x; y]
+        self.vector = self.array[_HEADER:_HEADER + n + m]   # w = [x; y]
 
     @property
     def samples(self) -> int:
-        """int: samples run so far (:func:`advance` counts them; a float in the array)."""
+        """int: samples run so far (a float in the array)."""
         return int(self.array[_COUNT])
-
-
-def advance(ws: np.ndarray, h: float) -> int:
-    """Run the samples of one step ``h`` [s] on a workspace array (nopython-compilable).
-
-    Reads the inputs, writes the outputs and the state in place; on a bad step or input
-    returns a status code and changes nothing.
-
-    Parameters
-    ----------
-    ws : numpy.ndarray
-        :attr:`Workspace.array`.
-    h : float
-        Step [s]: an integer multiple (``k >= 0``) of the sample period.
-
-    Returns
-    -------
-    int
-        :data:`STEP_OK`, :data:`STEP_BAD_STEP` or :data:`STEP_BAD_INPUT`.
-    """
-    n = int(ws[_NX])
-    m = int(ws[_NY])
-    p = int(ws[_NU])
-    ts = ws[_TS]
-    if not (h >= 0.0 and h < 1e300):
-        return STEP_BAD_STEP
-    k_float = h / ts
-    k = int(k_float + 0.5)
-    if abs(k_float - k) > MULTIPLE_RTOL * max(1.0, k_float):
-        return STEP_BAD_STEP
-    iw = HEADER                 # w = [x; y]
-    iy = iw + n
-    iu = iy + m
-    iv = iu + p
-    im = iv + p + n
-    ilo = im + (p + n) * (n + m)
-    ihi = ilo + p
-    cols = n + m
-    for j in range(m):
-        if not abs(ws[iy + j]) <= _MAX_FLOAT:     # NaN or +-inf
-            return STEP_BAD_INPUT
-    mat = ws[im:im + (p + n) * cols].reshape((p + n, cols))
-    w = ws[iw:iw + cols]
-    v = ws[iv:iv + p + n]
-    for _ in range(k):
-        np.dot(mat, w, v)                           # v = M w (BLAS, no allocation)
-        for i in range(p):
-            lo = ws[ilo + i]
-            hi = ws[ihi + i]
-            ws[iu + i] = lo if v[i] < lo else (hi if v[i] > hi else v[i])
-        for i in range(n):
-            ws[iw + i] = v[p + i]
-        ws[_COUNT] += 1.0
-    return STEP_OK
 
 
 # ---------------------------------------------------------------------- the law
@@ -429,9 +381,9 @@ class StateSpaceController:
 
     Notes
     -----
-    :meth:`step` is the numpy reference; :func:`advance` on :attr:`workspace` is the same law
-    for a compiled caller (they agree to rounding: the sums run in another order). A call that
-    fails validation raises ValueError and leaves the state unchanged.
+    :meth:`step` is the numpy reference; :meth:`compiled_step` the same law compiled (they
+    agree to rounding). A call that fails validation raises ValueError and leaves the state
+    unchanged.
     """
 
     def __init__(self, params: StateSpaceParams) -> None:
@@ -524,8 +476,22 @@ class StateSpaceController:
         ws.inputs[:] = yy
         p = ws.outputs.size
         for _ in range(k):
-            v = ws.matrix @ ws.vector           # as advance: one matrix-vector product
+            v = ws.matrix @ ws.vector           # one matrix-vector product per sample
             ws.outputs[:] = np.clip(v[:p], ws.lower, ws.upper)
             ws.state[:] = v[p:]
             ws.array[_COUNT] += 1.0
         return ws.outputs.copy()
+
+    def compiled_step(self, inputs: np.ndarray, outputs: np.ndarray) -> Any:
+        """This law's compiled step (:class:`controller.compiled.CompiledLaw`) reading the inputs
+        from ``inputs`` (shape (m,)) and writing the outputs into ``outputs`` (shape (p,)),
+        float64 buffers; None without numba or with compiled steps switched off. A step it
+        refuses (bad time, step or input; nothing changed) is left to :meth:`step`, which
+        names the problem."""
+        ws = self.workspace
+
+        def pack() -> tuple[object, list[np.ndarray]]:
+            return ws, [ws.timing, ws.matrix, ws.vector, ws.scratch, ws.lower, ws.upper,
+                        ws.outputs, inputs, outputs]
+
+        return compiled_law("state_space_step", pack)

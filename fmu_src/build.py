@@ -351,7 +351,7 @@ REGISTRY: tuple[FmuRecipe, ...] = (
         vendored=(("controller", "_dcs_controller_0_1_0"),
                   ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
         resource_files=(("fmu_src/state_space_default.json", "state_space.json"),),
-        requires=("numpy", "numba"),
+        requires=("numpy",),
     ),
     FmuRecipe(
         name="TopDriveController",

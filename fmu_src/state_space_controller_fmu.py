@@ -27,16 +27,20 @@ outputs (Real, continuous, initial exact, start 0): ``LAYOUT["outputs"]`` (defau
     ``actuator<s>_force_<C|E>``, N)
 parameters: ``lower_limit_<output>`` / ``upper_limit_<output>`` (tunable, the output's unit):
     saturation; "no limit" is -/+1e300.
-    ``compiled_step`` (Boolean, tunable, default true): the step runs as a compiled function
-    without Python (numba ``cfunc``, the wrapper's compiled-step protocol); false runs the numpy
-    reference ``do_step`` (the same law; the two agree to rounding).
+
+Compiled step
+-------------
+Where numba is loaded in the process (by the plant FMU, in the main job) the law's compiled
+step (``controller.compiled.state_space_step``, a numba ``cfunc`` cached beside the stable copy
+of the vendored package, ``slave_support.vendored``) runs every doStep without entering Python
+(``slave_support.LawSlave``); elsewhere, or with ``DRILLCOSIM_COMPILED_STEP=0``, doStep is the
+numpy reference (the same law; the two agree to rounding).
 
 Errors (the status protocol of ``fmu_src/slave_support``)
 ---------------------------------------------------------
 * a resource file that is missing, unreadable, or not a valid controller of this FMU's interface
-  (shapes, non-finite entries, names, units, Ts that do not match ``LAYOUT``): one line logged
-  at fmi2Instantiate (status Error) and the same line as the fmi2Error of
-  fmi2ExitInitializationMode and of every doStep;
+  (shapes, non-finite entries, names, units, Ts that do not match ``LAYOUT``): fmi2Instantiate
+  fails (returns NULL) with that one line logged (status Error);
 * limits with lower > upper: fmi2Error naming them (at initialization or the next doStep);
 * a step that is not a multiple of Ts, a non-finite input or time: fmi2Error from that doStep,
   state unchanged.
@@ -47,24 +51,25 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, ClassVar
 
-from _dcs_controller_0_1_0.state_space import (
-    HEADER,
-    StateSpaceParams,
-    advance,
-    load_state_space,
-)
-from _dcs_controller_0_1_0.state_space import (
-    StateSpaceController as StateSpaceLaw,
-)
 from _dcs_pythonfmu_0_7_0 import (
-    Boolean,
     DefaultExperiment,
     Fmi2Causality,
     Fmi2Initial,
     Fmi2Variability,
     Real,
 )
+from _dcs_pythonfmu_0_7_0.enums import Fmi2Status
 from _dcs_slave_support_0_1_0 import LawSlave
+from _dcs_slave_support_0_1_0.vendored import import_vendored
+
+#: Name under which the build vendors ``controller/`` into this FMU's resources.
+VENDORED_CONTROLLER = "_dcs_controller_0_1_0"
+# from a stable copy where numba can compile the law's step (its cache needs a fixed path)
+_CONTROLLER, _IMPORT_WARNING = import_vendored(VENDORED_CONTROLLER, __file__, only_with="numba")
+from _dcs_controller_0_1_0.state_space import (  # noqa: E402 - imported above from its copy
+    StateSpaceController as StateSpaceLaw,
+)
+from _dcs_controller_0_1_0.state_space import StateSpaceParams, load_state_space  # noqa: E402
 
 #: The resource file of the matrices.
 RESOURCE = "state_space.json"
@@ -89,26 +94,6 @@ DEFAULT_LAYOUT: dict[str, Any] = {
 
 def _limit_names(outputs: list[str]) -> tuple[str, ...]:
     return tuple(f"{side}_limit_{o}" for o in outputs for side in ("lower", "upper"))
-
-
-def _compiled_step() -> Any:
-    """The numba ``cfunc`` of :func:`controller.state_space.advance` on a workspace pointer."""
-    import numpy as np
-    from numba import carray, cfunc, njit, types
-
-    kernel = njit(advance)
-
-    @cfunc(types.int32(types.voidptr, types.float64, types.float64), nopython=True)
-    def step(context, t, h):  # pragma: no cover - runs compiled
-        if not abs(t) <= 1.7976931348623157e308:     # NaN or +-inf
-            return 3
-        size = carray(context, HEADER, dtype=np.float64)[0]
-        return kernel(carray(context, int(size), dtype=np.float64), h)
-
-    return step
-
-
-_STEP: list[Any] = []   # compiled once per process, on first use
 
 
 class StateSpaceController(LawSlave):
@@ -152,21 +137,14 @@ class StateSpaceController(LawSlave):
         super().__init__(**kwargs)
         self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=30.0,
                                                     step_size=float(self.LAYOUT["sample_period"]))
-        self.compiled_step = True
-        self._load_error: str | None = None
         self._base: StateSpaceParams | None = None
         try:
             self._base = self._load()
         except ValueError as exc:
-            self._load_error = str(exc)
-            self._error(f"fmi2Instantiate: {self._load_error}")
-            # the wrapper takes no status from construction (the instance is made): the line
-            # above is the message, fmi2ExitInitializationMode and every doStep the fmi2Error
-            self._fmi2_status = None
-        if self._base is not None:
+            # the wrapper takes this status from the construction: fmi2Instantiate fails
+            self._error(f"fmi2Instantiate: {exc}")
+        else:
             self._law = StateSpaceLaw(self._base)
-            ws = self._law.workspace
-            self.inputs, self.outputs = ws.inputs, ws.outputs  # the wrapper's Real buffers
         lay = self.LAYOUT
         for name, _unit, doc in lay["inputs"]:
             self.register_real_io(Real(name, causality=Fmi2Causality.input,
@@ -181,11 +159,8 @@ class StateSpaceController(LawSlave):
                 self._register_limit(f"{side}_limit_{name}", side, name,
                                      (-NO_LIMIT if side == "lower" else NO_LIMIT)
                                      if start is None else float(start))
-        self.register_variable(Boolean(
-            "compiled_step", causality=Fmi2Causality.parameter,
-            variability=Fmi2Variability.tunable,
-            description="true: the step runs compiled, without Python; false: the numpy "
-                        "reference do_step (the same law)"))
+        if _IMPORT_WARNING:
+            self.log(f"{self.instance_name}: {_IMPORT_WARNING}", status=Fmi2Status.warning)
 
     def _register_limit(self, name: str, side: str, output: str, start: float) -> None:
         self.param_values[name] = start
@@ -226,8 +201,6 @@ class StateSpaceController(LawSlave):
 
     # ------------------------------------------------------------------ the law
     def _params_from_variables(self) -> StateSpaceParams:
-        if self._base is None:
-            raise ValueError(self._load_error or "no matrices")
         lower = [self.param_values[f"lower_limit_{o}"] for o in self.REAL_OUTPUTS]
         upper = [self.param_values[f"upper_limit_{o}"] for o in self.REAL_OUTPUTS]
         bad = [o for o, lo, hi in zip(self.REAL_OUTPUTS, lower, upper) if not lo <= hi]
@@ -237,27 +210,11 @@ class StateSpaceController(LawSlave):
         return self._base.with_limits(lower, upper)
 
     def _make_law(self, params: StateSpaceParams) -> StateSpaceLaw:
-        self._law.params = params   # the one workspace: the wrapper holds its buffers
+        self._law.params = params   # other limits only: the state is kept (reset: zero)
         return self._law
 
     def _step_law(self, t: float, h: float) -> None:
-        self._law.step(t, h)
-
-    # ------------------------------------------------------------- compiled step
-    def _fmi2_compiled_step(self) -> tuple[int, int] | None:
-        """(cfunc address, workspace pointer) when the next step can run compiled: initialized,
-        no parameter change pending (do_step applies it first) and ``compiled_step`` on."""
-        if not (self.compiled_step and self._initialized and self._init_error is None
-                and self._snapshot(self.TUNABLE) == self._tunable_values):
-            return None
-        if not _STEP:
-            _STEP.append(_compiled_step())
-        return _STEP[0].address, self._law.workspace.array.ctypes.data
-
-    def _fmi2_compiled_step_failed(self, code: int, t: float, h: float) -> Any:
-        """A compiled step refused (bad step, input or time; nothing changed): the reference
-        step reports it in the same words."""
-        return self.do_step(t, h)
+        self.outputs[:] = self._law.step(t, h, self.inputs)
 
 
 StateSpaceController._tables()

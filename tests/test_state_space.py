@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from drillcosim.controller import state_space as ss
 from drillcosim.controller.state_space import (
     Signal,
     StateSpaceController,
@@ -39,19 +38,28 @@ def test_law_equals_scipy_dlsim():
     assert np.max(np.abs(out - ref)) <= 1e-14 * np.max(np.abs(ref))
 
 
+def compiled(law):
+    """The law's compiled step on fresh buffers (numba loaded: it is in the test process)."""
+    pytest.importorskip("numba")
+    inputs, outputs = np.zeros(len(law.params.inputs)), np.zeros(len(law.params.outputs))
+    step = law.compiled_step(inputs, outputs)
+    assert step is not None
+    return step, inputs, outputs
+
+
 def test_compiled_step_equals_numpy_step():
-    numba = pytest.importorskip("numba")
-    kernel = numba.njit(ss.advance)
     prm = random_params(n=9, m=5, p=4, seed=3, lower=-1.0, upper=1.5)
     a, b = StateSpaceController(prm), StateSpaceController(prm)
+    step, inputs, outputs = compiled(b)
     rng = np.random.default_rng(2)
     for k in range(300):
         y = rng.normal(size=5)
         ua = a.step(k * TS, 2 * TS, y)
-        b.workspace.inputs[:] = y
-        assert kernel(b.workspace.array, 2 * TS) == ss.STEP_OK
-        # the same law, the sums in another order (loops vs BLAS): equal to rounding
-        np.testing.assert_allclose(b.workspace.outputs, ua, rtol=0, atol=1e-13)
+        inputs[:] = y
+        assert step.step(k * TS, 2 * TS) == 0
+        # the same law; numba's BLAS and numpy's may round the products differently
+        np.testing.assert_allclose(outputs, ua, rtol=0, atol=1e-13)
+        np.testing.assert_array_equal(outputs, b.workspace.outputs)
     np.testing.assert_allclose(b.workspace.state, a.workspace.state, rtol=0, atol=1e-13)
     assert a.workspace.samples == b.workspace.samples == 600
 
@@ -92,15 +100,17 @@ def test_bad_step_or_input_changes_nothing():
     with pytest.raises(ValueError, match="non-finite input.*y2"):
         law.step(TS, TS, np.array([0, 0, np.nan, 0]))
     np.testing.assert_array_equal(law.workspace.array, before)
-    law.workspace.inputs[:] = [0, np.inf, 0, 0]
-    assert ss.advance(law.workspace.array, TS) == ss.STEP_BAD_INPUT
-    law.workspace.inputs[:] = 1.0
-    assert ss.advance(law.workspace.array, 0.7 * TS) == ss.STEP_BAD_STEP
-    assert ss.advance(law.workspace.array, math.nan) == ss.STEP_BAD_STEP
-    ws = law.workspace
-    n = ws.state.size
-    np.testing.assert_array_equal(ws.array[:ss.HEADER + n], before[:ss.HEADER + n])
-    np.testing.assert_array_equal(ws.array[ss.HEADER + n + 4:], before[ss.HEADER + n + 4:])
+    from drillcosim.controller.compiled import REFUSED
+
+    step, inputs, outputs = compiled(law)
+    inputs[:] = [0, np.inf, 0, 0]
+    assert step.step(TS, TS) == REFUSED
+    inputs[:] = 1.0
+    assert step.step(TS, 0.7 * TS) == REFUSED
+    assert step.step(TS, math.nan) == REFUSED
+    assert step.step(math.inf, TS) == REFUSED
+    np.testing.assert_array_equal(law.workspace.array, before)
+    assert not outputs.any()
 
 
 @pytest.mark.parametrize("change, message", [
