@@ -2,7 +2,8 @@
 
 :func:`build_system` makes the system every caller runs (``drillcosim run``, the API, sweeps,
 ensembles, the calibration, the conclusion study, SSP export) with up to three instances:
-``plant``, ``controller`` (the strain controller, when ``[controller] enabled``) and
+``plant``, ``controller`` (the strain controller, when ``[controller] enabled``: the P law, or
+with ``kind = "state_space"`` a state-space law from a matrices file) and
 ``top_drive_controller`` (when ``[top_drive_controller] enabled``), connected by name both ways
 (:mod:`.interface`; names from :mod:`plant.signals`):
 
@@ -70,6 +71,7 @@ from .scene_fmus import (
     ensure_recipes,
     plant_recipe,
     recipe_named,
+    state_space_recipe,
 )
 
 __all__ = ["ENGINES", "NO_LIMIT", "BuiltSystem", "build_system", "controller_start_values",
@@ -126,7 +128,10 @@ def scene_recipes(config: SceneConfig) -> dict[str, Any]:
     ``{"plant": FmuRecipe, "controller": ..., "top_drive_controller": ...}`` (controllers only
     when enabled). Building them ahead: :func:`.scene_fmus.ensure_recipes`."""
     recipes: dict[str, Any] = {PLANT: plant_recipe(config.scene)}
-    if config.controller.enabled:
+    if config.state_space is not None:
+        recipes[CONTROLLER] = state_space_recipe(config.scene, config.state_space.params,
+                                                 config.state_space.file)
+    elif config.controller.enabled:
         recipes[CONTROLLER] = controller_recipe(config.scene, config.n_sites,
                                                 config.controller.gain_matrix)
     if config.top_drive.enabled:
@@ -184,7 +189,12 @@ def _inprocess_faces(config: SceneConfig, slaves: Mapping[str, Slave]) -> dict[s
     model = slaves[PLANT].sim.model
     faces = {PLANT: _slave_interface(PLANT, slaves[PLANT], list(model.acting_inputs),
                                      {**model.output_units, **model.input_units})}
-    if CONTROLLER in slaves:
+    if CONTROLLER in slaves and config.state_space is not None:
+        ss = config.state_space.params
+        units = {s.name: s.unit for s in (*ss.inputs, *ss.outputs)}
+        faces[CONTROLLER] = _slave_interface(CONTROLLER, slaves[CONTROLLER],
+                                             slaves[CONTROLLER].inputs, units)
+    elif CONTROLLER in slaves:
         units = {}
         for s, a in site_channels(range(1, config.n_sites + 1)):
             units[strain(s, a)], units[actuator_force(s, a)] = "1", "N"
@@ -280,7 +290,8 @@ def build_system(config: SceneConfig, engine: str = "fmu", *,
         faces = {i: read_interface(i, paths[i]) for i in instances}
         built_for_scene = PLANT not in config.fmu_files and bool(recipes[PLANT].base)
         params = {PLANT: _plant_fmu_parameters(config, faces[PLANT], built_for_scene)}
-        start = {CONTROLLER: controller_start_values(config.controller, config.n_sites),
+        start = {CONTROLLER: {} if config.state_space is not None else  # limits: in its layout
+                 controller_start_values(config.controller, config.n_sites),
                  TOP_DRIVE: dataclasses.asdict(config.top_drive)}
         for i in controllers:
             params[i] = {k: v for k, v in start[i].items() if k in faces[i].ports}

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from drillcosim.controller.state_space import Signal, StateSpaceParams
+from drillcosim.cosim.master.errors import UserError
 
 from .closed_loop import growth_rate
 from .lqg import LqgWeights, lqg_gains, lqg_matrices
@@ -80,13 +81,13 @@ def design_on_plant(kind: str, plant: LoopPlant, step: float, delay: float, *,
                     force_limit: float = math.inf) -> Design:
     """Design on an already linearized plant (see :func:`design_controller`)."""
     if kind not in KINDS:
-        raise ValueError(f"kind = {kind!r}; allowed: {', '.join(KINDS)}")
+        raise UserError(f"kind = {kind!r}; allowed: {', '.join(KINDS)}")
     for name, v in (("step", step), ("delay", delay)):
         if not (math.isfinite(v) and v >= 0) or (name == "step" and v == 0):
-            raise ValueError(f"{name} = {v!r} s; allowed: a finite number "
+            raise UserError(f"{name} = {v!r} s; allowed: a finite number "
                              f"{'> 0' if name == 'step' else '>= 0'}")
     if not force_limit > 0:
-        raise ValueError(f"force_limit = {force_limit!r} N; allowed: > 0 (inf: none)")
+        raise UserError(f"force_limit = {force_limit!r} N; allowed: > 0 (inf: none)")
     strains, forces = plant.signals
     if kind == "lqg":
         weights = weights or LqgWeights()
@@ -96,7 +97,7 @@ def design_on_plant(kind: str, plant: LoopPlant, step: float, delay: float, *,
                 f"the strains; {settings})")
     else:
         if not (math.isfinite(gain) and gain >= 0):
-            raise ValueError(f"gain = {gain!r} N/strain; allowed: a finite number >= 0")
+            raise UserError(f"gain = {gain!r} N/strain; allowed: a finite number >= 0")
         K = gain_matrix(gain, plant.n_sites, relative_gains)
         A, B, C, D = predictor_matrices(plant, step, delay, K)
         settings = {"gain": gain, "relative_gains": None if relative_gains is None else
@@ -122,7 +123,7 @@ def design_controller(kind: str, scene: Any, *, per_span: int | None = None,
     scene : str or path
         Scene name or file.
     per_span : int, optional
-        Sites per span, evenly spread (:func:`cosim.study.conclusion.site_joints`).
+        Sites per span, evenly spread (:func:`cosim.study.paper.conclusion.site_joints`).
     joints : sequence of int, optional
         Explicit actuator joints (instead of ``per_span``; default: the scene's).
     delay : float, optional
@@ -130,28 +131,29 @@ def design_controller(kind: str, scene: Any, *, per_span: int | None = None,
     step : float, optional
         Communication step = the controller's sample period [s] (default: the scene's).
     overrides : mapping, optional
-        Nested scene overrides (e.g. another weight on bit).
+        Scene keys by key path (e.g. ``{"bit.weight_on_bit": ...}``).
     **options
         ``weights`` (:class:`.lqg.LqgWeights`), ``gain``, ``relative_gains``, ``force_limit``
         (:func:`design_on_plant`).
     """
-    from drillcosim.cosim.scenario.scene_system import cosim_settings
-    from drillcosim.plant.scene import load_scene
+    from drillcosim.cosim.scenario.config import load_config
+    from drillcosim.cosim.study.paper.conclusion import site_joints
 
     if per_span is not None and joints is not None:
-        raise ValueError("give per_span or joints, not both")
-    base = load_scene(scene, overrides=dict(overrides) if overrides else None)
-    ov = {k: dict(v) if isinstance(v, Mapping) else v for k, v in (overrides or {}).items()}
-    if per_span is not None:
-        from drillcosim.cosim.study.conclusion import site_joints
-
-        joints = site_joints(base.plant, per_span)
-    st = cosim_settings(base)
+        raise UserError("give per_span or joints, not both")
+    ov = dict(overrides or {})
     if step is not None:
-        ov.setdefault("cosim", {})["step"] = float(step)
+        ov["cosim.step"] = float(step)
+    base = load_config(scene, ov)
+    if per_span is not None:
+        try:
+            joints = site_joints(base.scene.plant, per_span)
+        except ValueError as exc:
+            raise UserError(f"--sites: {exc}") from None
     plant = LoopPlant.from_scene(scene, joints, ov)
-    return design_on_plant(kind, plant, st.step if step is None else float(step),
-                           st.actuator_delay if delay is None else float(delay), **options)
+    st = base.cosim
+    return design_on_plant(kind, plant, st.step, st.actuator_delay if delay is None
+                           else float(delay), **options)
 
 
 def _toml_value(v: Any) -> str:
@@ -179,7 +181,7 @@ def write_scene(design: Design, out: str | Path, *, base: str | None = None,
     """
     out = Path(out)
     if out.suffix != ".toml":
-        raise ValueError(f"--out {out}: a scene file name ending in .toml")
+        raise UserError(f"out = {str(out)!r}: a scene file name ending in .toml")
     matrices = out.with_suffix(".json")
     src = Path(design.scene)
     extends = base or (src.stem if src.parent.name == "scenes" else str(src.resolve()))

@@ -34,6 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drillcosim.cosim.master.errors import UserError
+
 from .plant_model import LoopPlant, augment
 
 __all__ = ["LqgGains", "LqgWeights", "lqg_gains", "lqg_matrices"]
@@ -66,7 +68,7 @@ class LqgWeights:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (
                     math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} = {v!r}; allowed: a finite number > 0")
+                raise UserError(f"{name} = {v!r}; allowed: a finite number > 0")
 
 
 @dataclass(frozen=True)

@@ -24,15 +24,16 @@ from typing import Any
 import numpy as np
 
 from drillcosim.cosim.study.stability import discretize, loop_weights, reduce_loop
+from drillcosim.plant.signals import actuator_force, site_channels, strain
 
 __all__ = ["LoopPlant", "augment", "site_signals"]
 
 
 def site_signals(n_sites: int) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """(strains, forces): the plant's output and input names of ``n_sites`` sites."""
-    ch = [(s, a) for s in range(1, n_sites + 1) for a in ("C", "E")]
-    return (tuple(f"strain{s}_{a}" for s, a in ch),
-            tuple(f"actuator{s}_force_{a}" for s, a in ch))
+    """(strains, forces): the plant's output and input names of ``n_sites`` sites, site by
+    site, gauge C then E (:mod:`plant.signals`)."""
+    ch = site_channels(range(1, n_sites + 1))
+    return tuple(strain(s, a) for s, a in ch), tuple(actuator_force(s, a) for s, a in ch)
 
 
 @dataclass
@@ -71,35 +72,41 @@ class LoopPlant:
     @classmethod
     def from_scene(cls, scene: Any, joints: Sequence[int] | None = None,
                    overrides: Mapping[str, Any] | None = None) -> LoopPlant:
-        """Linearize a scene's plant (name, path or loaded :class:`plant.scene.Scene`).
+        """Linearize a scene's plant.
 
         Parameters
         ----------
-        scene : str or Scene
+        scene : str, path or SceneConfig
+            A scene (name or file) or a loaded :class:`cosim.scenario.config.SceneConfig`.
         joints : sequence of int, optional
             Actuator joints (default: the scene's ``[actuators] joints``).
         overrides : mapping, optional
-            Nested overrides for :func:`plant.scene.load_scene`.
-        """
-        from drillcosim.cosim.scenario.scene_system import cosim_settings
-        from drillcosim.plant.linearize import linearize
-        from drillcosim.plant.scene import load_scene
+            Scene keys by key path (:func:`cosim.scenario.config.load_config`).
 
-        if hasattr(scene, "plant"):
+        Raises
+        ------
+        ConfigError
+            A scene without the full3d model or without actuator sites (one line).
+        """
+        from drillcosim.cosim.scenario.config import ConfigError, SceneConfig, load_config
+        from drillcosim.plant.linearize import linearize
+
+        if isinstance(scene, SceneConfig):
             if joints is not None or overrides:
-                raise ValueError("joints/overrides need a scene name or path, not a loaded Scene")
-            sc = scene
+                raise ValueError("joints/overrides need a scene name or path, not a "
+                                 "SceneConfig")
+            config = scene
         else:
-            ov = {k: dict(v) if isinstance(v, Mapping) else v
-                  for k, v in (overrides or {}).items()}
+            ov = dict(overrides or {})
             if joints is not None:
-                ov.setdefault("actuators", {})["joints"] = [int(j) for j in joints]
-            sc = load_scene(scene, overrides=ov or None)
+                ov["actuators.joints"] = [int(j) for j in joints]
+            config = load_config(scene, ov)
+        sc = config.scene
         if sc.model != "full3d" or not sc.plant.actuator_joints:
-            raise ValueError(f"scene {sc.name!r} (model {sc.model}, actuator joints "
-                             f"{list(sc.plant.actuator_joints)}): a lateral controller needs the "
-                             "full3d model with actuator sites")
-        st = cosim_settings(sc)
+            raise ConfigError(f"scene {sc.name!r} (model {sc.model}, actuator joints "
+                              f"{list(sc.plant.actuator_joints)}): a lateral controller needs "
+                              "the full3d model with actuator sites")
+        st = config.cosim
         lin = linearize(sc.plant, "full3d")
         model = lin.model
         n, N = model.n, lin.A.shape[0]

@@ -21,6 +21,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from drillcosim.cosim.master.errors import UserError
+
 from .plant_model import LoopPlant
 
 __all__ = ["gain_matrix", "predictor_matrices"]
@@ -31,7 +33,7 @@ def gain_matrix(gain: float, n_sites: int, relative: Sequence[Sequence[float]] |
     """``gain * kron(M, I_2)`` [N/strain], channels site by site, gauge C then E."""
     m = np.eye(n_sites) if relative is None else np.asarray(relative, dtype=float)
     if m.shape != (n_sites, n_sites):
-        raise ValueError(f"gain_matrix is {m.shape}; allowed: {n_sites} x {n_sites}")
+        raise UserError(f"gain_matrix is {m.shape}; allowed: {n_sites} x {n_sites}")
     return float(gain) * np.kron(m, np.eye(2))
 
 
