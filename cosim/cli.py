@@ -249,7 +249,7 @@ def _cmd_design(args: argparse.Namespace) -> int:
             joints = [int(j) for j in args.joints.split(",")]
         except ValueError:
             raise UserError(f"--joints {args.joints!r}: comma-separated joint numbers") from None
-    options = {"force_limit": args.force_limit}
+    options = {"force_limit": args.force_limit, "max_frequency": args.max_frequency}
     if args.kind == "lqg":
         options["weights"] = LqgWeights(args.deflection_scale, args.force_scale,
                                         args.force_noise, args.strain_noise)
@@ -425,6 +425,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="lqg: std of the strain noise [1] (default 1e-7)")
     p.add_argument("--force-limit", type=float, default=math.inf, metavar="N",
                    help="saturation |force| <= N [N] (default: none)")
+    p.add_argument("--max-frequency", type=float, default=1000.0, metavar="W",
+                   help="design model: the plant's modes up to W [rad/s] (default 1000: the "
+                   "lateral bending modes; inf: all); judged with all of them")
     p.add_argument("--out", required=True, metavar="SCENE.toml",
                    help="the scene to write; the matrices go to SCENE.json beside it")
     p.set_defaults(func=_cmd_design)

@@ -29,9 +29,13 @@ from .lqg import LqgWeights, lqg_gains, lqg_matrices
 from .plant_model import LoopPlant
 from .predictor import gain_matrix, predictor_matrices
 
-__all__ = ["KINDS", "Design", "design_controller", "design_on_plant", "write_scene"]
+__all__ = ["KINDS", "MAX_FREQUENCY", "Design", "design_controller", "design_on_plant",
+           "write_scene"]
 
 KINDS = ("lqg", "predictor")
+#: Modal truncation of the design model [rad/s] (:meth:`.plant_model.LoopPlant.truncated`):
+#: every lateral bending mode of the paper's string, none of the shear modes above the gap.
+MAX_FREQUENCY = 1000.0
 
 
 @dataclass(frozen=True)
@@ -49,9 +53,14 @@ class Design:
     scene : str
         The scene whose plant it was designed on (its source).
     settings : dict
-        The design's parameters (weights, gain), for the record.
+        The design's parameters (weights, gain, truncation), for the record.
     growth_rate : float
-        ln(rho) / H of the closed loop on the design plant at ``delay`` [1/s] (< 0: stable).
+        ln(rho) / H of the closed loop with the full linearized plant at ``delay`` [1/s]
+        (< 0: stable); the design's verdict.
+    design_growth_rate : float
+        The same on the (truncated) design model.
+    design_states : int
+        States of the design model (the plant's modes kept, :data:`MAX_FREQUENCY`).
     """
 
     kind: str
@@ -61,6 +70,8 @@ class Design:
     scene: str
     settings: dict[str, Any] = field(default_factory=dict)
     growth_rate: float = math.nan
+    design_growth_rate: float = math.nan
+    design_states: int = 0
 
     @property
     def stable(self) -> bool:
@@ -71,15 +82,19 @@ class Design:
         return (f"{self.kind} controller for joints {list(self.joints)}: "
                 f"{len(c.inputs)} strains -> {len(c.outputs)} forces, {c.n_states} states, "
                 f"Ts = {c.sample_period:g} s, designed for an actuator delay of "
-                f"{self.delay:g} s; closed loop on the design plant: growth "
-                f"{self.growth_rate:+.4g} 1/s ({'stable' if self.stable else 'UNSTABLE'})")
+                f"{self.delay:g} s on a {self.design_states}-state model; closed loop with the "
+                f"full linearized plant: growth {self.growth_rate:+.4g} 1/s "
+                f"({'stable' if self.stable else 'UNSTABLE'}; design model "
+                f"{self.design_growth_rate:+.4g} 1/s)")
 
 
 def design_on_plant(kind: str, plant: LoopPlant, step: float, delay: float, *,
                     weights: LqgWeights | None = None, gain: float = 1e8,
                     relative_gains: Sequence[Sequence[float]] | None = None,
-                    force_limit: float = math.inf) -> Design:
-    """Design on an already linearized plant (see :func:`design_controller`)."""
+                    force_limit: float = math.inf,
+                    max_frequency: float = MAX_FREQUENCY) -> Design:
+    """Design on an already linearized plant (see :func:`design_controller`): on its modes
+    up to ``max_frequency`` [rad/s] (``inf``: all), judged with all of them."""
     if kind not in KINDS:
         raise UserError(f"kind = {kind!r}; allowed: {', '.join(KINDS)}")
     for name, v in (("step", step), ("delay", delay)):
@@ -88,6 +103,11 @@ def design_on_plant(kind: str, plant: LoopPlant, step: float, delay: float, *,
                              f"{'> 0' if name == 'step' else '>= 0'}")
     if not force_limit > 0:
         raise UserError(f"force_limit = {force_limit!r} N; allowed: > 0 (inf: none)")
+    if not max_frequency > 0:
+        raise UserError(f"max_frequency = {max_frequency!r} rad/s; allowed: > 0 (inf: no "
+                        "truncation)")
+    full = plant
+    plant = full.truncated(max_frequency)
     strains, forces = plant.signals
     if kind == "lqg":
         weights = weights or LqgWeights()
@@ -103,12 +123,16 @@ def design_on_plant(kind: str, plant: LoopPlant, step: float, delay: float, *,
         settings = {"gain": gain, "relative_gains": None if relative_gains is None else
                     [list(map(float, r)) for r in relative_gains]}
         what = f"Smith predictor for a {delay:g} s delay around the P law, gain {gain:g} N/strain"
+    settings["max_frequency"] = max_frequency
     ctrl = StateSpaceParams(
         A, B, C, D, tuple(Signal(s, "1") for s in strains),
         tuple(Signal(f, "N", -force_limit, force_limit) for f in forces), step,
-        f"{what}; joints {list(plant.joints)}, designed on {Path(plant.source).name}")
+        f"{what}; joints {list(plant.joints)}, designed on {Path(plant.source).name} "
+        f"({plant.A.shape[0]} of its {full.A.shape[0]} states: modes up to "
+        f"{max_frequency:g} rad/s)")
     return Design(kind, ctrl, float(delay), plant.joints, plant.source, settings,
-                  growth_rate(plant, ctrl, delay))
+                  growth_rate(full, ctrl, delay), growth_rate(plant, ctrl, delay),
+                  plant.A.shape[0])
 
 
 def design_controller(kind: str, scene: Any, *, per_span: int | None = None,
@@ -133,8 +157,8 @@ def design_controller(kind: str, scene: Any, *, per_span: int | None = None,
     overrides : mapping, optional
         Scene keys by key path (e.g. ``{"bit.weight_on_bit": ...}``).
     **options
-        ``weights`` (:class:`.lqg.LqgWeights`), ``gain``, ``relative_gains``, ``force_limit``
-        (:func:`design_on_plant`).
+        ``weights`` (:class:`.lqg.LqgWeights`), ``gain``, ``relative_gains``, ``force_limit``,
+        ``max_frequency`` (:func:`design_on_plant`).
     """
     from drillcosim.cosim.scenario.config import load_config
     from drillcosim.cosim.study.paper.conclusion import site_joints

@@ -17,13 +17,15 @@ Signals (as the plant FMU names them): inputs ``actuator<s>_force_<C|E>`` [N], o
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import scipy.linalg
 
-from drillcosim.cosim.study.stability import discretize, loop_weights, reduce_loop
+from drillcosim.cosim.study.stability import discretize, loop_weights, modal_bases, reduce_loop
 from drillcosim.plant.signals import actuator_force, site_channels, strain
 
 __all__ = ["LoopPlant", "augment", "site_signals"]
@@ -122,6 +124,36 @@ class LoopPlant:
         return cls(Ar, Bx[:, :m], Cx[:p], Bx[:, m:], Cx[p:], dropped,
                    tuple(sc.plant.actuator_joints), st.algorithm, tuple(st.order),
                    st.coupling, st.sensor_delay, str(sc.source))
+
+    def truncated(self, max_frequency: float) -> LoopPlant:
+        """The plant with only its modes of ``|lambda| <= max_frequency`` [rad/s] (modal
+        truncation, for a smaller design model; judge a design on the full plant).
+
+        The drillstring's lateral bending modes (56 pairs for the paper's string, up to ~170
+        rad/s) lie below a gap (to ~2000 rad/s, the shear modes): the default of the designs,
+        :data:`.design.MAX_FREQUENCY` = 1000 rad/s, keeps them all (240 -> 112 states).
+
+        Raises
+        ------
+        UserError
+            No mode at or below ``max_frequency``.
+        """
+        from drillcosim.cosim.master.errors import UserError
+
+        lam, V = scipy.linalg.eig(self.A)
+        keep = np.abs(lam) <= max_frequency
+        if keep.all():
+            return self
+        if not keep.any():
+            raise UserError(f"max_frequency = {max_frequency!r} rad/s keeps no mode (the "
+                            f"slowest is at {np.abs(lam).min():.4g} rad/s)")
+        qk, qd = modal_bases(lam, V, keep)
+        T = np.hstack([qk, qd])
+        Ti = np.linalg.inv(T)
+        r = qk.shape[1]
+        return dataclasses.replace(
+            self, A=(Ti @ self.A @ T)[:r, :r], B=(Ti @ self.B)[:r], C=(self.C @ T)[:, :r],
+            Bw=(Ti @ self.Bw)[:r], Cd=(self.Cd @ T)[:, :r], _cache={})
 
     @property
     def n_sites(self) -> int:
