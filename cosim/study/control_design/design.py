@@ -23,6 +23,7 @@ from typing import Any
 
 from drillcosim.controller.state_space import Signal, StateSpaceParams
 from drillcosim.cosim.master.errors import UserError
+from drillcosim.plant.scene import scenes_dir
 
 from .closed_loop import growth_rate
 from .lqg import LqgWeights, lqg_gains, lqg_matrices
@@ -208,10 +209,21 @@ def write_scene(design: Design, out: str | Path, *, base: str | None = None,
         raise UserError(f"out = {str(out)!r}: a scene file name ending in .toml")
     matrices = out.with_suffix(".json")
     src = Path(design.scene)
-    extends = base or (src.stem if src.parent.name == "scenes" else str(src.resolve()))
+    shipped = scenes_dir() / f"{src.stem}.toml"
+    near = (shipped.is_file() and shipped.resolve() == src.resolve()) or (
+        out.parent.resolve() == src.parent.resolve())
+    extends = base or (src.stem if near else str(src.resolve()))
     c = design.controller
-    lines = [f"description = {_toml_value(design.summary())}",
-             f"extends = {_toml_value(extends)}", "", "[actuators]",
+    what = {"lqg": "LQG", "predictor": "Smith predictor around the P law"}[design.kind]
+    description = (f"{what} (drillcosim design {design.kind}) on joints "
+                   f"{list(design.joints)}, designed for {design.delay * 1e3:g} ms of actuator "
+                   f"delay at H = {c.sample_period * 1e3:g} ms: {c.n_states} states, closed loop "
+                   f"with the linearized plant {design.growth_rate:+.3g} 1/s")
+    settings = ", ".join(f"{k} = {v}" for k, v in design.settings.items() if v is not None)
+    lines = [f"description = {_toml_value(description)}",
+             f"extends = {_toml_value(extends)}",
+             f"# written by drillcosim design {design.kind} from {src.name}: {settings}",
+             f"# {design.summary()}", "", "[actuators]",
              f"joints = {_toml_value(list(design.joints))}", "", "[controller]",
              "enabled = true", 'kind = "state_space"',
              f"matrices = {_toml_value(matrices.name)}   # {c.n_states} states, "
