@@ -243,6 +243,10 @@ def _cmd_design(args: argparse.Namespace) -> int:
     from drillcosim.cosim.master.errors import UserError
     from drillcosim.cosim.study.control_design import LqgWeights, design_controller, write_scene
 
+    if args.kind == "compare":
+        return _cmd_compare(args)
+    if not args.scene or not args.out:
+        raise UserError(f"drillcosim design {args.kind}: give SCENE and --out SCENE.toml")
     joints = None
     if args.joints:
         try:
@@ -260,7 +264,26 @@ def _cmd_design(args: argparse.Namespace) -> int:
     scene, matrices = write_scene(d, args.out)
     print(d.summary())
     print(f"wrote {scene} and {matrices}")
-    return 0
+    return EXIT_OK
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from drillcosim.cosim.master.errors import UserError
+    from drillcosim.cosim.study.control_design.compare import run_compare
+    from drillcosim.cosim.study.control_design.compare_report import report
+    from drillcosim.cosim.study.control_design.linear import linear_table
+
+    if args.scene:
+        raise UserError("drillcosim design compare takes no SCENE (the study's scenes are "
+                        "fixed: docs/control_design.md); give --out DIR")
+    out = args.out or "out/control_compare"
+    if not args.report_only:
+        linear_table(out, progress=_progress(args))
+        if not args.linear:
+            run_compare(out, workers=args.workers, scheduler=args.scheduler,
+                        progress=_progress(args))
+    print(report(out, args.figures), end="")
+    return EXIT_OK
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -403,9 +426,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_calibrate)
     p = sub.add_parser("design", help="design a lateral controller (LQG, or the Smith predictor "
-                       "around the P law) on a scene's linearized plant; write it into a scene")
-    p.add_argument("kind", choices=("lqg", "predictor"))
-    p.add_argument("scene", help="scene name or TOML file designed on (and extended)")
+                       "around the P law) on a scene's linearized plant and write it into a "
+                       "scene; or run the comparison study (compare)")
+    p.add_argument("kind", choices=("lqg", "predictor", "compare"),
+                   help="compare: the P law, predictor and LQG over delay, simulated and "
+                   "predicted (resumable table in --out DIR, default out/control_compare; "
+                   "report: docs/control_design.md)")
+    p.add_argument("scene", nargs="?", help="scene name or TOML file designed on (and "
+                   "extended)")
     p.add_argument("--sites", type=int, metavar="N", help="actuator sites per span, evenly "
                    "spread (default: the scene's joints)")
     p.add_argument("--joints", metavar="J,J,...", help="explicit actuator joints")
@@ -428,8 +456,20 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--max-frequency", type=float, default=1000.0, metavar="W",
                    help="design model: the plant's modes up to W [rad/s] (default 1000: the "
                    "lateral bending modes; inf: all); judged with all of them")
-    p.add_argument("--out", required=True, metavar="SCENE.toml",
-                   help="the scene to write; the matrices go to SCENE.json beside it")
+    p.add_argument("--out", metavar="SCENE.toml",
+                   help="the scene to write; the matrices go to SCENE.json beside it "
+                   "(compare: the study folder)")
+    p.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="compare: worker processes (default 1; 0: this process)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="compare: a dask.distributed "
+                   "scheduler instead of local workers")
+    p.add_argument("--figures", metavar="DIR", help="compare: folder of the report's PNGs "
+                   "and CSVs (default OUT/report)")
+    p.add_argument("--report-only", action="store_true",
+                   help="compare: only the report of the rows run so far")
+    p.add_argument("--linear", action="store_true", help="compare: only the linear-regime "
+                   "check (1.5 s runs: co-simulated vs predicted growth rate; ~1 min)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_design)
     p = sub.add_parser("doctor", help="which Python an FMU would run in on this machine, and why")
     p.add_argument("fmu", nargs="?", help="an FMU built by drillcosim (default: the built "

@@ -238,6 +238,20 @@ def _lacking(config: SceneConfig, face: FmuInterface) -> list[str]:
             for key in config.set_keys.get(face.instance, ()) if port.get(key, key) not in face.ports]
 
 
+def _unfit_state_space(config: SceneConfig, faces: Mapping[str, FmuInterface]) -> list[str]:
+    """A state-space controller's inputs that are no output of the plant and outputs that are
+    no input of it (a linear law fed by nothing, or feeding nothing, is a wrong matrices file;
+    the P law's rule for sites one side does not serve does not apply)."""
+    if config.state_space is None or CONTROLLER not in faces:
+        return []
+    plant, face = faces[PLANT], faces[CONTROLLER]
+    src = f"[controller] matrices {config.state_space.file.name}"
+    return ([f"{face.label} input '{n}' ({src}) is no output of {plant.label}"
+             for n in face.inputs() if n not in plant.outputs()]
+            + [f"{face.label} output '{n}' ({src}) is no input of {plant.label}"
+               for n in face.outputs() if n not in plant.inputs()])
+
+
 def build_system(config: SceneConfig, engine: str = "fmu", *,
                  fmu_dir: str | Path | None = None) -> BuiltSystem:
     """Build the co-simulation system of a configuration and check it.
@@ -296,6 +310,7 @@ def build_system(config: SceneConfig, engine: str = "fmu", *,
         for i in controllers:
             params[i] = {k: v for k, v in start[i].items() if k in faces[i].ports}
         lacking = [p for i in controllers for p in _lacking(config, faces[i])]
+    lacking += _unfit_state_space(config, faces)
     fmus = [FmuSpec(PLANT, faces[PLANT].path, params[PLANT])]
     fmus += [FmuSpec(i, faces[i].path, params[i], cosim.controller_ticks) for i in controllers]
     wiring = wire_system(faces[PLANT], [faces[i] for i in controllers], fmus, lacking)
