@@ -257,7 +257,8 @@ def point_config(family: str, per_span: int, delay: float, step: float, variant:
         over.update({"controller.enabled": True, "controller.gain": fam.gain})
         controller = _p_law(joints, fam.gain, step)
     else:
-        path, design_rate = _design(fam, design_scene, joints, step, delay, Path(design_dir))
+        path, design_rate = _design(fam, design_scene, joints, step, delay,
+                                    Path(design_dir).resolve())
         over.update({"controller.enabled": True, "controller.kind": "state_space",
                      "controller.matrices": str(path)})
         controller = load_state_space(path)

@@ -80,7 +80,7 @@ def linear_point(family: str, delay: float, design_dir: str | Path, *,
     """
     designed = delay if design_delay is None else design_delay
     config, controller, _ = point_config(family, per_span, designed, step, "nominal",
-                                         stop_time, Path(design_dir).resolve(),
+                                         stop_time, design_dir,
                                          {"top_drive.ramp_time": 0.0,
                                           "cosim.actuator_delay": delay})
     plant = _loop_plant(SCENE, tuple(config.scene.plant.actuator_joints), step, "{}")
