@@ -169,3 +169,36 @@ def test_design_command(tmp_path, capsys):
     assert "stable" in capsys.readouterr().out
     assert main(["design", "lqg", SCENE, "--force-scale", "0", "--out", str(out)]) == 2
     assert "force_scale = 0.0; allowed" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["design", "lqg", SCENE, "--delay=-1e-3", "--out", "x.toml"], "delay = -0.001 s; allowed"),
+    (["design", "predictor", SCENE, "--out", "x.txt"], "ending in .toml"),
+    (["design", "lqg", "--out", "x.toml"], "give SCENE and --out"),
+    (["design", "compare", SCENE], "takes no SCENE"),
+    (["design", "lqg", "no_such_scene", "--out", "x.toml"], "no_such_scene"),
+])
+def test_bad_design_input_is_one_line(tmp_path, monkeypatch, capsys, argv, message):
+    """Exit code 2, one line on stderr naming the parameter, no traceback, nothing written."""
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_non_stabilizable_design_says_so(plant, monkeypatch):
+    """python-control's LinAlgError of a Riccati equation without a stabilizing solution becomes
+    one line naming the sites (this plant is stabilizable from every site, so the solver's
+    failure is imitated)."""
+    import control
+
+    def fail(*args, **kwargs):
+        raise np.linalg.LinAlgError("Failed to find a finite solution.")
+
+    from drillcosim.cosim.master.errors import UserError
+
+    monkeypatch.setattr(control, "dlqr", fail)
+    with pytest.raises(UserError, match=r"LQR on joints \[11, 26\].*not stabilizable") as info:
+        lqg_gains(plant, H, 5e-4, LqgWeights())
+    assert "\n" not in str(info.value)

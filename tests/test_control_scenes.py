@@ -188,3 +188,24 @@ def test_cosimulated_growth_rate_is_the_predicted_one(tmp_path_factory, family, 
         assert _agree(r["simulated"], r["predicted"]), r
     else:
         assert r["predicted"] < 0 and r["simulated"] < 0, r
+
+
+def test_comparison_study_runs_and_reports(tmp_path):
+    """The 30 s study's pipeline on three 2 s points (open loop, P 1e9 and the predictor at
+    0.5 ms): one row per point, the P law's envelope grows faster than the open loop's by more
+    than the verdict's margin and the prediction says unstable, the predictor's neither; the
+    report names both and writes its figures."""
+    from drillcosim.cosim.study.control_design.compare import ComparePoint, run_compare
+    from drillcosim.cosim.study.control_design.compare_report import compare_rows, report
+
+    pts = [ComparePoint("open", 1, 0.0, stop_time=2.0),
+           ComparePoint("p1e9", 1, 5e-4, stop_time=2.0),
+           ComparePoint("pred1e9", 1, 5e-4, stop_time=2.0)]
+    rows = run_compare(tmp_path, workers=0, progress=False, points=pts)
+    assert sorted(r["family"] for r in rows) == ["open", "p1e9", "pred1e9"]
+    by = {r["family"]: r for r in compare_rows(rows)}
+    assert by["p1e9"]["predicted_growth_rate"] > 1 and by["p1e9"]["verdict"] == "unstable"
+    assert by["pred1e9"]["predicted_growth_rate"] < 0 and by["pred1e9"]["below_margin"]
+    text = report(tmp_path)
+    assert "| P 1e9 | 1 |" in text and "| predictor 1e9 | 1 |" in text
+    assert (tmp_path / "report" / "control_growth.png").stat().st_size > 0

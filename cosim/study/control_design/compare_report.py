@@ -185,6 +185,14 @@ def _axes(nrows: int, ncols: int):
                         squeeze=False, layout="constrained")
 
 
+def _legend(axes, **kwargs: Any) -> None:
+    """One legend, in the first panel that has labelled lines."""
+    for ax in axes.flat:
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=6, **kwargs)
+            return
+
+
 def _steps(rows: Sequence[Mapping[str, Any]]) -> list[tuple[float, tuple[float, ...]]]:
     have = {r["step"] for r in rows}
     return [(s, d) for s, d in ((STEP, DELAYS), (STEP_1MS, DELAYS_1MS))
@@ -218,7 +226,7 @@ def plot_growth(rows: Sequence[Mapping[str, Any]], path: Path) -> Path:
             ax.set_title(f"{n} site(s)/span, H = {step * 1e3:g} ms", fontsize=9)
             ax.set_xlabel("actuator delay [ms]")
         axes[i, 0].set_ylabel("predicted growth rate [1/s]")
-    axes[0, -1].legend(fontsize=6, loc="upper left")
+    _legend(axes)
     fig.suptitle("lines: linear prediction; markers: simulation (o stable, x unstable, "
                  "s undecided)", fontsize=9)
     return save_figure(fig, path)
@@ -243,7 +251,7 @@ def _plot_metric(rows: Sequence[Mapping[str, Any]], path: Path, key: str, scale:
             ax.set_title(f"{n} site(s)/span, H = {step * 1e3:g} ms", fontsize=9)
             ax.set_xlabel("actuator delay [ms]")
         axes[i, 0].set_ylabel(ylabel)
-    axes[0, -1].legend(fontsize=6)
+    _legend(axes)
     fig.suptitle("completed runs below the growth margin (unstable points left out)",
                  fontsize=9)
     return save_figure(fig, path)

@@ -105,12 +105,22 @@ def lqg_gains(plant: LoopPlant, step: float, delay: float, weights: LqgWeights) 
     Q = np.zeros((nz, nz))
     Q[:n, :n] = plant.Cd.T @ plant.Cd / weights.deflection_scale ** 2
     R = np.eye(m) / weights.force_scale ** 2
-    K, S, E_lqr = control.dlqr(Az, Bz, Q, R)
+    try:
+        K, S, E_lqr = control.dlqr(Az, Bz, Q, R)
+    except np.linalg.LinAlgError as exc:
+        raise UserError(f"LQR on joints {list(plant.joints)} (delay {delay:g} s, step {step:g} s):"
+                        f" no stabilizing solution of the Riccati equation ({exc}): the plant is "
+                        "not stabilizable from these sites; choose other joints") from None
     Gz = np.zeros((nz, Bwd.shape[1]))
     Gz[:n] = Bwd
     W = weights.force_noise ** 2 * np.eye(Gz.shape[1])
     V = weights.strain_noise ** 2 * np.eye(Cz.shape[0])
-    L, P, E_kf = control.dlqe(Az, Gz, Cz, W, V)
+    try:
+        L, P, E_kf = control.dlqe(Az, Gz, Cz, W, V)
+    except np.linalg.LinAlgError as exc:
+        raise UserError(f"Kalman filter on joints {list(plant.joints)} (step {step:g} s): no "
+                        f"stabilizing solution of the filter Riccati equation ({exc}): the plant "
+                        "is not detectable from these strain gauges; choose other joints") from None
     M = P @ Cz.T @ np.linalg.inv(Cz @ P @ Cz.T + V)
     return LqgGains(Az, Bz, Cz, Q, R, np.asarray(K), np.asarray(S), np.asarray(E_lqr), Gz, W,
                     V, np.asarray(L), np.asarray(P), np.asarray(E_kf), M)
