@@ -21,13 +21,14 @@ Builds isolated from each other
 A Python host imports a module name once (``sys.modules``): two FMUs that ship different code
 under one name would both run the code of the one loaded first. So the names in the source
 (``_dcs_plant_0_1_0``, ``_dcs_pythonfmu_0_7_0``, the slave module ``_dcs_<script>_<version>``)
-are canonical names only: the build hashes everything it stages (every vendored file, the
-slave module(s), ``resources/``; :func:`build_hash`) and ships each module as
-``<canonical name>_<hash>`` (:data:`BUILD_HASH_LENGTH` hex digits), rewriting the names in
-every shipped ``.py`` file. Two builds that differ in any byte run their own code in one
-process, in either load order; instances of one build (or of byte-identical builds) share
-their modules. ``resources/dcs_build.json`` records the hash and the names
-(:func:`shipped_modules`).
+are canonical names only: the build ships each module as ``<canonical name>_<hash>``
+(:data:`BUILD_HASH_LENGTH` hex digits), the hash taken over the module's own files with the
+names of the modules it imports already replaced by their shipped names (:func:`module_names`),
+and rewrites the names in every shipped ``.py`` file. Two builds whose code differs in any
+byte run their own code in one process, in either load order; instances of one build share
+their modules, and so do builds that ship the same code (the scene variants of one plant
+share the plant package, and numba's compiled kernels of it). ``resources/dcs_build.json``
+records the hash of the whole build (:func:`build_hash`) and the names (:func:`shipped_modules`).
 
 Each FMU is built in a fresh Python subprocess (pythonfmu imports and
 instantiates the adapter and leaves entries on ``sys.path``; the calling process
@@ -109,6 +110,7 @@ __all__ = [
     "build_all",
     "build_one",
     "build_hash",
+    "module_names",
     "finalize_model_description",
     "main",
     "shipped_modules",
@@ -554,6 +556,56 @@ def build_hash(folders: Sequence[Path]) -> str:
     return digest.hexdigest()[:BUILD_HASH_LENGTH]
 
 
+def _module_files(staging: Path, name: str) -> list[Path]:
+    """The files of staged module ``name`` (a package folder or one ``.py``; caches left out)."""
+    folder = staging / name
+    if folder.is_dir():
+        return sorted(p for p in folder.rglob("*") if p.is_file() and
+                      "__pycache__" not in p.parts and p.suffix != ".pyc")
+    return [staging / f"{name}.py"]
+
+
+def module_names(staging: Path, canonical: Sequence[str]) -> dict[str, str]:
+    """The shipped name of every canonical module staged in ``staging``.
+
+    ``<canonical>_<hash>``, the hash (:data:`BUILD_HASH_LENGTH` hex digits of SHA-256) taken
+    over the module's files with the canonical names of the modules it refers to replaced by
+    their shipped names, dependencies first. Equal code ships under an equal name whatever else
+    a build carries: the scene variants of one plant share its package (and numba's cache of
+    its kernels, which is kept per package content), while code that differs in any byte, or
+    that imports a module that does, gets another name.
+
+    Raises
+    ------
+    RuntimeError
+        If the modules refer to each other in a cycle (no order gives every module its
+        dependencies' names first).
+    """
+    pattern = re.compile(r"\b(" + "|".join(map(re.escape, sorted(canonical, key=len,
+                                                                  reverse=True))) + r")\b")
+    files = {name: _module_files(staging, name) for name in canonical}
+    texts = {path: path.read_text(encoding="utf-8") for name in canonical
+             for path in files[name] if path.suffix == ".py"}
+    refers = {name: {m for path in files[name] if path in texts
+                     for m in pattern.findall(texts[path])} - {name} for name in canonical}
+    names: dict[str, str] = {}
+    while len(names) < len(canonical):
+        ready = [n for n in canonical if n not in names and refers[n] <= names.keys()]
+        if not ready:
+            raise RuntimeError(f"the vendored modules {sorted(set(canonical) - names.keys())} "
+                               f"refer to each other in a cycle")
+        for name in ready:
+            digest = hashlib.sha256()
+            for path in files[name]:
+                data = (pattern.sub(lambda m: names.get(m.group(1), m.group(1)),
+                                    texts[path]).encode() if path in texts
+                        else path.read_bytes())
+                digest.update(path.relative_to(staging).as_posix().encode() + b"\0" + data
+                              + b"\0")
+            names[name] = f"{name}_{digest.hexdigest()[:BUILD_HASH_LENGTH]}"
+    return names
+
+
 def _rename_modules(staging: Path, names: Mapping[str, str]) -> None:
     """Ship every canonical module name of ``staging`` under its build name: the package
     folders and module files are renamed and the names rewritten in every ``.py`` file (whole
@@ -642,10 +694,10 @@ def _build_in_this_process(recipe: FmuRecipe, workdir: Path) -> Path:
         shutil.copy2(recipe.script_path, staging / f"{recipe.slave_module}.py")
     resource_entries = _stage_resources(recipe, workdir / "resources")
 
-    # isolated builds: every module under <canonical>_<hash of all that is shipped>
-    digest = build_hash([staging, workdir / "resources"])
-    names = {name: f"{name}_{digest}" for name in canonical}
+    # isolated builds: every module under <canonical>_<hash of its code and its imports'>
+    names = module_names(staging, canonical)
     _rename_modules(staging, names)
+    digest = build_hash([staging, workdir / "resources"])  # the build's identity, recorded
     low, high = python_range()
     info = workdir / "info" / Path(BUILD_INFO).name
     info.parent.mkdir()

@@ -62,7 +62,6 @@ from drillcosim.plant.signals import (
 )
 
 from .config import ConfigError, SceneConfig, plant_parameter_paths
-from .inprocess import inprocess_slaves
 from .interface import InterfaceWarning, wire_system
 from .scene_fmus import (
     TOP_DRIVE_CONTROLLER,
@@ -291,6 +290,8 @@ def build_system(config: SceneConfig, engine: str = "fmu", *,
     controllers = instances[1:]
     cosim = config.cosim
     if engine == "inprocess":
+        from .inprocess import inprocess_slaves  # the FMU engine's start-up does not need it
+
         slaves = inprocess_slaves(config)
         faces = _inprocess_faces(config, slaves)
         params: dict[str, dict[str, Any]] = {i: {} for i in instances}
