@@ -50,13 +50,8 @@ from drillcosim.controller.state_space import (
 )
 from drillcosim.cosim.master.files import atomic_write
 from drillcosim.cosim.scenario.config import SceneConfig, load_config
-from drillcosim.cosim.scenario.summary import span_info
-from drillcosim.plant.model import DrillstringModel
 
-from ..ensemble import lateral_perturbation
-from ..paper.conclusion import EPS, SEED, site_joints
-from ..point import PointOptions, metrics, simulate_point
-from ..scene_stats import run_statistics
+from ..paper.conclusion import measure_config, site_joints
 from ..sweep import execute_points
 from ..table import ResultTable, full_row
 from .closed_loop import growth_rate
@@ -278,31 +273,10 @@ def measure_control(family: str, per_span: int, delay: float, step: float, varia
         plant = _loop_plant(run_scene(variant), joints, step,
                             json.dumps(VARIANTS[variant][0], sort_keys=True))
         predicted = growth_rate(plant, controller, config.cosim.actuator_delay)
-    offset = None
-    if member:
-        model = DrillstringModel(config.scene.plant, "full3d")
-        offset = lateral_perturbation(model, EPS, SEED, member)
-    opts = PointOptions(rms_fraction=STEADY_FRACTION)
-    data, reason = simulate_point(config, opts, "inprocess", None, offset)
-    t = data["time"]
-    diverged = bool(reason)
-    spans = {b: str(v["span"]) for b, v in span_info(config.scene).items()}
-    m = metrics(data, spans, config.n_sites, opts, diverged)
-    st = run_statistics(data, config) if not diverged else {}
-    row: dict[str, Any] = {
-        "status": "diverged" if diverged else "ok", "reason": reason,
-        "end_time": float(t[-1]) if len(t) else 0.0,
-        "joints": " ".join(str(j) for j in config.scene.plant.actuator_joints),
-        "growth_rate": m["growth_rate"], "growth_noise": m["growth_noise"],
-        "peak_force": m["peak_force"], "peak_power": m["peak_power"],
-        "long_peak_m": m["peak_deflection_long"],
-        "long_contact_time_s": st.get("long_contact_time_s", math.nan),
-        "short_contact_time_s": st.get("short_contact_time_s", math.nan),
-        "predicted_growth_rate": predicted, "design_growth_rate": design_rate,
-        "controller_states": float(controller.n_states) if controller is not None else 0.0}
-    for span in ("long", "short"):
-        mean, std = st.get(f"{span}_mean_m", math.nan), st.get(f"{span}_std_m", math.nan)
-        row[f"{span}_rms_m"] = math.hypot(mean, std)
+    row = measure_config(config, member)
+    row.update({"predicted_growth_rate": predicted, "design_growth_rate": design_rate,
+                "controller_states": float(controller.n_states) if controller is not None
+                else 0.0})
     row["wall_time"] = time.perf_counter() - wall0
     return row
 

@@ -199,9 +199,10 @@ def _steps(rows: Sequence[Mapping[str, Any]]) -> list[tuple[float, tuple[float, 
             if any(_same(s, h) for h in have)]
 
 
-def plot_growth(rows: Sequence[Mapping[str, Any]], path: Path) -> Path:
-    """Predicted growth rate vs delay (lines, symlog) per family; the simulated verdict as
-    markers on them (o tolerated, x unstable, s undecided above the margin's noise)."""
+def _panels(rows: Sequence[Mapping[str, Any]], path: Path, draw, ylabel: str, title: str,
+            yscale: dict[str, Any]) -> Path:
+    """A panel per step (rows) and sites per span (columns); ``draw(ax, family, color,
+    linestyle, grid)`` per family."""
     from drillcosim.cosim.scenario.plots import save_figure
 
     steps = _steps(rows)
@@ -210,51 +211,47 @@ def plot_growth(rows: Sequence[Mapping[str, Any]], path: Path) -> Path:
         for j, n in enumerate(PER_SPAN):
             ax = axes[i, j]
             for f, (c, ls) in _STYLE.items():
-                g = _grid(rows, f, n, step)
-                if not g:
-                    continue
-                x = [r["delay"] * 1e3 for r in g]
-                ax.plot(x, [r["predicted_growth_rate"] for r in g], color=c, ls=ls, lw=1,
-                        label=_LABEL[f])
-                for r in g:
-                    m = ("o" if r["below_margin"] else "x" if r["verdict"] == "unstable"
-                         else "s")
-                    ax.plot(r["delay"] * 1e3, r["predicted_growth_rate"], m, color=c, ms=4,
-                            mfc="none" if m == "o" else c)
-            ax.axhline(0.0, color="k", lw=0.6)
-            ax.set_yscale("symlog", linthresh=0.1)
-            ax.set_title(f"{n} site(s)/span, H = {step * 1e3:g} ms", fontsize=9)
-            ax.set_xlabel("actuator delay [ms]")
-        axes[i, 0].set_ylabel("predicted growth rate [1/s]")
-    _legend(axes)
-    fig.suptitle("lines: linear prediction; markers: simulation (o stable, x unstable, "
-                 "s undecided)", fontsize=9)
-    return save_figure(fig, path)
-
-
-def _plot_metric(rows: Sequence[Mapping[str, Any]], path: Path, key: str, scale: float,
-                 ylabel: str, log: bool = False) -> Path:
-    from drillcosim.cosim.scenario.plots import save_figure
-
-    steps = _steps(rows)
-    fig, axes = _axes(len(steps), len(PER_SPAN))
-    for i, (step, _delays) in enumerate(steps):
-        for j, n in enumerate(PER_SPAN):
-            ax = axes[i, j]
-            for f, (c, ls) in _STYLE.items():
-                g = [r for r in _grid(rows, f, n, step) if r["below_margin"]]
-                if g:
-                    ax.plot([r["delay"] * 1e3 for r in g], [r[key] * scale for r in g],
-                            color=c, ls=ls, marker="o", ms=3, lw=1, label=_LABEL[f])
-            if log:
-                ax.set_yscale("log")
+                draw(ax, f, c, ls, _grid(rows, f, n, step))
+            if yscale:
+                ax.set_yscale(**yscale)
             ax.set_title(f"{n} site(s)/span, H = {step * 1e3:g} ms", fontsize=9)
             ax.set_xlabel("actuator delay [ms]")
         axes[i, 0].set_ylabel(ylabel)
     _legend(axes)
-    fig.suptitle("completed runs below the growth margin (unstable points left out)",
-                 fontsize=9)
+    fig.suptitle(title, fontsize=9)
     return save_figure(fig, path)
+
+
+def plot_growth(rows: Sequence[Mapping[str, Any]], path: Path) -> Path:
+    """Predicted growth rate vs delay (lines, symlog) per family; the simulated verdict as
+    markers on them (o tolerated, x unstable, s undecided above the margin's noise)."""
+    def draw(ax, f, c, ls, g):
+        if not g:
+            return
+        x = [r["delay"] * 1e3 for r in g]
+        ax.plot(x, [r["predicted_growth_rate"] for r in g], color=c, ls=ls, lw=1,
+                label=_LABEL[f])
+        for r in g:
+            m = "o" if r["below_margin"] else "x" if r["verdict"] == "unstable" else "s"
+            ax.plot(r["delay"] * 1e3, r["predicted_growth_rate"], m, color=c, ms=4,
+                    mfc="none" if m == "o" else c)
+        ax.axhline(0.0, color="k", lw=0.6)
+
+    return _panels(rows, path, draw, "predicted growth rate [1/s]", "lines: linear "
+                   "prediction; markers: simulation (o stable, x unstable, s undecided)",
+                   {"value": "symlog", "linthresh": 0.1})
+
+
+def _plot_metric(rows: Sequence[Mapping[str, Any]], path: Path, key: str, scale: float,
+                 ylabel: str, log: bool = False) -> Path:
+    def draw(ax, f, c, ls, g):
+        g = [r for r in g if r["below_margin"]]
+        if g:
+            ax.plot([r["delay"] * 1e3 for r in g], [r[key] * scale for r in g], color=c,
+                    ls=ls, marker="o", ms=3, lw=1, label=_LABEL[f])
+
+    return _panels(rows, path, draw, ylabel, "completed runs below the growth margin "
+                   "(unstable points left out)", {"value": "log"} if log else {})
 
 
 def plot_benefit(rows: Sequence[Mapping[str, Any]], path: Path) -> Path:
