@@ -83,6 +83,7 @@ copies single files to chosen places in ``resources/`` (e.g. a user's scene file
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import hashlib
 import json
 import os
@@ -221,8 +222,10 @@ class FmuRecipe:
         Modules (import names) a Python must have to run the FMU; a host without Python
         checks its candidates for them (``resources/python_requires.txt``).
     exclude : tuple of str
-        Files of the vendored packages (relative to the root) left out of the FMU: code the
-        FMU never imports (tests' and benchmarks' reference implementations, analysis tools).
+        Files of the vendored packages and the ``extra_files`` folders (relative to the root;
+        ``fnmatch`` patterns, e.g. ``scenes/*.json``) left out of the FMU: code the FMU never
+        imports (tests' and benchmarks' reference implementations, analysis tools), data it
+        never reads.
     base : str
         For a variant (see the module docstring): the adapter class in ``script`` that the
         generated class ``name`` derives from; ``""`` (default): ``script`` defines ``name``.
@@ -282,16 +285,24 @@ class FmuRecipe:
         files, the wrapper's C sources and this build module."""
         from drillcosim.fmu_src.wrapper import sources as wrapper_sources
 
-        excluded = {(ROOT / e).resolve() for e in self.exclude}
         files = [self.script_path, Path(__file__).resolve(), *wrapper_sources()]
         for package, _ in self.vendored:
             files += [p for p in sorted((ROOT / package).rglob("*.py"))
-                      if "__pycache__" not in p.parts and p.resolve() not in excluded]
+                      if "__pycache__" not in p.parts and not self.excludes(p)]
         for extra in self.extra_files:
             path = ROOT / extra
-            files += sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+            files += (sorted(p for p in path.rglob("*") if p.is_file() and not self.excludes(p))
+                      if path.is_dir() else [path])
         files += [ROOT / src for src, _dest in self.resource_files]
         return files
+
+    def excludes(self, path: Path) -> bool:
+        """Whether ``path`` (a file under the root) is one of :attr:`exclude`."""
+        try:
+            rel = Path(path).resolve().relative_to(ROOT.resolve()).as_posix()
+        except ValueError:
+            return False
+        return any(fnmatch.fnmatchcase(rel, pattern) for pattern in self.exclude)
 
     @property
     def script_module(self) -> str:
@@ -345,7 +356,16 @@ REGISTRY: tuple[FmuRecipe, ...] = (
         # the numpy reference rhs (tests, benchmarks), the linear/modal analysis and the
         # continuous-time closed loop (study layer): the FMU never imports them (tested)
         exclude=("plant/numpy_rhs.py", "plant/linearize.py", "plant/modal.py",
-                 "plant/equilibrium.py", "plant/closed_loop.py"),
+                 "plant/equilibrium.py", "plant/closed_loop.py",
+                 "scenes/*.json"),   # controller matrices (the plant reads only the TOML)
+    ),
+    FmuRecipe(
+        name="StateSpaceController",
+        script="fmu_src/state_space_controller_fmu.py",
+        vendored=(("controller", "_dcs_controller_0_1_0"),
+                  ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
+        resource_files=(("fmu_src/state_space_default.json", "state_space.json"),),
+        requires=("numpy",),
     ),
     FmuRecipe(
         name="TopDriveController",
@@ -490,13 +510,16 @@ def _vendor(recipe: FmuRecipe, package: str, dst: Path) -> None:
     src = ROOT / package
     if not (src / "__init__.py").is_file():
         raise FileNotFoundError(f"vendored package {src} has no __init__.py")
-    excluded = {(ROOT / e).resolve() for e in recipe.exclude}
+    shutil.copytree(src, dst, ignore=_ignore(recipe))
 
+
+def _ignore(recipe: FmuRecipe):
+    """``copytree`` ignore: caches and the recipe's excluded files."""
     def ignore(folder: str, names: list[str]) -> set[str]:
         return {n for n in names if n == "__pycache__" or n.endswith(".pyc")
-                or (Path(folder) / n).resolve() in excluded}
+                or recipe.excludes(Path(folder) / n)}
 
-    shutil.copytree(src, dst, ignore=ignore)
+    return ignore
 
 
 def _stage_resources(recipe: FmuRecipe, dest: Path) -> list[Path]:
@@ -507,8 +530,7 @@ def _stage_resources(recipe: FmuRecipe, dest: Path) -> list[Path]:
         if not path.exists():
             raise FileNotFoundError(f"extra file {path} of {recipe.name} does not exist")
         if path.is_dir():
-            shutil.copytree(path, dest / path.name,
-                            ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+            shutil.copytree(path, dest / path.name, ignore=_ignore(recipe))
         else:
             shutil.copy2(path, dest / path.name)
     for src, rel in recipe.resource_files:
