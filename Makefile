@@ -35,7 +35,7 @@ run: install fmus
 
 test: install fmus
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -q --durations=12
+	$(BIN)/python -m pytest -q -n auto --dist loadfile --durations=12
 
 bench: install fmus
 	$(BIN)/drillcosim bench
