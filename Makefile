@@ -3,10 +3,10 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-FMUS := build/fmus/DrillstringPlant.fmu build/fmus/StrainController.fmu build/fmus/TopDriveController.fmu
+FMUS := build/fmus/DrillstringPlant.fmu build/fmus/StrainController.fmu build/fmus/TopDriveController.fmu build/fmus/StateSpaceController.fmu
 C_FMUS := build/fmus/StrainControllerC.fmu
-SRC := $(shell find plant controller fmu_src -name '*.py' -o -name '*.c' 2>/dev/null)
-C_SRC := $(wildcard fmu_src/c_controller/*.c fmu_src/c_controller/*.h fmu_src/c_controller/*.xml fmu_src/wrapper/fmi2/*.h) fmu_src/build_c.py
+SRC := $(shell find plant controller fmu_src -name '*.py' -o -name '*.c' -o -name '*.h' -o -name '*.json' 2>/dev/null)
+C_SRC := $(wildcard fmu_src/c_controller/*.c fmu_src/c_controller/*.h fmu_src/c_controller/*.xml fmu_src/wrapper/fmi2/*.h fmu_src/wrapper/dcs_registry.*) fmu_src/build_c.py
 
 .PHONY: all install fmus run test lint bench clean
 
@@ -35,7 +35,7 @@ run: install fmus
 
 test: install fmus
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -q --durations=12
+	$(BIN)/python -m pytest -q -n auto --dist loadfile --durations=12
 
 bench: install fmus
 	$(BIN)/drillcosim bench

@@ -1,5 +1,5 @@
 """drillcosim controller package: pure controller laws (no FMI code): the strain feedback of
-the bending actuators and the top-drive speed controller.
+the bending actuators, a generic discrete state-space law and the top-drive speed controller.
 
 All imports inside this package are relative and it depends on numpy only (the compiled
 steps, ``compiled.py``, use numba where it is installed; nothing imports them otherwise): the
@@ -9,6 +9,7 @@ into the controller FMU, so that copy can never shadow, or be shadowed by, a
 """
 
 from .params import MODES, ControllerParams, Mode, check_gain_matrix
+from .state_space import Signal, StateSpaceController, StateSpaceParams
 from .strain_feedback import (
     AXES,
     CHANNELS,
@@ -29,6 +30,9 @@ __all__ = [
     "SWITCH_TIME_RTOL",
     "ControllerParams",
     "Mode",
+    "Signal",
+    "StateSpaceController",
+    "StateSpaceParams",
     "StrainController",
     "TopDriveController",
     "TopDriveControllerParams",

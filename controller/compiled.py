@@ -3,9 +3,12 @@
 :func:`strain_step` and :func:`top_drive_step` (numba ``@cfunc``, ``int32 step(void *context,
 double t, double h)``) do what :meth:`controller.StrainController.step` (any number of sites,
 SISO or gain matrix, saturation, switch-on, lag) and :meth:`controller.TopDriveController.step`
-do, bit for bit, reading the inputs from an input buffer and writing the outputs into an output
-buffer. They change nothing and return :data:`REFUSED` for a step the Python law refuses (non-
-finite time, step or input; negative step) and :data:`FALLBACK` for one they leave to Python
+do, bit for bit, and :func:`state_space_step` what
+:meth:`controller.StateSpaceController.step` does (to rounding: its matrix-vector product is a
+call of numba's BLAS, numpy's of numpy's), reading the inputs from an input buffer and writing
+the outputs into an output buffer. They change nothing and return :data:`REFUSED` for a step
+the Python law refuses (non-finite time, step or input; negative step; a step that is not a
+whole number of the state-space law's samples) and :data:`FALLBACK` for one they leave to Python
 (the lag's decay factor for a new step size, which the Python law computes and keeps); the
 caller then runs the law's Python ``step``, which gives today's result or error message.
 
@@ -27,8 +30,8 @@ from numba import carray, cfunc, njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-__all__ = ["FALLBACK", "INTERNAL", "OK", "REFUSED", "CompiledLaw", "strain_step",
-           "top_drive_step"]
+__all__ = ["FALLBACK", "INTERNAL", "OK", "REFUSED", "CompiledLaw", "state_space_step",
+           "strain_step", "top_drive_step"]
 
 OK = 0
 FALLBACK = 1  # run this step in Python (nothing changed)
@@ -42,6 +45,9 @@ _WIDTH = 3  # address, d0, d1
 P_GAIN, P_LOWER, P_UPPER, P_SWITCH_ON, P_ENABLED, P_TAU, P_RTOL = range(7)
 # top-drive law: params
 T_TARGET, T_P, T_I, T_KT, T_RAMP, T_ENABLED = range(6)
+# state-space law: timing (the sample period, the samples run, the tolerance of "h is a
+# multiple of the sample period")
+S_PERIOD, S_COUNT, S_RTOL = range(3)
 
 
 @intrinsic
@@ -153,6 +159,55 @@ def top_drive_step(context, t, h):
     c = carray(context, 4 * _WIDTH, dtype=np.int64)
     try:
         return top_drive_core(t, h, _f1(c, 0), _f1(c, 1), _f1(c, 2), _f1(c, 3))
+    except Exception:  # noqa: BLE001 - never reported as a success
+        return INTERNAL
+
+
+# ------------------------------------------------------------------------ state space
+@njit(cache=True)
+def state_space_core(t, h, timing, matrix, w, scratch, lower, upper, law_outputs, inputs,
+                     outputs):
+    """:meth:`controller.StateSpaceController.step` on the views of its workspace: ``w = [x;
+    y]`` (the state, then the inputs the law holds), ``matrix = [[C, D], [A, B]]``, one
+    product per sample (``scratch = matrix w``)."""
+    if not (math.isfinite(t) and math.isfinite(h) and h >= 0.0):
+        return REFUSED
+    ts = timing[S_PERIOD]
+    k_float = h / ts
+    k = int(k_float + 0.5)
+    if abs(k_float - k) > timing[S_RTOL] * max(1.0, k_float):
+        return REFUSED
+    m = inputs.size
+    p = law_outputs.size
+    n = w.size - m
+    for j in range(m):
+        if not math.isfinite(inputs[j]):
+            return REFUSED
+    for j in range(m):
+        w[n + j] = inputs[j]
+    for _ in range(k):
+        np.dot(matrix, w, scratch)                  # BLAS, no allocation
+        for i in range(p):
+            v = scratch[i]
+            lo = lower[i]
+            hi = upper[i]
+            law_outputs[i] = lo if v < lo else (hi if v > hi else v)  # numpy's clip
+        for i in range(n):
+            w[i] = scratch[p + i]
+        timing[S_COUNT] += 1.0
+    for i in range(p):
+        outputs[i] = law_outputs[i]
+    return OK
+
+
+@cfunc(types.int32(types.voidptr, types.float64, types.float64), nopython=True, cache=True)
+def state_space_step(context, t, h):
+    """C entry point of the state-space law: slots timing, matrix, w, scratch, lower, upper,
+    law outputs, inputs, outputs."""
+    c = carray(context, 9 * _WIDTH, dtype=np.int64)
+    try:
+        return state_space_core(t, h, _f1(c, 0), _f2(c, 1), _f1(c, 2), _f1(c, 3), _f1(c, 4),
+                                _f1(c, 5), _f1(c, 6), _f1(c, 7), _f1(c, 8))
     except Exception:  # noqa: BLE001 - never reported as a success
         return INTERNAL
 

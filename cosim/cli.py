@@ -5,7 +5,9 @@ Sub-commands: ``modes`` (modal analysis next to the analytic values and the pape
 ``scenes`` (list the shipped scenes), ``schema`` (the scene file schema), ``build`` (write the
 FMUs), ``run`` (co-simulate a scene or an SSP file: results.csv, summary.json, plots), ``ssp``
 (write a scene's system as an SSP file), ``sweep`` (gain x delay x step stability/benefit
-table), ``calibrate`` (the paper's study: calibration, experiments, conclusion, report).
+table), ``calibrate`` (the paper's study: calibration, experiments, conclusion, report),
+``design`` (an LQG or Smith-predictor lateral controller designed on the linearized plant,
+written into a scene).
 
 Exit codes: 0 done; 1 a run that stopped early (divergence: a one-line report) or failed; 2 bad
 input (:class:`cosim.master.errors.UserError`: a scene, a key, a value, FMUs that do not fit,
@@ -17,10 +19,13 @@ Warnings of the project (e.g. plant inputs no controller output feeds) are one l
 from __future__ import annotations
 
 import argparse
+import atexit
 import errno
 import json
 import math
+import os
 import sys
+import threading
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -237,6 +242,53 @@ def _cmd_doctor(args: argparse.Namespace) -> int:
         raise UserError(str(exc)) from None
 
 
+def _cmd_design(args: argparse.Namespace) -> int:
+    from drillcosim.cosim.master.errors import UserError
+    from drillcosim.cosim.study.control_design import LqgWeights, design_controller, write_scene
+
+    if args.kind == "compare":
+        return _cmd_compare(args)
+    if not args.scene or not args.out:
+        raise UserError(f"drillcosim design {args.kind}: give SCENE and --out SCENE.toml")
+    joints = None
+    if args.joints:
+        try:
+            joints = [int(j) for j in args.joints.split(",")]
+        except ValueError:
+            raise UserError(f"--joints {args.joints!r}: comma-separated joint numbers") from None
+    options = {"force_limit": args.force_limit, "max_frequency": args.max_frequency}
+    if args.kind == "lqg":
+        options["weights"] = LqgWeights(args.deflection_scale, args.force_scale,
+                                        args.force_noise, args.strain_noise)
+    else:
+        options["gain"] = args.gain
+    d = design_controller(args.kind, args.scene, per_span=args.sites, joints=joints,
+                          delay=args.delay, step=args.step, **options)
+    scene, matrices = write_scene(d, args.out)
+    print(d.summary())
+    print(f"wrote {scene} and {matrices}")
+    return EXIT_OK
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from drillcosim.cosim.master.errors import UserError
+    from drillcosim.cosim.study.control_design.compare import run_compare
+    from drillcosim.cosim.study.control_design.compare_report import report
+    from drillcosim.cosim.study.control_design.linear import linear_table
+
+    if args.scene:
+        raise UserError("drillcosim design compare takes no SCENE (the study's scenes are "
+                        "fixed: docs/control_design.md); give --out DIR")
+    out = args.out or "out/control_compare"
+    if not args.report_only:
+        linear_table(out, progress=_progress(args))
+        if not args.linear:
+            run_compare(out, workers=args.workers, scheduler=args.scheduler,
+                        progress=_progress(args))
+    print(report(out, args.figures), end="")
+    return EXIT_OK
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     import importlib.util
 
@@ -376,6 +428,52 @@ def _parser() -> argparse.ArgumentParser:
                    help="report: folder of the PNGs and CSVs (default OUT/report)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_calibrate)
+    p = sub.add_parser("design", help="design a lateral controller (LQG, or the Smith predictor "
+                       "around the P law) on a scene's linearized plant and write it into a "
+                       "scene; or run the comparison study (compare)")
+    p.add_argument("kind", choices=("lqg", "predictor", "compare"),
+                   help="compare: the P law, predictor and LQG over delay, simulated and "
+                   "predicted (resumable table in --out DIR, default out/control_compare; "
+                   "report: docs/control_design.md)")
+    p.add_argument("scene", nargs="?", help="scene name or TOML file designed on (and "
+                   "extended)")
+    p.add_argument("--sites", type=int, metavar="N", help="actuator sites per span, evenly "
+                   "spread (default: the scene's joints)")
+    p.add_argument("--joints", metavar="J,J,...", help="explicit actuator joints")
+    p.add_argument("--delay", type=float, metavar="S", help="actuator delay designed for [s] "
+                   "(default: the scene's)")
+    p.add_argument("--step", type=float, metavar="S", help="communication step = sample "
+                   "period [s] (default: the scene's)")
+    p.add_argument("--gain", type=float, default=1e8, metavar="K",
+                   help="predictor: P-law gain [N/strain] (default 1e8)")
+    p.add_argument("--deflection-scale", type=float, default=1e-3, metavar="M",
+                   help="lqg: lateral displacement scale of the cost [m] (default 1e-3)")
+    p.add_argument("--force-scale", type=float, default=1e4, metavar="N",
+                   help="lqg: force scale of the cost [N] (default 1e4)")
+    p.add_argument("--force-noise", type=float, default=1.0, metavar="N",
+                   help="lqg: std of the unknown lateral force per body and axis [N] (default 1)")
+    p.add_argument("--strain-noise", type=float, default=1e-7, metavar="E",
+                   help="lqg: std of the strain noise [1] (default 1e-7)")
+    p.add_argument("--force-limit", type=float, default=math.inf, metavar="N",
+                   help="saturation |force| <= N [N] (default: none)")
+    p.add_argument("--max-frequency", type=float, default=1000.0, metavar="W",
+                   help="design model: the plant's modes up to W [rad/s] (default 1000: the "
+                   "lateral bending modes; inf: all); judged with all of them")
+    p.add_argument("--out", metavar="SCENE.toml",
+                   help="the scene to write; the matrices go to SCENE.json beside it "
+                   "(compare: the study folder)")
+    p.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="compare: worker processes (default 1; 0: this process)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="compare: a dask.distributed "
+                   "scheduler instead of local workers")
+    p.add_argument("--figures", metavar="DIR", help="compare: folder of the report's PNGs "
+                   "and CSVs (default OUT/report)")
+    p.add_argument("--report-only", action="store_true",
+                   help="compare: only the report of the rows run so far")
+    p.add_argument("--linear", action="store_true", help="compare: only the linear-regime "
+                   "check (1.5 s runs: co-simulated vs predicted growth rate; ~1 min)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_design)
     p = sub.add_parser("doctor", help="which Python an FMU would run in on this machine, and why")
     p.add_argument("fmu", nargs="?", help="an FMU built by drillcosim (default: the built "
                    "DrillstringPlant.fmu); exit 0 if a host without Python finds one, 1 if not")
@@ -412,5 +510,29 @@ def main(argv: Sequence[str] | None = None) -> int:
         warnings.showwarning = previous
 
 
+def console_main() -> int:
+    """The ``drillcosim`` console script: :func:`main`, then a quick exit.
+
+    After a run, Python's own finalization (tearing down numba's and llvmlite's modules and the
+    FMUs' vendored packages, a last garbage collection) takes 0.2-0.6 s, as long as the whole
+    start-up budget. When :func:`main` returns, everything it wrote is closed; the exit
+    handlers still run (:mod:`atexit`: temporary folders, worker processes, logging), the
+    standard streams are flushed, and the process ends with the exit code, skipping only the
+    finalization. With a thread other than the main one still running (a library's worker),
+    the exit is Python's usual one, which waits for it. An exception (an internal error) leaves
+    as usual, with its traceback.
+    """
+    code = main()
+    if threading.active_count() > 1:
+        return code
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe or stream: nothing more can be said
+            pass
+    os._exit(code)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    sys.exit(console_main())

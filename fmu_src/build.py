@@ -21,13 +21,14 @@ Builds isolated from each other
 A Python host imports a module name once (``sys.modules``): two FMUs that ship different code
 under one name would both run the code of the one loaded first. So the names in the source
 (``_dcs_plant_0_1_0``, ``_dcs_pythonfmu_0_7_0``, the slave module ``_dcs_<script>_<version>``)
-are canonical names only: the build hashes everything it stages (every vendored file, the
-slave module(s), ``resources/``; :func:`build_hash`) and ships each module as
-``<canonical name>_<hash>`` (:data:`BUILD_HASH_LENGTH` hex digits), rewriting the names in
-every shipped ``.py`` file. Two builds that differ in any byte run their own code in one
-process, in either load order; instances of one build (or of byte-identical builds) share
-their modules. ``resources/dcs_build.json`` records the hash and the names
-(:func:`shipped_modules`).
+are canonical names only: the build ships each module as ``<canonical name>_<hash>``
+(:data:`BUILD_HASH_LENGTH` hex digits), the hash taken over the module's own files with the
+names of the modules it imports already replaced by their shipped names (:func:`module_names`),
+and rewrites the names in every shipped ``.py`` file. Two builds whose code differs in any
+byte run their own code in one process, in either load order; instances of one build share
+their modules, and so do builds that ship the same code (the scene variants of one plant
+share the plant package, and numba's compiled kernels of it). ``resources/dcs_build.json``
+records the hash of the whole build (:func:`build_hash`) and the names (:func:`shipped_modules`).
 
 Each FMU is built in a fresh Python subprocess (pythonfmu imports and
 instantiates the adapter and leaves entries on ``sys.path``; the calling process
@@ -82,6 +83,7 @@ copies single files to chosen places in ``resources/`` (e.g. a user's scene file
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import hashlib
 import json
 import os
@@ -108,6 +110,7 @@ __all__ = [
     "build_all",
     "build_one",
     "build_hash",
+    "module_names",
     "finalize_model_description",
     "main",
     "shipped_modules",
@@ -220,8 +223,10 @@ class FmuRecipe:
         Modules (import names) a Python must have to run the FMU; a host without Python
         checks its candidates for them (``resources/python_requires.txt``).
     exclude : tuple of str
-        Files of the vendored packages (relative to the root) left out of the FMU: code the
-        FMU never imports (tests' and benchmarks' reference implementations, analysis tools).
+        Files of the vendored packages and the ``extra_files`` folders (relative to the root;
+        ``fnmatch`` patterns, e.g. ``scenes/*.json``) left out of the FMU: code the FMU never
+        imports (tests' and benchmarks' reference implementations, analysis tools), data it
+        never reads.
     base : str
         For a variant (see the module docstring): the adapter class in ``script`` that the
         generated class ``name`` derives from; ``""`` (default): ``script`` defines ``name``.
@@ -281,16 +286,24 @@ class FmuRecipe:
         files, the wrapper's C sources and this build module."""
         from drillcosim.fmu_src.wrapper import sources as wrapper_sources
 
-        excluded = {(ROOT / e).resolve() for e in self.exclude}
         files = [self.script_path, Path(__file__).resolve(), *wrapper_sources()]
         for package, _ in self.vendored:
             files += [p for p in sorted((ROOT / package).rglob("*.py"))
-                      if "__pycache__" not in p.parts and p.resolve() not in excluded]
+                      if "__pycache__" not in p.parts and not self.excludes(p)]
         for extra in self.extra_files:
             path = ROOT / extra
-            files += sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+            files += (sorted(p for p in path.rglob("*") if p.is_file() and not self.excludes(p))
+                      if path.is_dir() else [path])
         files += [ROOT / src for src, _dest in self.resource_files]
         return files
+
+    def excludes(self, path: Path) -> bool:
+        """Whether ``path`` (a file under the root) is one of :attr:`exclude`."""
+        try:
+            rel = Path(path).resolve().relative_to(ROOT.resolve()).as_posix()
+        except ValueError:
+            return False
+        return any(fnmatch.fnmatchcase(rel, pattern) for pattern in self.exclude)
 
     @property
     def script_module(self) -> str:
@@ -344,7 +357,16 @@ REGISTRY: tuple[FmuRecipe, ...] = (
         # the numpy reference rhs (tests, benchmarks), the linear/modal analysis and the
         # continuous-time closed loop (study layer): the FMU never imports them (tested)
         exclude=("plant/numpy_rhs.py", "plant/linearize.py", "plant/modal.py",
-                 "plant/equilibrium.py", "plant/closed_loop.py"),
+                 "plant/equilibrium.py", "plant/closed_loop.py",
+                 "scenes/*.json"),   # controller matrices (the plant reads only the TOML)
+    ),
+    FmuRecipe(
+        name="StateSpaceController",
+        script="fmu_src/state_space_controller_fmu.py",
+        vendored=(("controller", "_dcs_controller_0_1_0"),
+                  ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
+        resource_files=(("fmu_src/state_space_default.json", "state_space.json"),),
+        requires=("numpy",),
     ),
     FmuRecipe(
         name="TopDriveController",
@@ -489,13 +511,16 @@ def _vendor(recipe: FmuRecipe, package: str, dst: Path) -> None:
     src = ROOT / package
     if not (src / "__init__.py").is_file():
         raise FileNotFoundError(f"vendored package {src} has no __init__.py")
-    excluded = {(ROOT / e).resolve() for e in recipe.exclude}
+    shutil.copytree(src, dst, ignore=_ignore(recipe))
 
+
+def _ignore(recipe: FmuRecipe):
+    """``copytree`` ignore: caches and the recipe's excluded files."""
     def ignore(folder: str, names: list[str]) -> set[str]:
         return {n for n in names if n == "__pycache__" or n.endswith(".pyc")
-                or (Path(folder) / n).resolve() in excluded}
+                or recipe.excludes(Path(folder) / n)}
 
-    shutil.copytree(src, dst, ignore=ignore)
+    return ignore
 
 
 def _stage_resources(recipe: FmuRecipe, dest: Path) -> list[Path]:
@@ -506,8 +531,7 @@ def _stage_resources(recipe: FmuRecipe, dest: Path) -> list[Path]:
         if not path.exists():
             raise FileNotFoundError(f"extra file {path} of {recipe.name} does not exist")
         if path.is_dir():
-            shutil.copytree(path, dest / path.name,
-                            ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+            shutil.copytree(path, dest / path.name, ignore=_ignore(recipe))
         else:
             shutil.copy2(path, dest / path.name)
     for src, rel in recipe.resource_files:
@@ -531,6 +555,56 @@ def build_hash(folders: Sequence[Path]) -> str:
             digest.update(path.relative_to(folder.parent).as_posix().encode() + b"\0")
             digest.update(path.read_bytes() + b"\0")
     return digest.hexdigest()[:BUILD_HASH_LENGTH]
+
+
+def _module_files(staging: Path, name: str) -> list[Path]:
+    """The files of staged module ``name`` (a package folder or one ``.py``; caches left out)."""
+    folder = staging / name
+    if folder.is_dir():
+        return sorted(p for p in folder.rglob("*") if p.is_file() and
+                      "__pycache__" not in p.parts and p.suffix != ".pyc")
+    return [staging / f"{name}.py"]
+
+
+def module_names(staging: Path, canonical: Sequence[str]) -> dict[str, str]:
+    """The shipped name of every canonical module staged in ``staging``.
+
+    ``<canonical>_<hash>``, the hash (:data:`BUILD_HASH_LENGTH` hex digits of SHA-256) taken
+    over the module's files with the canonical names of the modules it refers to replaced by
+    their shipped names, dependencies first. Equal code ships under an equal name whatever else
+    a build carries: the scene variants of one plant share its package (and numba's cache of
+    its kernels, which is kept per package content), while code that differs in any byte, or
+    that imports a module that does, gets another name.
+
+    Raises
+    ------
+    RuntimeError
+        If the modules refer to each other in a cycle (no order gives every module its
+        dependencies' names first).
+    """
+    pattern = re.compile(r"\b(" + "|".join(map(re.escape, sorted(canonical, key=len,
+                                                                  reverse=True))) + r")\b")
+    files = {name: _module_files(staging, name) for name in canonical}
+    texts = {path: path.read_text(encoding="utf-8") for name in canonical
+             for path in files[name] if path.suffix == ".py"}
+    refers = {name: {m for path in files[name] if path in texts
+                     for m in pattern.findall(texts[path])} - {name} for name in canonical}
+    names: dict[str, str] = {}
+    while len(names) < len(canonical):
+        ready = [n for n in canonical if n not in names and refers[n] <= names.keys()]
+        if not ready:
+            raise RuntimeError(f"the vendored modules {sorted(set(canonical) - names.keys())} "
+                               f"refer to each other in a cycle")
+        for name in ready:
+            digest = hashlib.sha256()
+            for path in files[name]:
+                data = (pattern.sub(lambda m: names.get(m.group(1), m.group(1)),
+                                    texts[path]).encode() if path in texts
+                        else path.read_bytes())
+                digest.update(path.relative_to(staging).as_posix().encode() + b"\0" + data
+                              + b"\0")
+            names[name] = f"{name}_{digest.hexdigest()[:BUILD_HASH_LENGTH]}"
+    return names
 
 
 def _rename_modules(staging: Path, names: Mapping[str, str]) -> None:
@@ -621,10 +695,10 @@ def _build_in_this_process(recipe: FmuRecipe, workdir: Path) -> Path:
         shutil.copy2(recipe.script_path, staging / f"{recipe.slave_module}.py")
     resource_entries = _stage_resources(recipe, workdir / "resources")
 
-    # isolated builds: every module under <canonical>_<hash of all that is shipped>
-    digest = build_hash([staging, workdir / "resources"])
-    names = {name: f"{name}_{digest}" for name in canonical}
+    # isolated builds: every module under <canonical>_<hash of its code and its imports'>
+    names = module_names(staging, canonical)
     _rename_modules(staging, names)
+    digest = build_hash([staging, workdir / "resources"])  # the build's identity, recorded
     low, high = python_range()
     info = workdir / "info" / Path(BUILD_INFO).name
     info.parent.mkdir()

@@ -3,13 +3,17 @@
 The FMU is made from ``fmu_src/c_controller/`` (no Python at run time):
 
 * ``modelDescription.xml`` - written by hand, the same variables as ``StrainController.fmu``;
-* ``binaries/linux64/StrainControllerC.so`` - ``model.c`` (the law) and
-  ``fmi2_cosimulation.c`` (the FMI 2.0 entry points) compiled with the compiler and flags of
-  the native wrapper (``$CC`` or ``gcc``, :data:`fmu_src.wrapper.CFLAGS`: ``-std=c99 -Wall
-  -Wextra -Werror``), plus ``-ffp-contract=off`` so no multiply-add is fused (the Python law
-  rounds every operation; with fusion the two would differ in the last bit on FMA hardware);
-* ``sources/`` - the C files and the FMI 2.0 headers (listed in ``<SourceFiles>``), so an
-  importer on another platform can compile it (e.g. ``fmpy.util.compile_platform_binary``);
+* ``sources/`` - every file the binary is compiled from, in one flat folder (listed in
+  ``<SourceFiles>``), so an importer on another platform can compile it (e.g.
+  ``fmpy.util.compile_platform_binary``): ``model.c`` (the law), ``fmi2_cosimulation.c`` (the
+  FMI 2.0 entry points), ``config.h``, ``model.h``, the registry of live handles shared with the
+  native wrapper (``fmu_src/wrapper/dcs_registry.c``/``.h``, one implementation) and the FMI 2.0
+  headers;
+* ``binaries/linux64/StrainControllerC.so`` - compiled from that very ``sources/`` folder (staged
+  first) with the compiler and flags of the native wrapper (``$CC`` or ``gcc``,
+  :data:`fmu_src.wrapper.CFLAGS`: ``-std=c99 -Wall -Wextra -Werror``), plus
+  ``-ffp-contract=off`` so no multiply-add is fused (the Python law rounds every operation; with
+  fusion the two would differ in the last bit on FMA hardware);
 * ``documentation/licenses/fmi2-headers.txt`` - the headers' BSD-2-Clause license.
 
 A compiler warning is an error. The FMU is written atomically (temporary file + ``os.replace``).
@@ -26,18 +30,43 @@ import zipfile
 from collections.abc import Sequence
 from pathlib import Path
 
-__all__ = ["MODEL_IDENTIFIER", "SOURCE_DIR", "build_c_controller", "main"]
+__all__ = ["MODEL_IDENTIFIER", "SOURCE_DIR", "build_c_controller", "compile_library", "main",
+           "stage_sources"]
 
 #: The C sources of the controller FMU.
 SOURCE_DIR = Path(__file__).resolve().parent / "c_controller"
+#: The native wrapper's folder: the registry of live handles and the FMI 2.0 headers.
+WRAPPER_DIR = Path(__file__).resolve().parent / "wrapper"
 MODEL_IDENTIFIER = "StrainControllerC"
-C_FILES = ("model.c", "fmi2_cosimulation.c")
-HEADERS = ("config.h", "model.h")
-FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+#: The C files compiled (the ``<SourceFiles>`` of modelDescription.xml), by name in ``sources/``.
+C_FILES = ("model.c", "fmi2_cosimulation.c", "dcs_registry.c")
+#: Every file of ``sources/`` and where it comes from.
+SOURCES: dict[str, Path] = {
+    **{n: SOURCE_DIR / n for n in ("model.c", "fmi2_cosimulation.c", "config.h", "model.h")},
+    **{n: WRAPPER_DIR / n for n in ("dcs_registry.c", "dcs_registry.h")},
+    **{n: WRAPPER_DIR / "fmi2" / n
+       for n in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")},
+}
 EXTRA_CFLAGS = ("-ffp-contract=off",)
 
 
-def compile_library(out: Path | str, cc: str | None = None) -> Path:
+def stage_sources(dest: Path | str) -> Path:
+    """Copy the files of the FMU's ``sources/`` (:data:`SOURCES`) into ``dest`` (created).
+
+    Returns
+    -------
+    pathlib.Path
+        ``dest``.
+    """
+    dest = Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    for name, path in SOURCES.items():
+        shutil.copyfile(path, dest / name)
+    return dest
+
+
+def compile_library(out: Path | str, cc: str | None = None, flags: Sequence[str] = (),
+                    sources: Path | str | None = None) -> Path:
     """Compile the controller into the shared library ``out``.
 
     Parameters
@@ -46,6 +75,12 @@ def compile_library(out: Path | str, cc: str | None = None) -> Path:
         Target ``.so``.
     cc : str, optional
         C compiler (default ``$CC`` or ``gcc``).
+    flags : sequence of str
+        Extra compiler flags (e.g. sanitizers), after :data:`fmu_src.wrapper.CFLAGS` and
+        ``-ffp-contract=off``.
+    sources : path-like, optional
+        A staged ``sources/`` folder (:func:`stage_sources`) to compile; default: one staged
+        in a temporary folder.
 
     Returns
     -------
@@ -57,12 +92,15 @@ def compile_library(out: Path | str, cc: str | None = None) -> Path:
     RuntimeError
         No compiler, or the compiler failed or printed a warning (its output included).
     """
-    from drillcosim.fmu_src.wrapper import HERE as WRAPPER_DIR
     from drillcosim.fmu_src.wrapper import compile_shared
 
-    return compile_shared(MODEL_IDENTIFIER, [SOURCE_DIR / f for f in C_FILES], out,
-                          flags=(*EXTRA_CFLAGS, f"-I{WRAPPER_DIR / 'fmi2'}"), libs=("-lm",),
-                          cc=cc)
+    if sources is None:
+        with tempfile.TemporaryDirectory(prefix=f"{MODEL_IDENTIFIER}-sources-") as tmp:
+            return compile_library(out, cc, flags, stage_sources(tmp))
+    sources = Path(sources)
+    return compile_shared(MODEL_IDENTIFIER, [sources / f for f in C_FILES], out,
+                          flags=(*EXTRA_CFLAGS, f"-I{sources}", *flags),
+                          libs=("-lm", "-lpthread"), cc=cc)
 
 
 def build_c_controller(out_dir: Path | str, cc: str | None = None) -> Path:
@@ -78,17 +116,15 @@ def build_c_controller(out_dir: Path | str, cc: str | None = None) -> Path:
     target = out_dir / f"{MODEL_IDENTIFIER}.fmu"
     work = Path(tempfile.mkdtemp(prefix=f".{MODEL_IDENTIFIER}-", dir=out_dir))
     try:
-        library = compile_library(work / f"{MODEL_IDENTIFIER}.so", cc)
+        sources = stage_sources(work / "sources")
+        library = compile_library(work / f"{MODEL_IDENTIFIER}.so", cc, sources=sources)
         part = work / target.name
         with zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as zf:
             zf.write(SOURCE_DIR / "modelDescription.xml", "modelDescription.xml")
             zf.write(library, f"binaries/linux64/{MODEL_IDENTIFIER}.so")
-            for name in (*C_FILES, *HEADERS):
-                zf.write(SOURCE_DIR / name, f"sources/{name}")
-            fmi2 = Path(__file__).resolve().parent / "wrapper" / "fmi2"  # the official headers
-            for name in FMI_HEADERS:  # beside the C files: #include "fmi2Functions.h" resolves
-                zf.write(fmi2 / name, f"sources/{name}")
-            zf.write(fmi2 / "LICENSE.txt", "documentation/licenses/fmi2-headers.txt")
+            for name in SOURCES:
+                zf.write(sources / name, f"sources/{name}")
+            zf.write(WRAPPER_DIR / "fmi2" / "LICENSE.txt", "documentation/licenses/fmi2-headers.txt")
         os.replace(part, target)
     finally:
         shutil.rmtree(work, ignore_errors=True)

@@ -10,14 +10,22 @@ StrainController.fmu, bit for bit.
   controller FMU exactly (third-party engines running it: test_interop_libcosim.py,
   test_interop_ecos.py);
 * FMI behaviour: errors named in one log message with fmi2Error, the FMI 2.0 state machine,
-  FMU state get/set/serialise, no Python in the binary.
+  FMU state get/set/serialise, no Python in the binary;
+* handles a host should not pass (an instance used or freed after its free, a state freed
+  twice or used after its free, a made-up pointer): fmi2Error or ignored, not a crash
+  (``support/bad_handles.py``; test_sanitizers.py runs them under AddressSanitizer), with the
+  shipped binary and one compiled from the FMU's own ``sources/`` alone.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+import os
 import re
+import subprocess
+import sys
 import zipfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -33,7 +41,9 @@ from drillcosim.controller import MODES, ControllerParams, StrainController
 from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.scenario.build import build_system
 from drillcosim.cosim.scenario.config import load_config
-from drillcosim.fmu_src.build_c import SOURCE_DIR
+from drillcosim.fmu_src.build_c import EXTRA_CFLAGS, SOURCE_DIR
+from drillcosim.fmu_src.wrapper import compile_shared
+from support import bad_handles
 from support.fmi_logging import RecordingInstance
 
 INPUTS = ["strain1_C", "strain1_E", "strain2_C", "strain2_E"]
@@ -100,8 +110,44 @@ def test_binary_needs_no_python(c_controller_fmu) -> None:
         binary = zf.read("binaries/linux64/StrainControllerC.so")
     assert b"libpython" not in binary and b"Py_Initialize" not in binary
     assert not any(n.startswith("resources/") for n in names)
-    assert {"sources/model.c", "sources/fmi2_cosimulation.c", "sources/fmi2Functions.h"} \
-        <= set(names)
+    assert {"sources/model.c", "sources/fmi2_cosimulation.c", "sources/dcs_registry.c",
+            "sources/dcs_registry.h", "sources/fmi2Functions.h"} <= set(names)
+
+
+@pytest.fixture(scope="module")
+def built_from_sources(c_controller_fmu, tmp_path_factory) -> Path:
+    """The binary compiled anew from the FMU's ``sources/`` alone: the files its
+    ``<SourceFiles>`` lists, ``-I sources`` and nothing of this checkout (as an importer on
+    another platform would, e.g. fmpy's compile_platform_binary)."""
+    d = tmp_path_factory.mktemp("cctl_sources")
+    with zipfile.ZipFile(c_controller_fmu) as zf:
+        zf.extractall(d, members=[n for n in zf.namelist() if n.startswith("sources/")])
+    listed = [f.get("name") for f in _md_root(c_controller_fmu).iter("File")]
+    return compile_shared("StrainControllerC from its sources/", [d / "sources" / n for n in listed],
+                          d / "StrainControllerC.so", flags=(*EXTRA_CFLAGS, f"-I{d / 'sources'}"),
+                          libs=("-lm", "-lpthread"))
+
+
+@pytest.mark.needs_cc
+@pytest.mark.parametrize("binary", ["shipped", "built from sources/"])
+@pytest.mark.parametrize("case", bad_handles.CASES)
+def test_bad_handles_are_refused_not_followed(case: str, binary: str, c_controller_fmu: Path,
+                                              request, tmp_path: Path) -> None:
+    """gcc's build (-O2, no sanitizer): today's binary answered these with fmi2OK after reading
+    freed memory, or crashed (glibc's double-free abort, a segfault on the made-up pointer)."""
+    if binary == "shipped":
+        with zipfile.ZipFile(c_controller_fmu) as zf:
+            lib = tmp_path / "StrainControllerC.so"
+            lib.write_bytes(zf.read("binaries/linux64/StrainControllerC.so"))
+    else:
+        lib = request.getfixturevalue("built_from_sources")
+    guid = _md_root(c_controller_fmu).get("guid")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(__file__).parent),
+                                                       os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.run([sys.executable, bad_handles.__file__, str(lib), guid, case],
+                          env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, f"exit {proc.returncode}\n{proc.stderr[-3000:]}"
+    assert json.loads(proc.stdout) == bad_handles.EXPECTED[case]
 
 
 # ----------------------------------------------------------------- instances

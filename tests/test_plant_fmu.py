@@ -177,6 +177,8 @@ def test_fmu_ships_scenes_and_only_the_versioned_package(fmu_path: Path, shipped
         assert f"resources/scenes/{scene.name}" in names
     assert f"resources/{vendored_name}/__init__.py" in names
     assert not any(n.startswith("resources/plant/") or "__pycache__" in n for n in names)
+    # controller matrices beside the scenes are not the plant's (recipe exclude scenes/*.json)
+    assert not any(n.startswith("resources/scenes/") and n.endswith(".json") for n in names)
 
 
 # ------------------------------------------------------------ second implementation

@@ -16,7 +16,10 @@ with ``clang -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-fr
 * handles a host should not pass (a freed FMU state set and freed again, a freed instance
   stepped and freed again): fmi2Error or ignored, and no read of the freed memory (the wrapper
   looks handles up in its registries; reading a magic number through them was a
-  heap-use-after-free).
+  heap-use-after-free); for the C controller each case of ``support/bad_handles.py`` (an
+  instance used or freed after its free, a state freed twice or used after its free, a made-up
+  pointer) in its own process, since its binary shares the wrapper's registry (before, these
+  were a heap-use-after-free, a double free or a SEGV under ASan).
 
 Each run must exit normally (a finding is an abort) and print no sanitizer report. Needs clang
 and its sanitizer runtime (``.ci/run`` installs Debian's clang when missing): skipped with the
@@ -37,10 +40,10 @@ import pytest
 from fmpy import read_model_description
 
 from drillcosim.fmu_src.build import REGISTRY
-from drillcosim.fmu_src.build_c import C_FILES, EXTRA_CFLAGS, MODEL_IDENTIFIER, SOURCE_DIR
+from drillcosim.fmu_src.build_c import MODEL_IDENTIFIER, compile_library
 from drillcosim.fmu_src.wrapper import HERE as WRAPPER_DIR
 from drillcosim.fmu_src.wrapper import compile_shared, compile_wrapper, install_native_wrapper
-from support import c_host
+from support import bad_handles, c_host
 
 pytestmark = [pytest.mark.needs_cc, pytest.mark.slow]
 
@@ -85,10 +88,7 @@ def sanitized(asan_runtime: Path, project_fmus: dict[str, Path], c_controller_fm
         fmus[name] = out / f"{name}.fmu"
         shutil.copy2(project_fmus[name], fmus[name])
         install_native_wrapper(fmus[name], name, wrapper, RECIPES[name].requires)
-    lib = compile_shared("the C controller (sanitized)", [SOURCE_DIR / f for f in C_FILES],
-                         out / f"{MODEL_IDENTIFIER}.so", cc="clang",
-                         flags=(*EXTRA_CFLAGS, *SANITIZE, f"-I{WRAPPER_DIR / 'fmi2'}"),
-                         libs=("-lm",))
+    lib = compile_library(out / f"{MODEL_IDENTIFIER}.so", cc="clang", flags=SANITIZE)
     fmus[MODEL_IDENTIFIER] = out / f"{MODEL_IDENTIFIER}.fmu"
     shutil.copy2(c_controller_fmu, fmus[MODEL_IDENTIFIER])
     _replace_member(fmus[MODEL_IDENTIFIER], f"binaries/linux64/{MODEL_IDENTIFIER}.so",
@@ -246,3 +246,16 @@ def test_freed_handles_are_refused_without_reading_them(sanitized: dict[str, Pat
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out == {"setup": 0, "enter": 0, "exit": 0, "get_state": 0, "free_state": 0,
                    "set_freed_state": 3, "free_freed_state": 3, "step_freed_instance": 3}
+
+
+@pytest.mark.parametrize("case", bad_handles.CASES)
+def test_c_controller_bad_handles_are_refused_without_reading_them(
+        case: str, sanitized: dict[str, Path], asan_runtime: Path, tmp_path: Path) -> None:
+    d = c_host.unzip(sanitized[MODEL_IDENTIFIER], tmp_path / "unzip")
+    guid = read_model_description(str(sanitized[MODEL_IDENTIFIER])).guid
+    proc = subprocess.run([sys.executable, bad_handles.__file__,
+                           str(d / "binaries" / "linux64" / f"{MODEL_IDENTIFIER}.so"), guid, case],
+                          env=sanitizer_env(LD_PRELOAD=str(asan_runtime)), capture_output=True,
+                          text=True, timeout=120)
+    assert_clean(proc, case)
+    assert json.loads(proc.stdout.strip().splitlines()[-1]) == bad_handles.EXPECTED[case]

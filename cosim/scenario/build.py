@@ -2,7 +2,8 @@
 
 :func:`build_system` makes the system every caller runs (``drillcosim run``, the API, sweeps,
 ensembles, the calibration, the conclusion study, SSP export) with up to three instances:
-``plant``, ``controller`` (the strain controller, when ``[controller] enabled``) and
+``plant``, ``controller`` (the strain controller, when ``[controller] enabled``: the P law, or
+with ``kind = "state_space"`` a state-space law from a matrices file) and
 ``top_drive_controller`` (when ``[top_drive_controller] enabled``), connected by name both ways
 (:mod:`.interface`; names from :mod:`plant.signals`):
 
@@ -61,7 +62,6 @@ from drillcosim.plant.signals import (
 )
 
 from .config import ConfigError, SceneConfig, plant_parameter_paths
-from .inprocess import inprocess_slaves
 from .interface import InterfaceWarning, wire_system
 from .scene_fmus import (
     TOP_DRIVE_CONTROLLER,
@@ -70,6 +70,7 @@ from .scene_fmus import (
     ensure_recipes,
     plant_recipe,
     recipe_named,
+    state_space_recipe,
 )
 
 __all__ = ["ENGINES", "NO_LIMIT", "BuiltSystem", "build_system", "controller_start_values",
@@ -126,7 +127,10 @@ def scene_recipes(config: SceneConfig) -> dict[str, Any]:
     ``{"plant": FmuRecipe, "controller": ..., "top_drive_controller": ...}`` (controllers only
     when enabled). Building them ahead: :func:`.scene_fmus.ensure_recipes`."""
     recipes: dict[str, Any] = {PLANT: plant_recipe(config.scene)}
-    if config.controller.enabled:
+    if config.state_space is not None:
+        recipes[CONTROLLER] = state_space_recipe(config.scene, config.state_space.params,
+                                                 config.state_space.file)
+    elif config.controller.enabled:
         recipes[CONTROLLER] = controller_recipe(config.scene, config.n_sites,
                                                 config.controller.gain_matrix)
     if config.top_drive.enabled:
@@ -184,7 +188,12 @@ def _inprocess_faces(config: SceneConfig, slaves: Mapping[str, Slave]) -> dict[s
     model = slaves[PLANT].sim.model
     faces = {PLANT: _slave_interface(PLANT, slaves[PLANT], list(model.acting_inputs),
                                      {**model.output_units, **model.input_units})}
-    if CONTROLLER in slaves:
+    if CONTROLLER in slaves and config.state_space is not None:
+        ss = config.state_space.params
+        units = {s.name: s.unit for s in (*ss.inputs, *ss.outputs)}
+        faces[CONTROLLER] = _slave_interface(CONTROLLER, slaves[CONTROLLER],
+                                             slaves[CONTROLLER].inputs, units)
+    elif CONTROLLER in slaves:
         units = {}
         for s, a in site_channels(range(1, config.n_sites + 1)):
             units[strain(s, a)], units[actuator_force(s, a)] = "1", "N"
@@ -228,6 +237,20 @@ def _lacking(config: SceneConfig, face: FmuInterface) -> list[str]:
             for key in config.set_keys.get(face.instance, ()) if port.get(key, key) not in face.ports]
 
 
+def _unfit_state_space(config: SceneConfig, faces: Mapping[str, FmuInterface]) -> list[str]:
+    """A state-space controller's inputs that are no output of the plant and outputs that are
+    no input of it (a linear law fed by nothing, or feeding nothing, is a wrong matrices file;
+    the P law's rule for sites one side does not serve does not apply)."""
+    if config.state_space is None or CONTROLLER not in faces:
+        return []
+    plant, face = faces[PLANT], faces[CONTROLLER]
+    src = f"[controller] matrices {config.state_space.file.name}"
+    return ([f"{face.label} input '{n}' ({src}) is no output of {plant.label}"
+             for n in face.inputs() if n not in plant.outputs()]
+            + [f"{face.label} output '{n}' ({src}) is no input of {plant.label}"
+               for n in face.outputs() if n not in plant.inputs()])
+
+
 def build_system(config: SceneConfig, engine: str = "fmu", *,
                  fmu_dir: str | Path | None = None) -> BuiltSystem:
     """Build the co-simulation system of a configuration and check it.
@@ -267,6 +290,8 @@ def build_system(config: SceneConfig, engine: str = "fmu", *,
     controllers = instances[1:]
     cosim = config.cosim
     if engine == "inprocess":
+        from .inprocess import inprocess_slaves  # the FMU engine's start-up does not need it
+
         slaves = inprocess_slaves(config)
         faces = _inprocess_faces(config, slaves)
         params: dict[str, dict[str, Any]] = {i: {} for i in instances}
@@ -280,11 +305,13 @@ def build_system(config: SceneConfig, engine: str = "fmu", *,
         faces = {i: read_interface(i, paths[i]) for i in instances}
         built_for_scene = PLANT not in config.fmu_files and bool(recipes[PLANT].base)
         params = {PLANT: _plant_fmu_parameters(config, faces[PLANT], built_for_scene)}
-        start = {CONTROLLER: controller_start_values(config.controller, config.n_sites),
+        start = {CONTROLLER: {} if config.state_space is not None else  # limits: in its layout
+                 controller_start_values(config.controller, config.n_sites),
                  TOP_DRIVE: dataclasses.asdict(config.top_drive)}
         for i in controllers:
             params[i] = {k: v for k, v in start[i].items() if k in faces[i].ports}
         lacking = [p for i in controllers for p in _lacking(config, faces[i])]
+    lacking += _unfit_state_space(config, faces)
     fmus = [FmuSpec(PLANT, faces[PLANT].path, params[PLANT])]
     fmus += [FmuSpec(i, faces[i].path, params[i], cosim.controller_ticks) for i in controllers]
     wiring = wire_system(faces[PLANT], [faces[i] for i in controllers], fmus, lacking)

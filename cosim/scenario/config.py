@@ -7,6 +7,9 @@ and validates everything, once, into a :class:`SceneConfig`:
 * ``controller`` / ``top_drive`` - the controllers' typed parameters
   (:class:`controller.ControllerParams`, :class:`controller.TopDriveControllerParams`;
   ``enabled`` false when the scene has none);
+* ``state_space`` - with ``[controller] kind = "state_space"``, the strain controller is a
+  discrete state-space law (:class:`StateSpaceSetting`: the matrices file, validated into
+  :class:`controller.StateSpaceParams`) instead of the P law;
 * ``cosim`` - the co-simulation settings (:class:`CosimSettings`): the base step [s], and the
   stop time, the controllers' period and the recording interval as integer numbers of base
   steps (decided here, by one rule: :func:`cosim.master.system.integer_multiple`);
@@ -40,6 +43,11 @@ from pathlib import Path
 from typing import Any
 
 from drillcosim.controller import ControllerParams, TopDriveControllerParams
+from drillcosim.controller.state_space import (
+    MULTIPLE_RTOL,
+    StateSpaceParams,
+    load_state_space,
+)
 from drillcosim.cosim.master.errors import UserError
 from drillcosim.cosim.master.system import ALGORITHMS, COUPLINGS, integer_multiple
 from drillcosim.plant.scene import (
@@ -57,8 +65,9 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-__all__ = ["COSIM_KEYS", "ConfigError", "CosimSettings", "SceneConfig", "key_paths",
-           "load_config", "parse_set", "plant_parameter_paths"]
+__all__ = ["CONTROLLER_KINDS", "COSIM_KEYS", "ConfigError", "CosimSettings", "SceneConfig",
+           "StateSpaceSetting", "key_paths", "load_config", "parse_set",
+           "plant_parameter_paths"]
 
 #: ``[cosim]`` keys: (default, unit, meaning). ``None`` defaults are derived.
 COSIM_KEYS: dict[str, tuple[Any, str, str]] = {
@@ -83,6 +92,11 @@ CONTROLLER_TABLES: dict[str, tuple[str, type]] = {
     "controller": (CONTROLLER, ControllerParams),
     "top_drive_controller": (TOP_DRIVE, TopDriveControllerParams),
 }
+#: ``[controller] kind``: the P law (:class:`controller.ControllerParams`), or a discrete
+#: state-space law from a matrices file (``matrices``; :class:`StateSpaceSetting`).
+CONTROLLER_KINDS = ("proportional", "state_space")
+#: ``[controller]`` keys besides the P law's parameters.
+_CONTROLLER_EXTRA = ("kind", "matrices", "fmu")
 #: Top-level scene keys that are plain values (the others are tables).
 TOP_VALUES = tuple(k for k in PLANT_KEYS if k not in SECTIONS)
 
@@ -103,7 +117,8 @@ def _table_keys(table: str) -> list[str] | None:
     if table in SECTIONS:
         return [f.name for f in fields(SECTIONS[table])]
     if table in CONTROLLER_TABLES:
-        return [f.name for f in fields(CONTROLLER_TABLES[table][1])] + ["fmu"]
+        extra = _CONTROLLER_EXTRA if table == "controller" else ("fmu",)
+        return [f.name for f in fields(CONTROLLER_TABLES[table][1])] + list(extra)
     if table == "cosim":
         return list(COSIM_KEYS)
     if table == "plant":
@@ -291,6 +306,25 @@ def _finite_positive(x: Any) -> bool:
 
 
 @dataclass(frozen=True)
+class StateSpaceSetting:
+    """The strain controller as a discrete state-space law (``[controller] kind =
+    "state_space"``).
+
+    Attributes
+    ----------
+    file : Path
+        The matrices file (``[controller] matrices``, :mod:`controller.state_space` JSON).
+    params : StateSpaceParams
+        Its matrices, signals (names and units: checked against the plant when the system is
+        built), output limits and sample period (the controllers' period is a whole number of
+        them).
+    """
+
+    file: Path
+    params: StateSpaceParams
+
+
+@dataclass(frozen=True)
 class SceneConfig:
     """A scene validated into typed settings: what :func:`.build.build_system` builds.
 
@@ -312,6 +346,9 @@ class SceneConfig:
     set_keys : dict of str -> tuple of str
         Per controller instance, the keys its table sets explicitly (file and overrides): a
         foreign FMU must take those.
+    state_space : StateSpaceSetting or None
+        The strain controller's state-space law (``[controller] kind = "state_space"``); None:
+        the P law of ``controller``.
     """
 
     scene: Scene
@@ -321,6 +358,7 @@ class SceneConfig:
     fmu_files: dict[str, Path] = field(default_factory=dict)
     overrides: dict[str, Any] = field(default_factory=dict)
     set_keys: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    state_space: StateSpaceSetting | None = None
 
     @property
     def name(self) -> str:
@@ -393,10 +431,11 @@ def _params(table_name: str, table: Mapping[str, Any], source: str) -> Any:
     cls = CONTROLLER_TABLES[table_name][1]
     names = [f.name for f in fields(cls)]
     for key in table:
-        if key not in names and key != "fmu":
+        extra = _CONTROLLER_EXTRA if table_name == "controller" else ("fmu",)
+        if key not in names and key not in extra:
             raise ConfigError(f"{source}: [{table_name}] unknown key '{key}'"
-                              f"{_suggest(key, [*names, 'fmu'])}")
-    raw = {"enabled": False, **{k: v for k, v in table.items() if k != "fmu"}}
+                              f"{_suggest(key, [*names, *extra])}")
+    raw = {"enabled": False, **{k: v for k, v in table.items() if k not in _CONTROLLER_EXTRA}}
     try:
         return cls(**raw)
     except (TypeError, ValueError) as exc:
@@ -417,6 +456,50 @@ def _fmu_file(table_name: str, table: Mapping[str, Any], source: str) -> Path | 
     if not path.is_file():
         raise ConfigError(f"{source}: [{table_name}] fmu = {value!r}: no file '{path}'")
     return path
+
+
+def _state_space(table: Mapping[str, Any], cosim: CosimSettings, source: str,
+                 overrides: Mapping[str, Any]) -> StateSpaceSetting | None:
+    """The ``[controller]`` table's state-space law (None: ``kind = "proportional"``).
+
+    With ``kind = "state_space"`` the P law's keys are not read: a scene may extend a P-law
+    scene (its inherited ``gain``, ``mode`` ... do not apply); set as overrides they are an
+    error (a sweep of ``controller.gain`` over a state-space scene changes nothing)."""
+    where = f"{source}: [controller]"
+    kind = table.get("kind", CONTROLLER_KINDS[0])
+    if kind not in CONTROLLER_KINDS:
+        raise ConfigError(f"{where} kind = {kind!r} is not allowed"
+                          f"{_suggest(str(kind), CONTROLLER_KINDS)}")
+    if kind == "proportional":
+        if "matrices" in table:
+            raise ConfigError(f"{where} matrices applies to kind = \"state_space\" only")
+        return None
+    p_law = sorted(p for p in overrides if p.startswith("controller.")
+                   and p.split(".", 1)[1] not in ("enabled", *_CONTROLLER_EXTRA))
+    if p_law:
+        raise ConfigError(f"override {', '.join(p_law)}: not a key of a controller of kind = "
+                          "\"state_space\"; allowed: controller.enabled, controller.kind, "
+                          "controller.matrices (limits and sample period are in the matrices "
+                          "file)")
+    value = table.get("matrices")
+    if not isinstance(value, str) or not value:
+        raise ConfigError(f"{where} kind = \"state_space\" needs matrices = \"FILE.json\" (a "
+                          f"controller.state_space JSON file, relative to the scene file), "
+                          f"got {value!r}")
+    path = Path(value).expanduser()
+    if not path.is_absolute() and Path(source).is_file():
+        path = Path(source).resolve().parent / path
+    try:
+        params = load_state_space(path)
+    except ValueError as exc:
+        raise ConfigError(f"{where} matrices: {exc}") from None
+    period, ts = cosim.controller_sample_period, params.sample_period
+    k = period / ts
+    if abs(k - round(k)) > MULTIPLE_RTOL * max(1.0, k) or round(k) < 1:
+        raise ConfigError(f"{where} matrices {path.name}: sample period {ts!r} s does not "
+                          f"divide the controllers' period {period!r} s (cosim.step or "
+                          "cosim.controller_sample_period): allowed a whole number of samples")
+    return StateSpaceSetting(path, params)
 
 
 def load_config(scene: str | Path = "paper_closed_loop",
@@ -461,7 +544,10 @@ def load_config(scene: str | Path = "paper_closed_loop",
         if key != "fmu":
             raise ConfigError(f"{source}: [plant] unknown key '{key}'; allowed: fmu (the "
                               "plant's own parameters are top-level tables)")
-    controller = _params("controller", tables["controller"], source)
+    ctrl_table = tables["controller"]
+    if ctrl_table.get("kind") == "state_space":  # the P law's keys are not read (_state_space)
+        ctrl_table = {k: v for k, v in ctrl_table.items() if k in ("enabled", "fmu")}
+    controller = _params("controller", ctrl_table, source)
     top_drive = _params("top_drive_controller", tables["top_drive_controller"], source)
     n_sites = len(sc.plant.actuator_joints)
     if controller.gain_matrix and len(controller.gain_matrix) != n_sites:
@@ -478,6 +564,11 @@ def load_config(scene: str | Path = "paper_closed_loop",
     instances = (PLANT, *((CONTROLLER,) if controller.enabled else ()),
                  *((TOP_DRIVE,) if top_drive.enabled else ()))
     cosim = _cosim(tables["cosim"], instances, source)
+    state_space = _state_space(tables["controller"], cosim, source, over)
+    if state_space is not None and (controller_fmu or "fmu" in tables["controller"]):
+        raise ConfigError(f"{source}: [controller] kind = \"state_space\" runs the matrices in "
+                          "a StateSpaceController FMU built for the scene: a controller FMU "
+                          "file cannot be given too")
     if controller_fmu and not controller.enabled:
         raise ConfigError(f"{source}: a controller FMU was given ({controller_fmu}) but the "
                           "scene's controller is off: set controller.enabled=true")
@@ -493,6 +584,10 @@ def load_config(scene: str | Path = "paper_closed_loop",
             files[instance] = Path(given)
         elif (chosen := _fmu_file(table_name, tables[table_name], source)) is not None:
             files[instance] = chosen
-    set_keys = {CONTROLLER_TABLES[t][0]: tuple(k for k in tables[t] if k not in ("enabled", "fmu"))
+    set_keys = {CONTROLLER_TABLES[t][0]: tuple(k for k in tables[t]
+                                               if k not in ("enabled", *_CONTROLLER_EXTRA))
                 for t in CONTROLLER_TABLES}
-    return SceneConfig(sc, controller, top_drive, cosim, files, over, set_keys)
+    if state_space is not None:
+        set_keys[CONTROLLER] = ()
+        state_space = state_space if controller.enabled else None
+    return SceneConfig(sc, controller, top_drive, cosim, files, over, set_keys, state_space)

@@ -3,7 +3,9 @@ protocol (:class:`cosim.master.slave.Slave`), without FMI.
 
 The FMUs wrap the same objects (``fmu_src/``): :class:`PlantSlave` steps a
 :class:`plant.simulator.PlantSimulator`, :class:`ControllerSlave` a
-:class:`controller.StrainController` (any number of sites, SISO or with a gain matrix) and
+:class:`controller.StrainController` (any number of sites, SISO or with a gain matrix),
+:class:`StateSpaceSlave` a :class:`controller.StateSpaceController` (``[controller] kind =
+"state_space"``) and
 :class:`TopDriveSlave` a :class:`controller.TopDriveController` exactly as the FMU adapters do
 (same times, same step sizes, outputs taken after each step, a failed plant step discarded with
 the plant's own message; the plant is the model the plant FMU builds: the scene's, or the 3D
@@ -27,6 +29,8 @@ import numpy as np
 
 from drillcosim.controller import (
     ControllerParams,
+    StateSpaceController,
+    StateSpaceParams,
     StrainController,
     TopDriveController,
     TopDriveControllerParams,
@@ -49,7 +53,8 @@ from drillcosim.plant.simulator import PlantSimulator
 from .config import SceneConfig
 from .scene_fmus import plant_layout
 
-__all__ = ["ControllerSlave", "PlantSlave", "TopDriveSlave", "inprocess_slaves"]
+__all__ = ["ControllerSlave", "PlantSlave", "StateSpaceSlave", "TopDriveSlave",
+           "inprocess_slaves"]
 
 
 class _ArraySlave(Slave):
@@ -293,6 +298,31 @@ class ControllerSlave(_LawSlave):
         self.y[:] = self.law.step(t, h, self.u)
 
 
+class StateSpaceSlave(_LawSlave):
+    """:class:`controller.StateSpaceController` as a slave (inputs and outputs: the law's
+    signals, by name), as ``StateSpaceController.fmu`` runs it.
+
+    Parameters
+    ----------
+    name : str
+        Instance name.
+    params : StateSpaceParams
+    """
+
+    def __init__(self, name: str, params: StateSpaceParams):
+        super().__init__(name, params.input_names, params.output_names)
+        self.law = StateSpaceController(params)
+        self._step = self.law.compiled_step(self.u, self.y)
+
+    def instantiate(self, start_time: float, stop_time: float | None) -> None:
+        """Zero state and outputs at the start."""
+        self.law.reset()
+        self.y[:] = self.law.workspace.outputs
+
+    def _advance(self, t: float, h: float) -> None:
+        self.y[:] = self.law.step(t, h, self.u)
+
+
 class TopDriveSlave(_LawSlave):
     """:class:`controller.TopDriveController` as a slave (inputs: ``top_rotary_speed``
     [rad/s], ``top_torque`` [N m]; output: ``top_drive_torque`` [N m]).
@@ -328,14 +358,17 @@ def inprocess_slaves(config: SceneConfig) -> dict[str, Slave]:
     Returns
     -------
     dict
-        ``{"plant": PlantSlave, "controller": ControllerSlave, "top_drive_controller":
-        TopDriveSlave}`` (the enabled controllers), for ``Master(system, slaves)``.
+        ``{"plant": PlantSlave, "controller": ControllerSlave (or StateSpaceSlave),
+        "top_drive_controller": TopDriveSlave}`` (the enabled controllers), for
+        ``Master(system, slaves)``.
     """
     scene = config.scene
     kind = "full3d" if plant_layout(scene) is None else scene.model
     slaves: dict[str, Slave] = {
         PLANT: PlantSlave(PLANT, PlantSimulator(DrillstringModel(scene.plant, kind)))}
-    if config.controller.enabled:
+    if config.state_space is not None:
+        slaves[CONTROLLER] = StateSpaceSlave(CONTROLLER, config.state_space.params)
+    elif config.controller.enabled:
         slaves[CONTROLLER] = ControllerSlave(CONTROLLER, config.controller,
                                              tuple(range(1, config.n_sites + 1)))
     if config.top_drive.enabled:

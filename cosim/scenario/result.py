@@ -125,7 +125,12 @@ class Result:
                             output_interval=cfg.cosim.output_interval, wall_time=self.wall_time,
                             real_time_factor=self.real_time_factor, end_time=self.end_time,
                             switch_on_time=self._switch_on_time, diverged=self.failure)
-        summary["controller"] = dataclasses.asdict(ctrl)
+        ss = cfg.state_space
+        summary["controller"] = dataclasses.asdict(ctrl) if ss is None else {
+            "enabled": True, "kind": "state_space", "matrices": str(ss.file),
+            "n_states": ss.params.n_states, "inputs": list(ss.params.input_names),
+            "outputs": list(ss.params.output_names),
+            "sample_period": ss.params.sample_period, "description": ss.params.description}
         if cfg.top_drive.enabled:
             summary["top_drive_controller"] = dataclasses.asdict(cfg.top_drive)
         summary["cosim"] = cfg.cosim.as_dict()

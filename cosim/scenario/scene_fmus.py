@@ -13,6 +13,9 @@ and whose ``scene`` and ``model`` parameters start at the scene and its model ki
 Likewise the default ``StrainController.fmu`` serves two sites with one P law per channel;
 a scene with another number of sites or a ``[controller] gain_matrix`` gets
 ``StrainController_<scene>`` (its sites, the relative gains ``gain_matrix_<i>_<j>``).
+A scene whose ``[controller] kind = "state_space"`` gets ``StateSpaceController_<scene>``: the
+generic state-space adapter with the matrices file's interface (names, units, limits, number
+of states, sample period) and the file itself as ``resources/state_space.json``.
 The top-drive controller (``TopDriveController.fmu``) has one layout.
 
 A variant's model identifier, file name, slave module and GUID differ from the default's
@@ -31,6 +34,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from drillcosim.controller.state_space import StateSpaceParams
 from drillcosim.fmu_src.build import DEFAULT_OUT, REGISTRY, FmuRecipe, build_one, stale
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.params import PlantParams
@@ -42,13 +46,15 @@ from drillcosim.plant.signals import (
     body_signal,
 )
 
-__all__ = ["DEFAULT_CONTROLLER", "DEFAULT_PLANT", "TOP_DRIVE_CONTROLLER", "PlantLayout",
-           "controller_recipe", "default_fmu_dir", "ensure_recipes", "plant_layout",
-           "plant_recipe", "recipe_named", "variant_name"]
+__all__ = ["DEFAULT_CONTROLLER", "DEFAULT_PLANT", "STATE_SPACE_CONTROLLER",
+           "TOP_DRIVE_CONTROLLER", "PlantLayout", "controller_recipe", "default_fmu_dir",
+           "ensure_recipes", "plant_layout", "plant_recipe", "recipe_named",
+           "state_space_recipe", "variant_name"]
 
 DEFAULT_PLANT = "DrillstringPlant"
 DEFAULT_CONTROLLER = "StrainController"
 TOP_DRIVE_CONTROLLER = "TopDriveController"
+STATE_SPACE_CONTROLLER = "StateSpaceController"
 
 Row = tuple[str, str, str]
 
@@ -190,6 +196,36 @@ def controller_recipe(scene: Scene, n_sites: int, gain_matrix: tuple) -> FmuReci
         name=variant_name(DEFAULT_CONTROLLER, scene), script=base.script, vendored=base.vendored,
         extra_files=base.extra_files, options=base.options, requires=base.requires,
         exclude=base.exclude, base=DEFAULT_CONTROLLER, class_attributes=json.dumps(layout))
+
+
+def state_space_recipe(scene: Scene, params: StateSpaceParams, matrices: Path) -> FmuRecipe:
+    """The recipe of ``StateSpaceController_<scene>``: the generic adapter with the interface
+    of ``params`` (read from the file ``matrices``, which the FMU carries as its resource)."""
+    base = recipe_named(STATE_SPACE_CONTROLLER)
+
+    def limit(x: float) -> float | None:
+        return None if x in (float("inf"), float("-inf")) else x
+
+    description = (f"Discrete state-space controller built for scene '{scene.name}' "
+                   f"(u = clip(C x + D y), x+ = A x + B y; matrices in "
+                   f"resources/state_space.json): {len(params.inputs)} inputs, "
+                   f"{len(params.outputs)} outputs, {params.n_states} states, Ts = "
+                   f"{params.sample_period:g} s. {params.description}")
+    layout = {
+        "inputs": [[s.name, s.unit, f"Input {i} of the state-space law (plant output "
+                    f"{s.name})"] for i, s in enumerate(params.inputs, start=1)],
+        "outputs": [[s.name, s.unit, f"Output {i} of the state-space law (plant input "
+                     f"{s.name})"] for i, s in enumerate(params.outputs, start=1)],
+        "lower": [limit(s.lower) for s in params.outputs],
+        "upper": [limit(s.upper) for s in params.outputs],
+        "n_states": params.n_states, "sample_period": params.sample_period,
+        "description": description}
+    return FmuRecipe(
+        name=variant_name(STATE_SPACE_CONTROLLER, scene), script=base.script,
+        vendored=base.vendored, extra_files=base.extra_files, options=base.options,
+        requires=base.requires, exclude=base.exclude, base=STATE_SPACE_CONTROLLER,
+        class_attributes=json.dumps({"LAYOUT": layout}),
+        resource_files=((str(Path(matrices).resolve()), "state_space.json"),))
 
 
 def ensure_recipes(recipes: Sequence[FmuRecipe], fmu_dir: str | Path | None = None

@@ -69,6 +69,7 @@ __all__ = [
     "line_weights",
     "loop_delay_steps",
     "loop_weights",
+    "modal_bases",
     "reduce_loop",
     "spectral_radius",
 ]
@@ -300,6 +301,44 @@ def reduce_loop(A: np.ndarray, B: np.ndarray, C: np.ndarray, tol: float = 1e-10
     keep = score > tol * score.max()
     if keep.all():
         return A, B, C, np.zeros(0, dtype=complex)
+    qk, qd = modal_bases(lam, V, keep)
+    T = np.hstack([qk, qd])
+    r = qk.shape[1]
+    Ti = np.linalg.inv(T)
+    At = Ti @ A @ T
+    keep = keep | _conjugates(lam, keep)
+    return At[:r, :r], (Ti @ B)[:r], (C @ T)[:, :r], lam[~keep]
+
+
+def _conjugates(lam: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The conjugate partners of the modes in ``mask``."""
+    out = np.zeros_like(mask)
+    for i in np.flatnonzero(mask):
+        if lam[i].imag != 0:
+            out[int(np.argmin(np.abs(lam - lam[i].conj())))] = True
+    return out
+
+
+def modal_bases(lam: np.ndarray, V: np.ndarray, keep: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Real bases of the invariant subspaces of the kept modes and of the others.
+
+    Parameters
+    ----------
+    lam : numpy.ndarray, shape (N,)
+        Eigenvalues.
+    V : numpy.ndarray, shape (N, N)
+        Right eigenvectors (columns).
+    keep : numpy.ndarray of bool, shape (N,)
+        The modes to keep; a kept mode's conjugate is kept with it.
+
+    Returns
+    -------
+    qk, qd : numpy.ndarray, shapes (N, r), (N, N - r)
+        ``[Re v, Im v]`` of each kept (other) complex pair, ``v`` of a real mode: with
+        ``T = [qk, qd]``, ``T^-1 A T`` is block diagonal (the first ``r`` states the kept modes).
+    """
+    keep = keep | _conjugates(lam, keep)
 
     def real_basis(mask: np.ndarray) -> np.ndarray:
         cols = []
@@ -310,19 +349,9 @@ def reduce_loop(A: np.ndarray, B: np.ndarray, C: np.ndarray, tol: float = 1e-10
             cols.append(v.real)
             if abs(lam[i].imag) > 0:
                 cols.append(v.imag)
-        return np.array(cols).T
+        return np.array(cols).T if cols else np.zeros((len(lam), 0))
 
-    # keep conjugate pairs together
-    for i in np.flatnonzero(keep):
-        if lam[i].imag != 0:
-            j = int(np.argmin(np.abs(lam - lam[i].conj())))
-            keep[j] = True
-    qk, qd = real_basis(keep), real_basis(~keep)
-    T = np.hstack([qk, qd])
-    r = qk.shape[1]
-    Ti = np.linalg.inv(T)
-    At = Ti @ A @ T
-    return At[:r, :r], (Ti @ B)[:r], (C @ T)[:, :r], lam[~keep]
+    return real_basis(keep), real_basis(~keep)
 
 
 def coupled_plant(scene: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:

@@ -11,6 +11,14 @@
  * After fmi2Error the instance accepts only fmi2Reset, fmi2SetFMUstate, fmi2FreeFMUstate,
  * fmi2FreeInstance and the logging/version calls (FMI 2.0 section 2.1.3). fmi2Fatal is never
  * returned. Memory: calloc/free (canNotUseMemoryManagementFunctions = true).
+ *
+ * Handles: an fmi2Component or fmi2FMUstate a host passes in is used only if it is in the
+ * registry of live ones this library gave out (dcs_registry.c, shared with the native wrapper):
+ * it is looked up, never read before that, so a freed, foreign or made-up handle is refused
+ * without touching memory that may be gone. An unknown component: fmi2Error and no message
+ * (no instance, no logger), fmi2FreeInstance ignores it; an unknown state: fmi2Error naming it.
+ * A handle leaves its registry before it is freed, so a second free finds nothing to free.
+ * Serialized states (bytes) are checked by size, magic number and version instead.
  */
 #include <math.h>
 #include <stdarg.h>
@@ -19,6 +27,7 @@
 #include <string.h>
 
 #include "config.h"
+#include "dcs_registry.h"
 #include "fmi2Functions.h"
 #include "model.h"
 
@@ -92,7 +101,32 @@ typedef struct {
     ModelData d;
 } SerialState;
 
+/* The live handles of this library (of every instance): valid only if listed. */
+static DcsRegistry g_instances = DCS_REGISTRY_INIT;
+static DcsRegistry g_states = DCS_REGISTRY_INIT;
+
+static Instance *instance_of(fmi2Component c)
+{
+    return dcs_registry_contains(&g_instances, c) ? (Instance *)c : NULL;
+}
+
+/* A live state of this library (any instance's), else NULL. */
+static SerialState *state_of(fmi2FMUstate s)
+{
+    return dcs_registry_contains(&g_states, s) ? (SerialState *)s : NULL;
+}
+
 /* ------------------------------------------------------------------------ logging */
+#if defined(__GNUC__)
+#define PRINTF_LIKE(f, a) __attribute__((format(printf, f, a)))
+#else
+#define PRINTF_LIKE(f, a)
+#endif
+
+static void log_message(Instance *inst, fmi2Status status, const char *category,
+                        const char *fmt, ...) PRINTF_LIKE(4, 5);
+static fmi2Status fail(Instance *inst, const char *call, const char *fmt, ...) PRINTF_LIKE(3, 4);
+
 static void log_message(Instance *inst, fmi2Status status, const char *category,
                         const char *fmt, ...)
 {
@@ -133,9 +167,10 @@ static const char *state_name(ModelState s)
     }
 }
 
-/* The calling-sequence check of every function: the instance's state must be in the mask. */
+/* The check of every function: c must be a live instance (looked up, not read), and its
+ * state in the mask. */
 #define BEGIN(F)                                                                            \
-    Instance *inst = (Instance *)c;                                                         \
+    Instance *inst = instance_of(c);                                                        \
     if (!inst) {                                                                            \
         return fmi2Error;                                                                   \
     }                                                                                       \
@@ -221,15 +256,23 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     inst->env = env;
     inst->logging_on = loggingOn ? 1 : 0;
     set_start_values(&inst->d);
+    if (dcs_registry_add(&g_instances, inst) != 0) {
+        free(inst->instance_name);
+        free(inst);
+        if (logger) logger(env, name, fmi2Error, "logStatusError",
+                           "%s: fmi2Instantiate: out of memory", name);
+        return NULL;
+    }
     return inst;
 }
 
 void fmi2FreeInstance(fmi2Component c)
 {
-    Instance *inst = (Instance *)c;
-    if (!inst) {
+    /* out of the registry first: a second free (or a foreign handle) finds nothing */
+    if (!dcs_registry_remove(&g_instances, c)) {
         return;
     }
+    Instance *inst = (Instance *)c;
     free(inst->instance_name);
     free(inst);
 }
@@ -555,13 +598,25 @@ fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2Stri
 }
 
 /* ------------------------------------------------------------------------ FMU state */
+/* *FMUstate if it is a live state (FMI 2.0: a state given is overwritten), else a new one
+ * (registered); NULL if out of memory. A pointer not in the registry is never written through. */
+static SerialState *state_to_fill(fmi2FMUstate *FMUstate)
+{
+    SerialState *s = state_of(*FMUstate);
+    if (!s && (s = calloc(1, sizeof *s)) != NULL && dcs_registry_add(&g_states, s) != 0) {
+        free(s);
+        s = NULL;
+    }
+    return s;
+}
+
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
     BEGIN(fmi2GetFMUstate)
     if (!FMUstate) {
         return fail(inst, "fmi2GetFMUstate", "FMUstate must not be NULL");
     }
-    SerialState *s = *FMUstate ? (SerialState *)*FMUstate : calloc(1, sizeof *s);
+    SerialState *s = state_to_fill(FMUstate);
     if (!s) {
         return fail(inst, "fmi2GetFMUstate", "out of memory");
     }
@@ -572,9 +627,10 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
     return fmi2OK;
 }
 
-static int valid_state(const SerialState *s)
+/* Whether the bytes of a serialized state (copied into s) are one of this FMU's. */
+static int valid_serial_state(const SerialState *s)
 {
-    return s && s->magic == SERIAL_MAGIC && s->version == SERIAL_VERSION &&
+    return s->magic == SERIAL_MAGIC && s->version == SERIAL_VERSION &&
            (s->d.state == Instantiated || s->d.state == InitializationMode ||
             s->d.state == StepComplete || s->d.state == Terminated);
 }
@@ -582,8 +638,8 @@ static int valid_state(const SerialState *s)
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
 {
     BEGIN(fmi2SetFMUstate)
-    const SerialState *s = (const SerialState *)FMUstate;
-    if (!valid_state(s)) {
+    const SerialState *s = state_of(FMUstate);
+    if (!s) {
         return fail(inst, "fmi2SetFMUstate", "not a state of this FMU");
     }
     inst->d = s->d;
@@ -593,17 +649,24 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
     BEGIN(fmi2FreeFMUstate)
-    if (FMUstate) {
-        free(*FMUstate);
-        *FMUstate = NULL;
+    if (!FMUstate || !*FMUstate) {
+        return fmi2OK; /* nothing to free */
     }
+    /* out of the registry first: a second free (or a foreign pointer) finds nothing */
+    if (!dcs_registry_remove(&g_states, *FMUstate)) {
+        return fail(inst, "fmi2FreeFMUstate", "not a state of this FMU");
+    }
+    free(*FMUstate);
+    *FMUstate = NULL;
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size)
 {
     BEGIN(fmi2SerializedFMUstateSize)
-    (void)FMUstate;
+    if (!state_of(FMUstate)) {
+        return fail(inst, "fmi2SerializedFMUstateSize", "not a state of this FMU");
+    }
     if (!size) {
         return fail(inst, "fmi2SerializedFMUstateSize", "size must not be NULL");
     }
@@ -615,12 +678,15 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate,
                                  fmi2Byte serializedState[], size_t size)
 {
     BEGIN(fmi2SerializeFMUstate)
-    if (!valid_state((const SerialState *)FMUstate) || !serializedState ||
-        size < sizeof(SerialState)) {
-        return fail(inst, "fmi2SerializeFMUstate", "need a state of this FMU and %zu bytes",
-                    sizeof(SerialState));
+    const SerialState *s = state_of(FMUstate);
+    if (!s) {
+        return fail(inst, "fmi2SerializeFMUstate", "not a state of this FMU");
     }
-    memcpy(serializedState, FMUstate, sizeof(SerialState));
+    if (!serializedState || size < sizeof *s) {
+        return fail(inst, "fmi2SerializeFMUstate", "need a buffer of %zu bytes, got %zu",
+                    sizeof *s, serializedState ? size : (size_t)0);
+    }
+    memcpy(serializedState, s, sizeof *s);
     return fmi2OK;
 }
 
@@ -634,10 +700,10 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
                     "(%zu bytes, expected %zu)", size, sizeof tmp);
     }
     memcpy(&tmp, serializedState, sizeof tmp);
-    if (!valid_state(&tmp)) {
+    if (!valid_serial_state(&tmp)) {
         return fail(inst, "fmi2DeSerializeFMUstate", "not a serialized state of this FMU");
     }
-    SerialState *s = *FMUstate ? (SerialState *)*FMUstate : malloc(sizeof *s);
+    SerialState *s = state_to_fill(FMUstate);
     if (!s) {
         return fail(inst, "fmi2DeSerializeFMUstate", "out of memory");
     }

@@ -6,8 +6,9 @@ run on our C wrapper (``fmu_src/wrapper``), whose status protocol this class spe
 * **Status.** Every FMI callback returns None; a problem is reported by :meth:`DcsSlave._error`,
   which logs the message (status and category ``logStatus<Status>``) and raises
   ``self._fmi2_status`` to that status; the wrapper returns the highest status of the call
-  and resets the attribute. No anticipated problem raises; an unexpected exception becomes
-  fmi2Error with its traceback and the instance stays usable.
+  and resets the attribute (the constructor's too: fmi2Error there makes fmi2Instantiate
+  fail, e.g. a resource file that does not fit). No anticipated problem raises; an unexpected
+  exception becomes fmi2Error with its traceback and the instance stays usable.
 * **Guarded get/set.** A bad value reference, a wrong type or writing a variable that is not
   settable is fmi2Error from that get/set call, naming the variable (a get returns NaN / 0 /
   false / "" for it, a set ignores it). Adapters add their own rules by overriding

@@ -102,7 +102,7 @@ def import_vendored(name: str, beside: str, submodules: Sequence[str] = (),
     Parameters
     ----------
     name : str
-        The vendored import name (e.g. ``_dcs_plant_0_1_0``).
+        The vendored import name (``_dcs_<package>_<version>_<hash>``).
     beside : str
         The adapter's ``__file__``: the package lies beside it in ``resources/``.
     submodules : sequence of str

@@ -120,7 +120,7 @@ SOURCES: tuple[Path, ...] = tuple(HERE / n for n in (
     "dcs_state.c", "fmi2_functions.c"))
 #: The official FMI 2.0.5 headers and our internal ones.
 HEADERS: tuple[Path, ...] = tuple(HERE / n for n in (
-    "dcs_discover.h", "dcs_python.h", "dcs_wrapper.h", "fmi2/fmi2FunctionTypes.h",
+    "dcs_discover.h", "dcs_python.h", "dcs_registry.h", "dcs_wrapper.h", "fmi2/fmi2FunctionTypes.h",
     "fmi2/fmi2Functions.h", "fmi2/fmi2TypesPlatform.h"))
 
 

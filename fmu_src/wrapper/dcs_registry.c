@@ -6,13 +6,14 @@
  * made-up handle is refused without reading memory that may be gone (a magic number read
  * through it would be a read after free). A handle enters when it is created and leaves before
  * it is freed. A set of pointers: open addressing with linear probing and backward-shift
- * deletion, guarded by one mutex (hosts may run instances in different threads).
+ * deletion, guarded by one mutex (hosts may run instances in different threads). Used by
+ * the wrapper and the C controller FMU alike (dcs_registry.h; only libc and pthreads).
  */
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "dcs_wrapper.h"
+#include "dcs_registry.h"
 
 static size_t slot_of(const void *p, size_t cap)
 {

@@ -129,6 +129,29 @@ static fmi2Status log_exception(DcsInstance *in, const char *fn)
     return status;
 }
 
+/* status raised to the slave's _fmi2_status (GIL held), which is reset to None. */
+static fmi2Status take_status(DcsSlave *s, fmi2Status status)
+{
+    if (s->has_status && status != fmi2Fatal) {
+        PyObject *extra = p_PyObject_GetAttr(s->obj, dcs_py.fmi2_status);
+        if (extra == NULL) {
+            p_PyErr_Clear();
+        } else if (extra != dcs_py.none) {
+            long v = p_PyLong_AsLong(extra);
+            if (p_PyErr_Occurred()) {
+                p_PyErr_Clear();
+                v = fmi2Error;
+            }
+            if (v > (long)status && v <= fmi2Fatal)
+                status = (fmi2Status)v;
+            if (p_PyObject_SetAttr(s->obj, dcs_py.fmi2_status, dcs_py.none) != 0)
+                p_PyErr_Clear();
+        }
+        dcs_decref(extra);
+    }
+    return status;
+}
+
 /* Status of a call from its result (a new reference, consumed) and _fmi2_status. */
 static fmi2Status status_of(DcsInstance *in, PyObject *res, int is_step, const char *fn)
 {
@@ -155,24 +178,7 @@ static fmi2Status status_of(DcsInstance *in, PyObject *res, int is_step, const c
         status = t < 0 ? log_exception(in, fn) : t ? fmi2OK : fmi2Discard;
     }
     dcs_decref(res);
-    if (s->has_status && status != fmi2Fatal) {
-        PyObject *extra = p_PyObject_GetAttr(s->obj, dcs_py.fmi2_status);
-        if (extra == NULL) {
-            p_PyErr_Clear();
-        } else if (extra != dcs_py.none) {
-            long v = p_PyLong_AsLong(extra);
-            if (p_PyErr_Occurred()) {
-                p_PyErr_Clear();
-                v = fmi2Error;
-            }
-            if (v > (long)status && v <= fmi2Fatal)
-                status = (fmi2Status)v;
-            if (p_PyObject_SetAttr(s->obj, dcs_py.fmi2_status, dcs_py.none) != 0)
-                p_PyErr_Clear();
-        }
-        dcs_decref(extra);
-    }
-    return status;
+    return take_status(s, status);
 }
 
 /* Take the slave's compiled step anew (GIL held; see the top of this file); returns status,
@@ -490,7 +496,10 @@ fmi2Status dcs_slave_create(DcsInstance *in)
             status = rc == -2 ? fmi2Error
                               : log_exception(in, "fmi2Instantiate (creating the slave)");
         } else {
-            status = refresh_compiled(in, status, "fmi2Instantiate");
+            /* a problem the constructor reported (logged, e.g. a bad resource file) */
+            status = take_status(s, status);
+            if (status <= fmi2Warning)
+                status = refresh_compiled(in, status, "fmi2Instantiate");
         }
         drain_log(in);
         if (status > fmi2Warning) {

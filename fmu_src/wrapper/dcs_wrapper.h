@@ -9,15 +9,16 @@
  *   dcs_slave.c       the pythonfmu slave object: calls, the status protocol, values, buffers
  *   dcs_state.c       FMU state objects and their serialization
  *   dcs_registry.c    the sets of live instances and states (handles are looked up, never
- *                     probed through a pointer that may be freed)
+ *                     probed through a pointer that may be freed; dcs_registry.h, which the
+ *                     C controller FMU shares)
  * Only dcs_python.c, dcs_slave.c and dcs_state.c include Python.h (dcs_python.h).
  */
 #ifndef DCS_WRAPPER_H
 #define DCS_WRAPPER_H
 
-#include <pthread.h>
 #include <stddef.h>
 
+#include "dcs_registry.h" /* DcsRegistry: the sets of live handles */
 #include "fmi2/fmi2Functions.h"
 
 /* FMI 2.0 co-simulation states of an instance, one bit each (masks in fmi2_functions.c). */
@@ -57,18 +58,6 @@ typedef struct {
     size_t n_messages, cap_messages;
     DcsSlave *slave;
 } DcsInstance;
-
-/* ------------------------------------------------------------- dcs_registry.c */
-/* A mutex-guarded set of pointers (the live handles of one kind). */
-typedef struct {
-    pthread_mutex_t lock;
-    const void **slots;
-    size_t cap, n;
-} DcsRegistry;
-#define DCS_REGISTRY_INIT {PTHREAD_MUTEX_INITIALIZER, NULL, 0, 0}
-int dcs_registry_add(DcsRegistry *r, const void *p);      /* 0, or -1 out of memory */
-int dcs_registry_contains(DcsRegistry *r, const void *p); /* 1 if p is in r */
-int dcs_registry_remove(DcsRegistry *r, const void *p);   /* 1 if p was in r (removed) */
 
 /* ------------------------------------------------------------- dcs_instance.c */
 DcsInstance *dcs_instance_new(fmi2String name, const fmi2CallbackFunctions *functions,

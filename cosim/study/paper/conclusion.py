@@ -167,7 +167,15 @@ def measure_sites(scene: str, per_span: int, gain: float, delay: float, step: fl
     """Run one point in process and measure it (module docstring; columns
     :data:`RESULT_COLUMNS`)."""
     wall0 = time.perf_counter()
-    config = site_config(scene, per_span, gain, delay, step, stop_time)
+    row = measure_config(site_config(scene, per_span, gain, delay, step, stop_time), member)
+    row["wall_time"] = time.perf_counter() - wall0
+    return row
+
+
+def measure_config(config: SceneConfig, member: int = 0) -> dict[str, Any]:
+    """Run a configuration in process (ensemble ``member``: 0 unperturbed) and measure it:
+    status, reason, end time, joints, growth rate and noise, peak force and power, long/short
+    RMS radial deflection over the last third, long-span peak, contact times (no wall time)."""
     offset = None
     if member:
         model = DrillstringModel(config.scene.plant, "full3d")
@@ -191,7 +199,6 @@ def measure_sites(scene: str, per_span: int, gain: float, delay: float, step: fl
     row["long_peak_m"] = m["peak_deflection_long"]
     row["long_contact_time_s"] = st.get("long_contact_time_s", math.nan)
     row["short_contact_time_s"] = st.get("short_contact_time_s", math.nan)
-    row["wall_time"] = time.perf_counter() - wall0
     return row
 
 
