@@ -36,8 +36,8 @@ from drillcosim.plant.scene import load_scene
 from drillcosim.plant.simulator import PlantSimulator, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
-#: main before the field-scale plant (issues 22-24 merged): its plant is the reference
-BASE = "8b94d50898a9f60450c04f23af170a89e64c49a4"
+#: main when the field branch last merged it (issues 22-24, 26), without the field-scale plant
+BASE = "d30ca1b00e05bf1b8ad0d0ce76d3b9a61b7329e4"
 STEPS = 120  # communication steps with inputs
 ALONE = 0.1  # s, the plant alone through the recording loop
 
@@ -68,6 +68,9 @@ def base_plant() -> tuple[object, object, Path]:
             os.replace(tmp, home)  # atomic: a concurrent run finds all or nothing
         except OSError:  # another run put it there first
             shutil.rmtree(tmp, ignore_errors=True)
+        for old in home.parent.iterdir():  # the copies of earlier bases
+            if old.is_dir() and old.name != home.name and not old.name.startswith("tmp"):
+                shutil.rmtree(old, ignore_errors=True)
     sys.path.insert(0, str(home))
     try:
         scene = importlib.import_module(f"{name}.scene")
