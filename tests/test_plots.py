@@ -102,18 +102,10 @@ def test_a_long_run_is_drawn_from_its_envelope(tmp_path) -> None:
 
     data = _record(["plant.body11_X", "plant.body11_Y", "plant.body11_radial_deflection",
                     "plant.body11_contact_force"], n=30001)
-    drawn = []
-    real = plots._series
-
-    def spy(ax, t, y, **kw):
-        real(ax, t, y, **kw)
-        drawn.append(len(ax.lines[-1].get_xdata()))
-
-    plots._series = spy
-    try:
-        plots.plot_deflection_contact(data, tmp_path / "d.png", 0.02)
-    finally:
-        plots._series = real
+    fig = plots.DeflectionContactFigure.build(data, 0.02)
+    fig.update(data)
+    drawn = [len(line.get_xdata()) for line, *_ in fig.series]
+    fig.save(tmp_path / "d.png")
     assert len(drawn) == 2 and max(drawn) <= 4 * 5 * plots.SHOW_DPI < 30001 / 4
     assert imread(tmp_path / "d.png").shape[:2] == (720, 600)
 
