@@ -138,12 +138,11 @@ def _run_ssp(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from drillcosim.api import load_scene
+    from drillcosim.api import build_system, load_scene
     from drillcosim.cosim.master.errors import FMI2_ERROR, CosimError
 
     if _is_ssp(args.scene):
         return _run_ssp(args)
-    from drillcosim.cosim.scenario.build import build_system
     from drillcosim.cosim.scenario.plot_workers import PlotWorkers
     from drillcosim.cosim.scenario.result import plot_settings
     from drillcosim.cosim.scenario.simulate import simulate

@@ -3,16 +3,18 @@
 :class:`PlotWorkers` starts its processes (``python -m drillcosim.cosim.scenario.plot_workers``)
 when the run starts: each imports matplotlib while the master steps. :meth:`PlotWorkers.feed`
 gives the run an observer (:class:`PlotFeed`) that copies the recorded rows, every 1/20 of the
-run, into a file both sides map, and tells the workers how many there are: each worker builds
-its share of the figures (:data:`GROUPS`) and draws them with the rows so far, the time axis
-already the whole run's (:meth:`.plots.RunFigure.update`), whenever it is idle. When the run
-stops, the feed hands over the last rows and the workers draw the final pictures (with their
-limits reached, only the lines: :meth:`.plots.RunFigure.render`) while this process writes the
-rest of its results; :meth:`PlotWorkers.plot_run` then has them write their PNGs, the same files
-:func:`.plots.plot_run` writes (rows other than those fed are fed first). A worker that cannot
-do its share (it died, matplotlib is missing, it raised) leaves it to this process, which draws
-it with :func:`.plots.plot_run` (and raises what that raises). With one core, no workers: this
-process draws everything.
+run, into a file both sides map, and tells the workers how many there are. Each worker builds
+its share of the figures (:data:`GROUPS`); once the rows reach :data:`LATE` of the run it
+updates them with the rows so far, the time axis already the whole run's
+(:meth:`.plots.RunFigure.update`), and draws the layer below their lines (axes, ticks, labels:
+most of the cost) whenever their limits changed (:meth:`.plots.RunFigure.prepare`). When the
+run stops, the feed hands over the last rows and the workers draw the final pictures (limits
+reached: only the lines and above; else the whole figure) and encode them while this process
+writes the rest of its results; :meth:`PlotWorkers.plot_run` then has them write their PNGs,
+the same files :func:`.plots.plot_run` writes (rows other than those fed are fed first). A
+worker that cannot do its share (it died, matplotlib is missing, it raised) leaves it to this
+process, which draws it with :func:`.plots.plot_run` (and raises what that raises). With one
+core, no workers: this process draws everything.
 
 Protocol: pickled dicts on the worker's stdin, read by a thread as they come, in order:
 ``{"settings": <plot_run's keyword arguments>, "figures": <names>}``; ``{"rows": <file>,
@@ -45,6 +47,9 @@ GROUPS = (("deflection_contact", "orbit_steady", "axial_torsional"), ("actuators
 TIMEOUT = 600.0
 #: Row updates the feed sends over a run.
 UPDATES = 20
+#: The workers draw the layer below the lines (:meth:`.plots.RunFigure.prepare`) once the rows
+#: reach this fraction of the run (the limits are then mostly the final ones).
+LATE = 0.7
 
 
 class PlotWorkers:
@@ -274,13 +279,16 @@ def main() -> int:
         if figures is None or figures[0][0] is not key[0] or figures[0][1] != key[1]:
             figures = (key, run_figures(data, **snap["settings"], figures=snap["figures"]))
         final = snap["t_end"] is None
+        t = data["time"]
+        if not final and t[-1] < t[0] + LATE * (snap["t_end"] - t[0]):
+            continue                               # the limits are not near the final ones
         made = {}
         for name, fig in figures[1].items():
             fig.update(data, snap["t_end"])
             if final:
                 made[name] = fig.png()
                 continue
-            fig.render()
+            fig.prepare()
             with ready:
                 if state["gen"] != drawn:
                     break                          # newer rows: draw those

@@ -173,6 +173,12 @@ class RunFigure:
         self.series.append((line, fmu, output, scale))
         return True
 
+    def _headed(self, axes, switch_on_time: float | None, title: str, what: str):
+        """Mark the controller's switch-on in ``axes``, head the figure ``title: what``."""
+        _mark(axes, switch_on_time)
+        self.fig.suptitle(f"{title}: {what}" if title else what)
+        return self
+
     def update(self, data: np.ndarray, t_end: float | None = None) -> None:
         """Set the lines from ``data`` (at least 2 rows; the time series decimated to the pixel
         columns of the figure's width at :data:`SHOW_DPI`) and rescale the axes.
@@ -197,25 +203,35 @@ class RunFigure:
         return [a for a in sorted(ax.get_children(), key=lambda a: a.get_zorder())
                 if a.get_zorder() >= low and a.get_visible()]
 
-    def render(self) -> None:
-        """Draw the figure with Agg (see the class docstring)."""
+    def _key(self) -> tuple:
+        """What the layer below the lines depends on: every axes' limits."""
+        return tuple(tuple(ax.viewLim.bounds) for ax in self.fig.axes)
+
+    def prepare(self) -> None:
+        """Draw the layer below the lines now if the limits changed since it was drawn (a
+        later :meth:`render` with these limits draws only the lines and above)."""
         from matplotlib.backends.backend_agg import FigureCanvasAgg
 
         canvas = self.fig.canvas
         if not isinstance(canvas, FigureCanvasAgg):
             canvas = FigureCanvasAgg(self.fig)
-        above = [(ax, self._above(ax)) for ax in self.fig.axes]
-        key = tuple(tuple(ax.viewLim.bounds) for ax in self.fig.axes)
-        if self._below is not None and self._below[0] == key:
-            canvas.restore_region(self._below[1])
-        else:
-            for _, artists in above:
-                for a in artists:
+        key = self._key()
+        if self._below is None or self._below[0] != key:
+            for ax in self.fig.axes:
+                for a in self._above(ax):
                     a.set_animated(True)        # not drawn by canvas.draw()
             canvas.draw()
             self._below = (key, canvas.copy_from_bbox(self.fig.bbox))
-        for ax, artists in above:
-            for a in artists:
+
+    def render(self) -> None:
+        """Draw the figure with Agg (see the class docstring)."""
+        below = self._below
+        self.prepare()
+        canvas = self.fig.canvas
+        if below is self._below:                # drawn before: a copy of it
+            canvas.restore_region(self._below[1])
+        for ax in self.fig.axes:
+            for a in self._above(ax):
                 ax.draw_artist(a)
 
     def png(self) -> bytes:
@@ -327,6 +343,13 @@ def _draw(fig: RunFigure | None, data: np.ndarray, path: str | Path) -> Path | N
     return fig.save(path)
 
 
+def _time_panel(ax, ylabel: str) -> None:
+    """Label a bottom panel (time axis) and grid it."""
+    ax.set_ylabel(ylabel)
+    ax.set_xlabel("time [s]")
+    ax.grid(alpha=0.3)
+
+
 def _mark(axes, switch_on_time: float | None) -> None:
     if switch_on_time:
         for ax in np.ravel(axes):
@@ -362,13 +385,9 @@ class DeflectionContactFigure(RunFigure):
             ax = axes[1, j]
             self._series(ax, data, PLANT, f"body{b}_contact_force", KN, lw=0.7,
                          color="tab:red")
-            ax.set_ylabel("contact force [kN]")
-            ax.set_xlabel("time [s]")
-            ax.grid(alpha=0.3)
-        _mark(axes, switch_on_time)
-        fig.suptitle(f"{title}: radial deflection and wellbore contact force" if title else
-                     "radial deflection and wellbore contact force")
-        return self
+            _time_panel(ax, "contact force [kN]")
+        return self._headed(axes, switch_on_time, title,
+                            "radial deflection and wellbore contact force")
 
 
 def plot_deflection_contact(data: np.ndarray, path: str | Path, clearance: float,
@@ -412,13 +431,8 @@ class ActuatorsFigure(RunFigure):
             ax.grid(alpha=0.3)
             ax = axes[1, j]
             self._series(ax, data, PLANT, f"actuator{s}_power", lw=0.7, color="tab:green")
-            ax.set_ylabel("actuator power [W]")
-            ax.set_xlabel("time [s]")
-            ax.grid(alpha=0.3)
-        _mark(axes, switch_on_time)
-        fig.suptitle(f"{title}: actuator force and power" if title else
-                     "actuator force and power")
-        return self
+            _time_panel(ax, "actuator power [W]")
+        return self._headed(axes, switch_on_time, title, "actuator force and power")
 
 
 def plot_actuators(data: np.ndarray, path: str | Path, n_sites: int = 2,
