@@ -143,22 +143,27 @@ def _run_ssp(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from drillcosim.api import simulate
+    from drillcosim.api import build_system, load_scene
     from drillcosim.cosim.master.errors import FMI2_ERROR, CosimError
 
     if _is_ssp(args.scene):
         return _run_ssp(args)
     from drillcosim.cosim.scenario.plot_workers import PlotWorkers
+    from drillcosim.cosim.scenario.result import plot_settings
+    from drillcosim.cosim.scenario.simulate import simulate
 
     out = Path(args.out) if args.out is not None else Path("out") / Path(args.scene).stem
-    # the figures' worker processes import matplotlib while the run steps
+    # the figures' worker processes import matplotlib while the run steps, and draw the
+    # figures with the rows so far (the feed)
     with PlotWorkers(0 if args.no_plots else None) as workers:
         try:
-            result = simulate(args.scene, stop_time=args.stop_time, step=args.step,
-                              delay=args.delay, gain=args.gain, overrides=_parse_set(args.set),
-                              engine=args.engine, progress=_progress(args),
-                              fmu_dir=args.fmu_dir, plant_fmu=args.plant_fmu,
-                              controller_fmu=args.controller_fmu, csv_path=out / "results.csv")
+            config = load_scene(args.scene, stop_time=args.stop_time, step=args.step,
+                                delay=args.delay, gain=args.gain, overrides=_parse_set(args.set),
+                                plant_fmu=args.plant_fmu, controller_fmu=args.controller_fmu)
+            built = build_system(config, args.engine, fmu_dir=args.fmu_dir)
+            feed = workers.feed(plot_settings(config), config.cosim.stop_time)
+            result = simulate(built, progress=_progress(args), csv_path=out / "results.csv",
+                              observers=[feed] if feed is not None else ())
         except CosimError as exc:  # failed before the first step: earlier files are kept
             if exc.call == "fmi2ExitInitializationMode" and exc.status == FMI2_ERROR:
                 # the FMU rejected its parameters (its message names them): bad input

@@ -50,7 +50,8 @@ def _named(stop_time: float | None = None, step: float | None = None, delay: flo
     return over
 
 
-def load_scene(scene: str | Path = "paper_closed_loop", *,
+def load_scene(scene: str | Path = "paper_closed_loop", *, stop_time: float | None = None,
+               step: float | None = None, delay: float | None = None, gain: float | None = None,
                overrides: Mapping[str, Any] | None = None,
                plant_fmu: str | Path | None = None,
                controller_fmu: str | Path | None = None) -> SceneConfig:
@@ -60,6 +61,8 @@ def load_scene(scene: str | Path = "paper_closed_loop", *,
     ----------
     scene : str or path
         A shipped scene's name (:func:`list_scenes`) or a scene file (``.toml``).
+    stop_time, step, delay, gain : float, optional
+        As for :func:`simulate`.
     overrides : mapping, optional
         Key paths -> values, e.g. ``{"cosim.step": 2.5e-4, "controller.gain": 1e8}``.
     plant_fmu, controller_fmu : path-like, optional
@@ -77,7 +80,8 @@ def load_scene(scene: str | Path = "paper_closed_loop", *,
     UserError
         One line naming the file or key and what is allowed.
     """
-    return load_config(scene, overrides, plant_fmu=plant_fmu, controller_fmu=controller_fmu)
+    return load_config(scene, _named(stop_time, step, delay, gain, overrides),
+                       plant_fmu=plant_fmu, controller_fmu=controller_fmu)
 
 
 def simulate(scene: str | Path = "paper_closed_loop", *, stop_time: float | None = None,
@@ -133,8 +137,8 @@ def simulate(scene: str | Path = "paper_closed_loop", *, stop_time: float | None
     cosim.master.errors.CosimError
         The run failed before its first step (e.g. an FMU rejected its parameters).
     """
-    config = load_config(scene, _named(stop_time, step, delay, gain, overrides),
-                         plant_fmu=plant_fmu, controller_fmu=controller_fmu)
+    config = load_scene(scene, stop_time=stop_time, step=step, delay=delay, gain=gain,
+                        overrides=overrides, plant_fmu=plant_fmu, controller_fmu=controller_fmu)
     built = build_system(config, engine, fmu_dir=fmu_dir)
     return simulate_built(built, outputs=outputs, progress=progress, csv_path=csv_path)
 

@@ -85,7 +85,8 @@ def patched_plant(tmp_path_factory: pytest.TempPathFactory) -> Path:
     text = observables.read_text()
     assert text.count(ORIGINAL_LINE) == 1  # the patch point still exists
     observables.write_text(text.replace(ORIGINAL_LINE, PATCHED_LINE))
-    exclude = tuple(str(src / Path(e).relative_to("plant")) for e in PLANT.exclude)
+    exclude = tuple(str(src / Path(e).relative_to("plant")) if e.startswith("plant/") else e
+                    for e in PLANT.exclude)
     recipe = dataclasses.replace(PLANT, exclude=exclude,
                                  vendored=((str(src), CANONICAL), *PLANT.vendored[1:]))
     return build_one(recipe, tmp_path_factory.mktemp("patched_fmu"))

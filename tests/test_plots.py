@@ -102,18 +102,10 @@ def test_a_long_run_is_drawn_from_its_envelope(tmp_path) -> None:
 
     data = _record(["plant.body11_X", "plant.body11_Y", "plant.body11_radial_deflection",
                     "plant.body11_contact_force"], n=30001)
-    drawn = []
-    real = plots._series
-
-    def spy(ax, t, y, **kw):
-        real(ax, t, y, **kw)
-        drawn.append(len(ax.lines[-1].get_xdata()))
-
-    plots._series = spy
-    try:
-        plots.plot_deflection_contact(data, tmp_path / "d.png", 0.02)
-    finally:
-        plots._series = real
+    fig = plots.DeflectionContactFigure.build(data, 0.02)
+    fig.update(data)
+    drawn = [len(line.get_xdata()) for line, *_ in fig.series]
+    fig.save(tmp_path / "d.png")
     assert len(drawn) == 2 and max(drawn) <= 4 * 5 * plots.SHOW_DPI < 30001 / 4
     assert imread(tmp_path / "d.png").shape[:2] == (720, 600)
 
@@ -146,3 +138,61 @@ def test_plot_workers_write_the_same_figures_as_this_process(tmp_path) -> None:
     assert all(a.read_bytes() == b.read_bytes() for a, b in zip(here, again))
     with PlotWorkers(0) as none:                      # one core: no workers
         assert none.procs == []
+
+
+def _feed_run(workers, data: np.ndarray, settings: dict, stop_time: float, pause: float = 0.0):
+    """Stream ``data`` to ``workers`` as a run would (PlotFeed over a Recorder), the rows in
+    blocks of 1/20 of ``stop_time``, then stop."""
+    import time
+    from types import SimpleNamespace
+
+    from drillcosim.cosim.master.recorder import Recorder
+
+    recorder = Recorder([n for n in data.dtype.names if n != "time"], 1)
+    feed = workers.feed(settings, stop_time)
+    h = float(data["time"][1] - data["time"][0])
+    execution = SimpleNamespace(observers=[feed, recorder], time=float(data["time"][0]),
+                                base_step=h, tick=0)
+    feed.on_start(execution)
+    flat = data.view(np.float64).reshape(len(data), -1)
+    for start in range(0, len(data), feed.stride_ticks):
+        recorder.add_rows(flat[start:start + feed.stride_ticks])
+        execution.tick = start + feed.stride_ticks
+        feed.on_step(execution)
+        time.sleep(pause)                      # the workers draw the rows so far
+    feed.on_stop(execution)
+    return recorder.data
+
+
+def test_figures_drawn_while_a_run_steps_equal_those_drawn_at_its_end(tmp_path) -> None:
+    """The workers draw their figures from the rows so far (time axis to the stop time), then
+    the final ones: the same PNG bytes as plot_run drawing the whole data at once in this
+    process; a run that stops early (half its rows) gets the figures of what it recorded; a
+    worker killed after the feed leaves its share to this process."""
+    from drillcosim.cosim.scenario.plot_workers import PlotWorkers
+
+    n = 3000
+    data = _record(["plant.body11_X", "plant.body11_Y", "plant.body11_radial_deflection",
+                    "plant.body11_contact_force", "plant.actuator1_power",
+                    "controller.actuator1_force_C"], n=n)
+    data["plant.body11_radial_deflection"] *= np.linspace(0.0, 1.0, n)   # limits change late
+    settings = {"clearance": 0.02, "spans": {11: {"span": "long"}}, "n_sites": 1,
+                "title": "t", "switch_on_time": 1.0}
+    stop = float(data["time"][-1])
+    for name, rows, kill in (("whole", data, False), ("early", data[: n // 2], False),
+                             ("killed", data, True)):
+        here, there = tmp_path / f"{name}_here", tmp_path / f"{name}_there"
+        here.mkdir()
+        there.mkdir()
+        expected = plot_run(rows, here, **settings)
+        with PlotWorkers(2) as workers:
+            fed = _feed_run(workers, rows, settings, stop, pause=0.1 if name == "whole" else 0)
+            assert np.array_equal(fed, rows)
+            if kill:
+                workers.procs[1].kill()
+                workers.procs[1].wait()
+            got = workers.plot_run(fed, there, **settings)
+        assert [p.name for p in got] == [p.name for p in expected] == [
+            "orbit.png", "orbit_steady.png", "deflection_contact.png", "actuators.png"]
+        for a, b in zip(expected, got):
+            assert a.read_bytes() == b.read_bytes(), (name, a.name)

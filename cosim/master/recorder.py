@@ -289,6 +289,15 @@ class Recorder:
             return np.zeros(0, dtype=self.dtype)
         return np.concatenate(parts)
 
+    def rows_since(self, start: int) -> np.ndarray:
+        """The rows recorded from row ``start`` on (a copy; all of them: :attr:`data`)."""
+        parts, first = [], 0
+        for part in self._chunks + self._pending():
+            if first + len(part) > start:
+                parts.append(part[max(start - first, 0):])
+            first += len(part)
+        return np.concatenate(parts) if parts else np.zeros(0, dtype=self.dtype)
+
     def abort(self) -> None:
         """Drop the temporary CSV without touching the target (nothing was run)."""
         if self.closed:

@@ -28,12 +28,21 @@ from drillcosim.cosim.master.files import AtomicFile
 from .config import SceneConfig
 from .summary import span_info, summarize, write_json
 
-__all__ = ["Figures", "Result", "seconds_text"]
+__all__ = ["Figures", "Result", "plot_settings", "seconds_text"]
 
 
 def seconds_text(seconds: float) -> str:
     """A wall time [s] for a one-line message: 3 significant digits, whole seconds from 1000 s."""
     return f"{seconds:.3g}" if seconds < 1000 else f"{seconds:.0f}"
+
+
+def plot_settings(config: SceneConfig) -> dict[str, Any]:
+    """The keyword arguments of :func:`.plots.plot_run` for a run of ``config`` besides its
+    rows and folder: clearance [m], spans, sites, title, controller switch-on time [s]."""
+    ctrl = config.controller
+    return {"clearance": config.scene.plant.contact.clearance,
+            "spans": span_info(config.scene), "n_sites": config.n_sites, "title": config.name,
+            "switch_on_time": (ctrl.switch_on_time if ctrl.enabled else None) or None}
 
 
 class Figures(list):
@@ -162,9 +171,7 @@ class Result:
 
         out = Path(folder) if folder is not None else Path(tempfile.mkdtemp(prefix="drillcosim_"))
         out.mkdir(parents=True, exist_ok=True)
-        return Figures(plot_run(self.data, out, self.config.scene.plant.contact.clearance,
-                                self.spans, self.config.n_sites, title=self.config.name,
-                                switch_on_time=self._switch_on_time or None))
+        return Figures(plot_run(self.data, out, **plot_settings(self.config)))
 
     def save(self, folder: str | Path, plots: bool = True, workers=None) -> list[Path]:
         """Write ``results.csv``, ``summary.json`` and (``plots``) the PNGs into ``folder``

@@ -48,12 +48,11 @@ import json
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from drillcosim.cosim.master.files import atomic_write
-from drillcosim.plant.scene import Scene
 from drillcosim.plant.signals import (
     AXES,
     CONTROLLER,
@@ -65,6 +64,9 @@ from drillcosim.plant.signals import (
     body_signal,
     strain,
 )
+
+if TYPE_CHECKING:  # the plots' worker processes import this module: no plant model
+    from drillcosim.plant.scene import Scene
 
 __all__ = ["STICK_SPEED", "SUMMARY_KEYS", "column", "contact_bodies", "load_results",
            "span_info", "stick_slip_metrics", "summarize", "write_json"]
