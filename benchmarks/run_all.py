@@ -294,6 +294,7 @@ def _fmu_and_master_sections(quick: bool) -> list[str]:
     mo = _script(["benchmarks/bench_master_overhead.py", "--steps", steps], 1800)
     table = [ln for ln in mo.splitlines() if ln.startswith("|") or " steps of " in ln]
     red = _script(["benchmarks/bench_reduced.py", "--stop-time", "3" if quick else "10"], 900)
+    fld = _script(["benchmarks/bench_field.py", *(["--quick"] if quick else [])], 1800)
     rms = "" if quick else _script(["benchmarks/bench_rms_sensitivity.py", "--members", "160",
                                     "--divisors", "1,2", "--no-step-table",
                                     "--fixed", "kutta3@0.00025"], 5400)
@@ -303,7 +304,7 @@ def _fmu_and_master_sections(quick: bool) -> list[str]:
     ext = _script(["benchmarks/bench_extensions.py", "--skip", "off", *(["--quick"] if quick
                                                                         else [])], 1800)
     ext = "\n## Physics extensions (benchmarks/bench_extensions.py)\n\n" + ext
-    return [red, rms, fixed, ext, fm, fb, "",
+    return [red, fld, rms, fixed, ext, fm, fb, "",
             "## Master overhead on tiny FMUs (benchmarks/bench_master_overhead.py)", "",
             f"Command: `python benchmarks/bench_master_overhead.py --steps {steps}` (target: "
             "our master within 1.3x of a hand-written raw fmpy loop).", "", *table, "", ctl]

@@ -183,6 +183,7 @@ UNIT_DEFINITIONS: dict[str, dict[str, int]] = {
     "N": {"kg": 1, "m": 1, "s": -2},
     "N/m": {"kg": 1, "s": -2},
     "N.s/m": {"kg": 1, "s": -1},
+    "N.s/m2": {"kg": 1, "m": -1, "s": -1},
     "N.m": {"kg": 1, "m": 2, "s": -2},
     "N.m/rad": {"kg": 1, "m": 2, "s": -2, "rad": -1},
     "N.m.s/rad": {"kg": 1, "m": 2, "s": -1, "rad": -1},

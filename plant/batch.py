@@ -21,8 +21,7 @@ RECORD_EXPEULER = 1
 
 @njit(cache=True)
 def run_record(model, method, t0, h, n_out, max_dt, breakpoints, y, p, ip, fp, u, wR, wF, wM, k1,
-               k2, k3, k4, yt, op_idx, op_sizes, op_blocks, zbit_ref, out, idx, rec, limits,
-               strain_factor):
+               k2, k3, k4, yt, op_idx, op_sizes, op_blocks, zbit_ref, out, idx, rec, limits):
     """Advance ``n_out`` output steps of ``h`` [s], recording the outputs ``idx``.
 
     ``method``: :data:`RECORD_RK4` (steps <= ``max_dt`` [s], split at ``breakpoints`` by
@@ -50,7 +49,7 @@ def run_record(model, method, t0, h, n_out, max_dt, breakpoints, y, p, ip, fp, u
             advance_rk4_span(model, t, t + h, max_dt, breakpoints, y, p, ip, fp, u, wR, wF, wM,
                              k1, k2, k3, k4, yt)
         code, i, val = check_state(full3d, n, y, limits[0], limits[1], limits[2], limits[3],
-                                   strain_factor, wR)
+                                   wR, p, ip)
         if full3d:
             outputs3d(t + h, y, p, ip, fp, u, wR, zbit_ref, out)
         else:

@@ -418,6 +418,10 @@ class ClosedLoopSimulator:
         if model.kind != "full3d" or model.n_sites == 0:
             raise ValueError("ClosedLoopSimulator needs model = 'full3d' with actuator sites "
                              f"(got {model.kind!r} with {model.n_sites} sites)")
+        if not model.params.uniform or model.framed:
+            raise ValueError("ClosedLoopSimulator serves the uniform pipe in a vertical hole (its "
+                             "strains use the pipe's gauge radius and segment length); run a "
+                             "string of sections or a curved hole through the co-simulation")
         if not isinstance(law, StrainLaw):
             raise TypeError(f"law must be a StrainLaw, got {type(law).__name__}")
         if interpolation not in INTERPOLATIONS:

@@ -76,10 +76,10 @@ INTERNAL = 9  # an exception inside the compiled code (a bug): the state may be 
 ENV = "DRILLCOSIM_COMPILED_STEP"
 
 # Settings (float64) of the context.
-S_MAX_STEP, S_ZBIT_REF, S_STRAIN_FACTOR, S_VERLET_LAMBDA = 0, 1, 2, 3
-S_MAX_LATERAL, S_MAX_TILT, S_MAX_SPEED, S_MAX_STRAIN = 4, 5, 6, 7
-S_OP_DT, S_AUTO_H, S_MAX_SUBSTEPS = 8, 9, 10
-N_SETTINGS = 11
+S_MAX_STEP, S_ZBIT_REF, S_VERLET_LAMBDA = 0, 1, 2
+S_MAX_LATERAL, S_MAX_TILT, S_MAX_SPEED, S_MAX_STRAIN = 3, 4, 5, 6
+S_OP_DT, S_AUTO_H, S_MAX_SUBSTEPS = 7, 8, 9
+N_SETTINGS = 10
 # Meta (int64) of the context.
 M_MODEL, M_KERNEL, M_AUTO = 0, 1, 2
 N_META = 3
@@ -225,8 +225,7 @@ def step_core(t, h, meta, settings, clock, y, p, ip, fp, u, wR, wF, wM, work, br
     else:
         outputs_at(clock[0], y, p, ip, fp, u, wR, settings[S_ZBIT_REF], out)
     code, i, val = check_state(full3d, ip[0], y, settings[S_MAX_LATERAL], settings[S_MAX_TILT],
-                               settings[S_MAX_SPEED], settings[S_MAX_STRAIN],
-                               settings[S_STRAIN_FACTOR], wR, True)
+                               settings[S_MAX_SPEED], settings[S_MAX_STRAIN], wR, p, ip, True)
     if code != GUARD_OK:
         report[0] = code
         report[1] = i
@@ -316,7 +315,6 @@ class CompiledStep:
         limits = sim.limits()
         settings[S_MAX_STEP] = sim.max_step
         settings[S_ZBIT_REF] = m._zbit_ref
-        settings[S_STRAIN_FACTOR] = sim.strain_factor
         settings[S_VERLET_LAMBDA] = m.verlet_lambda
         settings[S_MAX_LATERAL:S_MAX_STRAIN + 1] = limits
         settings[S_OP_DT] = math.nan

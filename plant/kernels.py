@@ -40,8 +40,20 @@ import numpy as np
 from numba import njit
 
 from .layout import (
-    ACT_ARM,
-    ALPHA_LAT,
+    B_CLIN,
+    B_CQ,
+    B_H,
+    B_IJP,
+    B_IM,
+    B_JP,
+    B_JT,
+    B_K1,
+    B_K2,
+    B_M,
+    B_ML,
+    B_P,
+    B_R,
+    B_W,
     BIT_A,
     BIT_AMP,
     BIT_EPS,
@@ -54,26 +66,28 @@ from .layout import (
     BIT_WF,
     BIT_WSPD,
     BIT_ZETA,
-    C_AX,
-    C_BE,
     C_CONT,
-    C_SH,
     C_STAB,
-    C_TO,
     CB_AX,
-    CLEAR,
+    CP_BODY,
+    CP_CLR,
+    CP_RC,
+    CP_Z,
     CT_AX,
     CT_LAT,
     CT_TO,
-    G1,
-    G3,
-    GRAV,
-    HALF,
-    JP,
-    JT,
-    K_AX,
+    HOIST,
+    J_ARM,
+    J_CAX,
+    J_CBE,
+    J_CSH,
+    J_CTO,
+    J_G1,
+    J_G3,
+    J_KAX,
+    J_KSH,
+    J_LEN,
     K_CONT,
-    K_SH,
     K_STAB,
     KB_AX,
     KT_AX,
@@ -86,13 +100,15 @@ from .layout import (
     LD_ON,
     LD_T0,
     LD_T1,
-    MASS,
     MU_WALL,
+    NB,
+    NCP,
     NLD,
+    NP,
     OMEGA0,
-    R_OUT,
     T_RAMP,
     TD_INERTIA,
+    TD_R,
     UNB,
     V_SLIP,
     ZBIT0,
@@ -112,7 +128,10 @@ IP_TDX = 7  # index of the top-drive angle in y (speed: + 1) or -1
 IP_BIT = 8  # bit mode (BIT_PRESCRIBED)
 IP_BITX = 9  # index of the bit's auxiliary state in y or -1
 IP_XOUT = 10  # 1: the outputs include the extensions' (signals.plant_outputs(extended=True))
-IP_HDR = 11
+IP_NCP = 11  # number of contact points (rows of the contact-point table in fp)
+IP_FRAMED = 12  # 1: positions and velocities are local to each body's reference frame
+IP_FIELD = 13  # 1: the outputs include the field summary (signals.FIELD_SCALAR_OUTPUTS)
+IP_HDR = 14
 
 # top-drive modes (params.TOP_DRIVE_MODES order)
 TD_PRESCRIBED = 0
@@ -305,62 +324,171 @@ def _load_active(fp, row):
 
 
 @njit(cache=_CACHE, inline="always")
-def wall_friction(k, nx, ny, fn, mu, p, y, oV, oW, R, wF, wM):
-    """Regularized Coulomb friction of the wall on contact body ``k`` (0-based).
+def wall_friction(nx, ny, fn, mu, vslip, rc, vx, vy, vz, wx, wy, wz, Rl):
+    """Regularized Coulomb friction of the wall at a contact point, in the hole's local frame.
 
-    The contact point P sits on the collar surface at ``r_c`` (outer radius) along the outward
-    normal ``n = (nx, ny, 0)``. Its slip velocity has a circumferential part
-    ``v_t = v_G . t + r_c omega_Z`` (``t = e_Z x n``) and an axial part
-    ``v_z = v_G,Z + r_c (omega_X n_y - omega_Y n_x)`` (``omega`` inertial). The friction force
-    ``-mu fn (v_t t + v_z e_Z) / sqrt(v_t^2 + v_z^2 + v_eps^2)`` acts at P: on the centre and as
-    the moment ``r_c n x F`` (about the axis: ``r_c F_t``), added to ``wF`` (inertial) and ``wM``
-    (body frame).
+    The contact point P sits on the pipe surface at ``rc`` along the outward normal
+    ``n = (nx, ny, 0)`` (local frame: z along the hole axis; the inertial frame for a vertical
+    hole); ``(vx, vy, vz)`` is the velocity [m/s] of the axis point of the pipe next to P,
+    ``(wx, wy, wz)`` the body-frame angular velocity and ``Rl`` the body's rotation relative to
+    the local frame. P's slip velocity has a circumferential part ``v_t = v . t + rc omega_z``
+    (``t = e_z x n``) and an axial part ``v_z + rc (omega_x n_y - omega_y n_x)`` (``omega`` in
+    the local frame). The friction force ``-mu fn (v_t t + v_z e_z) / sqrt(v_t^2 + v_z^2 +
+    v_eps^2)`` acts at P. Returns its local components and its moment ``rc n x F`` about the
+    axis point in the body frame: ``(fx, fy, fz, mx, my, mz)``.
     """
-    rc = p[R_OUT]
-    wx = y[oW + 3 * k]
-    wy = y[oW + 3 * k + 1]
-    wz = y[oW + 3 * k + 2]
-    ox, oy, oz = _mv(R, wx, wy, wz)
-    vt = -ny * y[oV + 3 * k] + nx * y[oV + 3 * k + 1] + rc * oz
-    vz = y[oV + 3 * k + 2] + rc * (ox * ny - oy * nx)
-    g = mu * fn / math.sqrt(vt * vt + vz * vz + p[V_SLIP] * p[V_SLIP])
+    ox, oy, oz = _mv(Rl, wx, wy, wz)
+    vt = -ny * vx + nx * vy + rc * oz
+    vz = vz + rc * (ox * ny - oy * nx)
+    g = mu * fn / math.sqrt(vt * vt + vz * vz + vslip * vslip)
     ft = -g * vt
     fz = -g * vz
-    wF[k, 0] -= ft * ny
-    wF[k, 1] += ft * nx
+    m0, m1, m2 = _mtv(Rl, rc * ny * fz, -rc * nx * fz, rc * ft)
+    return -ft * ny, ft * nx, fz, m0, m1, m2
+
+
+@njit(cache=_CACHE, inline="always")
+def _local_rotation(y, oA, k, framed, wR, S):
+    """Rotation of body ``k`` relative to its reference frame (``wR[k]`` unless framed: then
+    built into the scratch ``S`` from the Cardan angles); returns the matrix to use."""
+    if framed:
+        cardan(y[oA + 3 * k], y[oA + 3 * k + 1], y[oA + 3 * k + 2], S)
+        return S
+    return wR[k]
+
+
+@njit(cache=_CACHE, inline="always")
+def _frame_mv(p, o, a, b, c):
+    """Reference frame at ``p[o:o+9]`` (row-major) times the vector (a, b, c)."""
+    return (p[o] * a + p[o + 1] * b + p[o + 2] * c,
+            p[o + 3] * a + p[o + 4] * b + p[o + 5] * c,
+            p[o + 6] * a + p[o + 7] * b + p[o + 8] * c)
+
+
+@njit(cache=_CACHE, inline="always")
+def _frame_mtv(p, o, a, b, c):
+    """Transpose of the reference frame at ``p[o:o+9]`` times the vector (a, b, c)."""
+    return (p[o] * a + p[o + 3] * b + p[o + 6] * c,
+            p[o + 1] * a + p[o + 4] * b + p[o + 7] * c,
+            p[o + 2] * a + p[o + 5] * b + p[o + 8] * c)
+
+
+@njit(cache=_CACHE, inline="always")
+def _frame_mm(p, o, S, R):
+    """R = F S with F the reference frame at ``p[o:o+9]`` (row-major)."""
+    for i in range(3):
+        f0 = p[o + 3 * i]
+        f1 = p[o + 3 * i + 1]
+        f2 = p[o + 3 * i + 2]
+        for j in range(3):
+            R[i, j] = f0 * S[0, j] + f1 * S[1, j] + f2 * S[2, j]
+
+
+@njit(cache=_CACHE, inline="always")
+def _frame_tmm(p, o, S, R):
+    """R = F^T S with F the reference frame at ``p[o:o+9]`` (row-major)."""
+    for i in range(3):
+        f0 = p[o + i]
+        f1 = p[o + 3 + i]
+        f2 = p[o + 6 + i]
+        for j in range(3):
+            R[i, j] = f0 * S[0, j] + f1 * S[1, j] + f2 * S[2, j]
+
+
+@njit(cache=_CACHE, inline="always")
+def body_inertial(y, p, k, framed, oV):
+    """Inertial position [m] and velocity [m/s] of the mass centre of body ``k`` (6 values)."""
+    if framed:
+        o = NP + NB * k
+        g0, g1, g2 = _frame_mv(p, o + B_R, y[3 * k], y[3 * k + 1], y[3 * k + 2])
+        v0, v1, v2 = _frame_mv(p, o + B_R, y[oV + 3 * k], y[oV + 3 * k + 1], y[oV + 3 * k + 2])
+        return (p[o + B_P] + g0, p[o + B_P + 1] + g1, p[o + B_P + 2] + g2, v0, v1, v2)
+    return (y[3 * k], y[3 * k + 1], y[3 * k + 2], y[oV + 3 * k], y[oV + 3 * k + 1],
+            y[oV + 3 * k + 2])
+
+
+@njit(cache=_CACHE, inline="always")
+def _add_local_force(wF, p, k, framed, fx, fy, fz):
+    """Add a force given in body ``k``'s local frame to ``wF[k]`` (inertial)."""
+    if framed:
+        fx, fy, fz = _frame_mv(p, NP + NB * k + B_R, fx, fy, fz)
+    wF[k, 0] += fx
+    wF[k, 1] += fy
     wF[k, 2] += fz
-    m0, m1, m2 = _mtv(R, rc * ny * fz, -rc * nx * fz, rc * ft)
-    wM[k, 0] += m0
-    wM[k, 1] += m1
-    wM[k, 2] += m2
+
+
+@njit(cache=_CACHE, inline="always")
+def top_hoist(t, p):
+    """Axial displacement [m] and speed [m/s] of the top drive along its axis (hoisting)."""
+    if p[HOIST] == 0.0:
+        return 0.0, 0.0
+    return top_drive(t, p[HOIST], p[T_RAMP])
+
+
+@njit(cache=_CACHE, inline="always")
+def top_point(t, y, p, framed, oV, R0, h):
+    """Position of body 0's top end A relative to the top drive [m] and the velocity of its
+    mass centre relative to the drive [m/s] (inertial; the drive hoists along its axis)."""
+    G0, G1, G2, V0, V1, V2 = body_inertial(y, p, 0, framed, oV)
+    A0 = G0 - h * R0[0, 2]
+    A1 = G1 - h * R0[1, 2]
+    A2 = G2 - h * R0[2, 2]
+    if p[HOIST] != 0.0:
+        zt, vt = top_hoist(t, p)
+        A0 -= zt * p[TD_R + 2]
+        A1 -= zt * p[TD_R + 5]
+        A2 -= zt * p[TD_R + 8]
+        V0 -= vt * p[TD_R + 2]
+        V1 -= vt * p[TD_R + 5]
+        V2 -= vt * p[TD_R + 8]
+    return A0, A1, A2, V0, V1, V2
 
 
 @njit(cache=_CACHE)
 def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
-    """Full 3D right-hand side; writes dy (12 n). wR (n+1,3,3), wF (n,3), wM (n,3) are scratch."""
+    """Full 3D right-hand side (:func:`_rhs3d`), compiled once per frame kind: with the frame
+    flag a constant, the vertical hole's code carries no per-body frame tests."""
+    if ip[IP_FRAMED] != 0:
+        _rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM, True)
+    else:
+        _rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM, False)
+
+
+@njit(cache=_CACHE, inline="always")
+def _rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM, framed):
+    """Full 3D right-hand side; writes dy (12 n). wR (n + 2, 3, 3), wF (n, 3), wM (n, 3) are
+    scratch (``wR[k]`` body k's rotation to the inertial frame, ``wR[n]`` and ``wR[n + 1]``
+    free).
+
+    Unframed (the uniform vertical string): positions and velocities are inertial. Framed
+    (``ip[IP_FRAMED]``, a curved hole): body k's position, velocity and Cardan angles are
+    relative to its reference frame (point ``B_P``, rotation ``B_R``: the body's place in the
+    initial state along the hole), forces are summed in the inertial frame (gravity along +Z)
+    and turned into the local frame for Newton's law.
+    """
     n = ip[IP_N]
     ns = ip[IP_NS]
-    nc = ip[IP_NC]
     na = ip[IP_NA]
     unb = ip[IP_UNB]
     nl = ip[IP_NL]
-    h = p[HALF]
-    m = p[MASS]
-    jt = p[JT]
-    jp = p[JP]
+    ncp = ip[IP_NCP]
     oA = 3 * n
     oV = 6 * n
     oW = 9 * n
-    Rrel = wR[n]  # scratch slot: wR has n + 1 matrices
-    g = p[GRAV]
-    alpha = p[ALPHA_LAT] * m
-    # kinematics, gravity, lateral drag
+    Rrel = wR[n]  # scratch slots: wR has n + 2 matrices
+    S = wR[n + 1]
+    # kinematics, weight, lateral drag
     for k in range(n):
+        o = NP + NB * k
         R = wR[k]
         psi = y[oA + 3 * k]
         th = y[oA + 3 * k + 1]
         ph = y[oA + 3 * k + 2]
-        cardan(psi, th, ph, R)
+        if framed:
+            cardan(psi, th, ph, S)
+            _frame_mm(p, o + B_R, S, R)
+        else:
+            cardan(psi, th, ph, R)
         wx = y[oW + 3 * k]
         wy = y[oW + 3 * k + 1]
         wz = y[oW + 3 * k + 2]
@@ -374,21 +502,34 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
         for i in range(3):
             dy[3 * k + i] = y[oV + 3 * k + i]
             wM[k, i] = 0.0
-        wF[k, 0] = -alpha * y[oV + 3 * k]
-        wF[k, 1] = -alpha * y[oV + 3 * k + 1]
-        wF[k, 2] = m * g
+        alpha = p[o + B_CLIN]
+        vx = y[oV + 3 * k]
+        vy = y[oV + 3 * k + 1]
+        fx = -alpha * vx
+        fy = -alpha * vy
+        cq = p[o + B_CQ]
+        if cq > 0.0:
+            q = cq * math.sqrt(vx * vx + vy * vy)
+            fx -= q * vx
+            fy -= q * vy
+        if framed:
+            fx, fy, fz = _frame_mv(p, o + B_R, fx, fy, 0.0)
+            wF[k, 0] = fx
+            wF[k, 1] = fy
+            wF[k, 2] = fz + p[o + B_W]
+        else:
+            wF[k, 0] = fx
+            wF[k, 1] = fy
+            wF[k, 2] = p[o + B_W]
 
-    ksh = p[K_SH]
-    kax = p[K_AX]
-    csh = p[C_SH]
-    cax = p[C_AX]
-    g1 = p[G1]
-    g3 = p[G3]
-    cbe = p[C_BE]
-    cto = p[C_TO]
     # joints between body a (point B) and body b = a + 1 (point A)
+    Ga0, Ga1, Ga2, Va0, Va1, Va2 = body_inertial(y, p, 0, framed, oV)
     for a in range(n - 1):
         b = a + 1
+        oa = NP + NB * a
+        ha = p[oa + B_H]
+        hb = p[oa + NB + B_H]
+        Gb0, Gb1, Gb2, Vb0, Vb1, Vb2 = body_inertial(y, p, b, framed, oV)
         Ra = wR[a]
         Rb = wR[b]
         wxa = y[oW + 3 * a]
@@ -397,20 +538,22 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
         wxb = y[oW + 3 * b]
         wyb = y[oW + 3 * b + 1]
         wzb = y[oW + 3 * b + 2]
-        dI0 = (y[3 * b] - h * Rb[0, 2]) - (y[3 * a] + h * Ra[0, 2])
-        dI1 = (y[3 * b + 1] - h * Rb[1, 2]) - (y[3 * a + 1] + h * Ra[1, 2])
-        dI2 = (y[3 * b + 2] - h * Rb[2, 2]) - (y[3 * a + 2] + h * Ra[2, 2])
-        vA = _mv(Rb, -h * wyb, h * wxb, 0.0)
-        vB = _mv(Ra, h * wya, -h * wxa, 0.0)
-        dv0 = y[oV + 3 * b] + vA[0] - y[oV + 3 * a] - vB[0]
-        dv1 = y[oV + 3 * b + 1] + vA[1] - y[oV + 3 * a + 1] - vB[1]
-        dv2 = y[oV + 3 * b + 2] + vA[2] - y[oV + 3 * a + 2] - vB[2]
+        dI0 = (Gb0 - hb * Rb[0, 2]) - (Ga0 + ha * Ra[0, 2])
+        dI1 = (Gb1 - hb * Rb[1, 2]) - (Ga1 + ha * Ra[1, 2])
+        dI2 = (Gb2 - hb * Rb[2, 2]) - (Ga2 + ha * Ra[2, 2])
+        vA = _mv(Rb, -hb * wyb, hb * wxb, 0.0)
+        vB = _mv(Ra, ha * wya, -ha * wxa, 0.0)
+        dv0 = Vb0 + vA[0] - Va0 - vB[0]
+        dv1 = Vb1 + vA[1] - Va1 - vB[1]
+        dv2 = Vb2 + vA[2] - Va2 - vB[2]
+        ksh = p[oa + J_KSH]
+        csh = p[oa + J_CSH]
         d0, d1, d2 = _mtv(Rb, dI0, dI1, dI2)
         r0, r1, r2 = _mtv(Rb, dv0, dv1, dv2)
         c0, c1, c2 = _cross(wxb, wyb, wzb, d0, d1, d2)
         f0 = -(ksh * d0 + csh * (r0 - c0))
         f1 = -(ksh * d1 + csh * (r1 - c1))
-        f2 = -(kax * d2 + cax * (r2 - c2))
+        f2 = -(p[oa + J_KAX] * d2 + p[oa + J_CAX] * (r2 - c2))
         F0, F1, F2 = _mv(Rb, f0, f1, f2)
         wF[b, 0] += F0
         wF[b, 1] += F1
@@ -418,15 +561,18 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
         wF[a, 0] -= F0
         wF[a, 1] -= F1
         wF[a, 2] -= F2
-        # moment on b: r_A x f with r_A = (0, 0, -h), plus -d x f
+        # moment on b: r_A x f with r_A = (0, 0, -h_b), plus -d x f
         e0, e1, e2 = _cross(d0, d1, d2, f0, f1, f2)
-        wM[b, 0] += h * f1 - e0
-        wM[b, 1] += -h * f0 - e1
+        wM[b, 0] += hb * f1 - e0
+        wM[b, 1] += -hb * f0 - e1
         wM[b, 2] += -e2
         fa0, fa1, fa2 = _mtv(Ra, -F0, -F1, -F2)
-        wM[a, 0] += -h * fa1
-        wM[a, 1] += h * fa0
+        wM[a, 0] += -ha * fa1
+        wM[a, 1] += ha * fa0
         # rotational spring-damper
+        g1 = p[oa + J_G1]
+        g3 = p[oa + J_G3]
+        cbe = p[oa + J_CBE]
         relative_rotation(Ra, Rb, Rrel)
         tb0 = -0.5 * (g3 * Rrel[2, 1] - g1 * Rrel[1, 2])
         tb1 = -0.5 * (g1 * Rrel[0, 2] - g3 * Rrel[2, 0])
@@ -437,7 +583,7 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
         q0, q1, q2 = _mtv(Rrel, wxa, wya, wza)
         td0 = -cbe * (wxb - q0)
         td1 = -cbe * (wyb - q1)
-        td2 = -cto * (wzb - q2)
+        td2 = -p[oa + J_CTO] * (wzb - q2)
         wM[b, 0] += tb0 + td0
         wM[b, 1] += tb1 + td1
         wM[b, 2] += tb2 + td2
@@ -445,13 +591,14 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
         wM[a, 0] += ta0 - s0
         wM[a, 1] += ta1 - s1
         wM[a, 2] += ta2 - s2
+        Ga0, Ga1, Ga2, Va0, Va1, Va2 = Gb0, Gb1, Gb2, Vb0, Vb1, Vb2
 
     # actuator couples (site s at the joint below body ip[...]): moment on b, reaction on a
-    arm = p[ACT_ARM]
-    o_act = IP_HDR + ns + nc
+    o_act = IP_HDR + ns + ip[IP_NC]
     for s in range(na):
         a = ip[o_act + s]
         b = a + 1
+        arm = p[NP + NB * a + J_ARM]
         t0 = -arm * u[2 * s + 1]
         t1 = arm * u[2 * s]
         relative_rotation(wR[a], wR[b], Rrel)
@@ -462,18 +609,17 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
         wM[a, 1] -= s1
         wM[a, 2] -= s2
 
-    # top drive joint on body 0 (top drive at the origin, rotating about Z)
+    # top drive joint on body 0 (top drive at the origin, rotating about its axis, hoisting)
     R0 = wR[0]
+    h = p[NP + B_H]
     wx0 = y[oW]
     wy0 = y[oW + 1]
     wz0 = y[oW + 2]
     ang, om = drive_motion(t, y, p, ip, u)
-    A0 = y[0] - h * R0[0, 2]
-    A1 = y[1] - h * R0[1, 2]
-    A2 = y[2] - h * R0[2, 2]
+    A0, A1, A2, V0, V1, V2 = top_point(t, y, p, framed, oV, R0, h)
     vA = _mv(R0, -h * wy0, h * wx0, 0.0)
     d0, d1, d2 = _mtv(R0, A0, A1, A2)
-    r0, r1, r2 = _mtv(R0, y[oV] + vA[0], y[oV + 1] + vA[1], y[oV + 2] + vA[2])
+    r0, r1, r2 = _mtv(R0, V0 + vA[0], V1 + vA[1], V2 + vA[2])
     c0, c1, c2 = _cross(wx0, wy0, wz0, d0, d1, d2)
     klat = p[KT_LAT]
     clat = p[CT_LAT]
@@ -490,89 +636,153 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
     wM[0, 2] += -e2
     ktt = p[KT_TO]
     if ktt > 0.0:
+        Rt = R0
+        if framed:  # the body's rotation relative to the top drive's frame
+            _frame_tmm(p, TD_R, R0, S)
+            Rt = S
         ca = math.cos(ang)
         sa = math.sin(ang)
-        # Rrel = Rz(ang)^T R0
+        # Rrel = Rz(ang)^T Rt
         for j in range(3):
-            Rrel[0, j] = ca * R0[0, j] + sa * R0[1, j]
-            Rrel[1, j] = -sa * R0[0, j] + ca * R0[1, j]
-            Rrel[2, j] = R0[2, j]
+            Rrel[0, j] = ca * Rt[0, j] + sa * Rt[1, j]
+            Rrel[1, j] = -sa * Rt[0, j] + ca * Rt[1, j]
+            Rrel[2, j] = Rt[2, j]
         m0 = 0.5 * ktt * (Rrel[2, 1] + Rrel[1, 2])
         m1 = -0.5 * ktt * (Rrel[0, 2] + Rrel[2, 0])
-        m2 = -0.5 * ktt * (Rrel[1, 0] - Rrel[0, 1]) - p[CT_TO] * (wz0 - om * R0[2, 2])
+        m2 = -0.5 * ktt * (Rrel[1, 0] - Rrel[0, 1]) - p[CT_TO] * (wz0 - om * Rt[2, 2])
         wM[0, 0] += m0
         wM[0, 1] += m1
         wM[0, 2] += m2
         if ip[IP_TD] != TD_PRESCRIBED:
-            drive_rates(y, dy, p, ip, u, R0[2, 0] * m0 + R0[2, 1] * m1 + R0[2, 2] * m2)
+            drive_rates(y, dy, p, ip, u, Rt[2, 0] * m0 + Rt[2, 1] * m1 + Rt[2, 2] * m2)
 
-    # bit: axial spring to the prescribed rock position (or the cutting law), resisting torque
+    # bit: axial spring to the prescribed rock position (or the cutting law), resisting torque;
+    # in the bit body's local frame (the inertial one unless framed)
     e = n - 1
-    Re = wR[e]
+    h = p[NP + NB * e + B_H]
     kb = p[KB_AX]
-    if ip[IP_BIT] == BIT_CUTTING:
-        x = ip[IP_BITX]
+    if ip[IP_BIT] == BIT_CUTTING or kb > 0.0:
+        Re = _local_rotation(y, oA, e, framed, wR, S)
         vB = _mv(Re, h * y[oW + 3 * e + 1], -h * y[oW + 3 * e], 0.0)
-        wb, tqb, rop, dcut = cutting_bit(y[3 * e + 2] + h * Re[2, 2], y[oV + 3 * e + 2] + vB[2],
-                                         y[x], y[oA + 3 * e], y[oW + 3 * e + 2], p)
-        dy[x] = rop
-        wM[e, 2] -= tqb
-        wF[e, 2] -= wb
-        fb0, fb1, fb2 = _mtv(Re, 0.0, 0.0, -wb)
-        wM[e, 0] += -h * fb1
-        wM[e, 1] += h * fb0
-    elif kb > 0.0:
-        zr, vr = bit_rock(ang, om, p)
-        vB = _mv(Re, h * y[oW + 3 * e + 1], -h * y[oW + 3 * e], 0.0)
-        Bz = y[3 * e + 2] + h * Re[2, 2]
-        Fz = -kb * (Bz - zr) - p[CB_AX] * (y[oV + 3 * e + 2] + vB[2] - vr)
-        wF[e, 2] += Fz
+        if ip[IP_BIT] == BIT_CUTTING:
+            x = ip[IP_BITX]
+            wb, tqb, rop, dcut = cutting_bit(y[3 * e + 2] + h * Re[2, 2],
+                                             y[oV + 3 * e + 2] + vB[2], y[x], y[oA + 3 * e],
+                                             y[oW + 3 * e + 2], p)
+            dy[x] = rop
+            wM[e, 2] -= tqb
+            Fz = -wb
+        else:
+            zr, vr = bit_rock(ang, om, p)
+            Bz = y[3 * e + 2] + h * Re[2, 2]
+            Fz = -kb * (Bz - zr) - p[CB_AX] * (y[oV + 3 * e + 2] + vB[2] - vr)
+        if framed:
+            _add_local_force(wF, p, e, framed, 0.0, 0.0, Fz)
+        else:
+            wF[e, 2] += Fz
         fb0, fb1, fb2 = _mtv(Re, 0.0, 0.0, Fz)
         wM[e, 0] += -h * fb1
         wM[e, 1] += h * fb0
     if p[BIT_TORQUE] > 0.0:
         wM[e, 2] -= p[BIT_TORQUE] * math.tanh(y[oW + 3 * e + 2] / p[BIT_EPS])
 
-    # stabilizers: lateral springs at material points
+    # stabilizers: lateral springs at material points (to the local hole axis)
     ks = p[K_STAB]
     cs = p[C_STAB]
     for s in range(ns):
         k = ip[IP_HDR + s]
         zl = fp[s]
-        R = wR[k]
+        R = _local_rotation(y, oA, k, framed, wR, S)
         vP = _mv(R, zl * y[oW + 3 * k + 1], -zl * y[oW + 3 * k], 0.0)
         P0 = y[3 * k] + zl * R[0, 2]
         P1 = y[3 * k + 1] + zl * R[1, 2]
         Fx = -ks * P0 - cs * (y[oV + 3 * k] + vP[0])
         Fy = -ks * P1 - cs * (y[oV + 3 * k + 1] + vP[1])
-        wF[k, 0] += Fx
-        wF[k, 1] += Fy
+        if framed:
+            _add_local_force(wF, p, k, framed, Fx, Fy, 0.0)
+        else:
+            wF[k, 0] += Fx
+            wF[k, 1] += Fy
         fb0, fb1, fb2 = _mtv(R, Fx, Fy, 0.0)
         wM[k, 0] += -zl * fb1
         wM[k, 1] += zl * fb0
 
-    # wellbore contact (eq. 14-17); normal force never pulls; optional Coulomb friction
+    # wellbore contact (eq. 14-17) at the contact points; normal force never pulls; optional
+    # regularized Coulomb friction
     kc = p[K_CONT]
     cc = p[C_CONT]
-    clr = p[CLEAR]
     mu = p[MU_WALL]
     if kc == 0.0 and cc == 0.0:
-        nc = 0  # contact off: no cost
-    for s in range(nc):
-        k = ip[IP_HDR + ns + s]
+        ncp = 0  # contact off: no cost
+    o_cp = ns + NLD * nl
+    for s in range(ncp):
+        row = o_cp + NCP * s
+        k = int(fp[row + CP_BODY])
+        zl = fp[row + CP_Z]
+        clr = fp[row + CP_CLR]
         X = y[3 * k]
         Y = y[3 * k + 1]
+        Z = y[3 * k + 2]
+        vx = y[oV + 3 * k]
+        vy = y[oV + 3 * k + 1]
+        vz = y[oV + 3 * k + 2]
+        if zl != 0.0:  # a point off the mass centre (stabilizer blades, bit gauge)
+            Rl = _local_rotation(y, oA, k, framed, wR, S)
+            X += zl * Rl[0, 2]
+            Y += zl * Rl[1, 2]
+            Z += zl * Rl[2, 2]
+            q0, q1, q2 = _mv(Rl, zl * y[oW + 3 * k + 1], -zl * y[oW + 3 * k], 0.0)
+            vx += q0
+            vy += q1
+            vz += q2
+        k1 = 0.0
+        k2 = 0.0
+        if framed:  # lateral offset from the curved hole axis
+            o = NP + NB * k
+            k1 = p[o + B_K1]
+            k2 = p[o + B_K2]
+            X -= 0.5 * k1 * Z * Z
+            Y -= 0.5 * k2 * Z * Z
         dlt = math.sqrt(X * X + Y * Y)
         if dlt > clr:
             nx = X / dlt
             ny = Y / dlt
-            vn = nx * y[oV + 3 * k] + ny * y[oV + 3 * k + 1]
+            vn = nx * vx + ny * vy
             fn = kc * (dlt - clr) + cc * vn
             if fn > 0.0:
-                wF[k, 0] -= fn * nx
-                wF[k, 1] -= fn * ny
+                if not framed and zl == 0.0:
+                    wF[k, 0] -= fn * nx
+                    wF[k, 1] -= fn * ny
+                    if mu > 0.0:
+                        gx, gy, gz, m0, m1, m2 = wall_friction(
+                            nx, ny, fn, mu, p[V_SLIP], fp[row + CP_RC], vx, vy, vz,
+                            y[oW + 3 * k], y[oW + 3 * k + 1], y[oW + 3 * k + 2], wR[k])
+                        wF[k, 0] += gx
+                        wF[k, 1] += gy
+                        wF[k, 2] += gz
+                        wM[k, 0] += m0
+                        wM[k, 1] += m1
+                        wM[k, 2] += m2
+                    continue
+                Rl = _local_rotation(y, oA, k, framed, wR, S)
+                fx = -fn * nx
+                fy = -fn * ny
+                fz = fn * (nx * k1 + ny * k2) * Z
                 if mu > 0.0:
-                    wall_friction(k, nx, ny, fn, mu, p, y, oV, oW, wR[k], wF, wM)
+                    gx, gy, gz, m0, m1, m2 = wall_friction(
+                        nx, ny, fn, mu, p[V_SLIP], fp[row + CP_RC], vx, vy, vz,
+                        y[oW + 3 * k], y[oW + 3 * k + 1], y[oW + 3 * k + 2], Rl)
+                    fx += gx
+                    fy += gy
+                    fz += gz
+                    wM[k, 0] += m0
+                    wM[k, 1] += m1
+                    wM[k, 2] += m2
+                if zl != 0.0:  # moment of the force at the point about the mass centre
+                    b0, b1, b2 = _mtv(Rl, fx, fy, fz)
+                    wM[k, 0] -= zl * b1
+                    wM[k, 1] += zl * b0
+                _add_local_force(wF, p, k, framed, fx, fy, fz)
 
     # mass unbalance: centrifugal force along body x
     if unb >= 0:
@@ -595,10 +805,28 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
             else:
                 wM[k, d] += fp[row + LD_MAG]
 
-    # Newton (inertial frame), Euler with the gyroscopic term (body frame)
+    # Newton (local frame; lateral with the mud's added mass), Euler with the gyroscopic term
+    # (body frame)
     for k in range(n):
-        for i in range(3):
-            dy[oV + 3 * k + i] = wF[k, i] / m
+        o = NP + NB * k
+        m = p[o + B_M]
+        if framed:
+            Fx, Fy, Fz = _frame_mtv(p, o + B_R, wF[k, 0], wF[k, 1], wF[k, 2])
+            ml = p[o + B_ML]
+            dy[oV + 3 * k] = Fx / ml
+            dy[oV + 3 * k + 1] = Fy / ml
+            dy[oV + 3 * k + 2] = Fz / m
+        else:
+            ml = p[o + B_ML]
+            if ml == m:
+                for i in range(3):
+                    dy[oV + 3 * k + i] = wF[k, i] / m
+            else:
+                dy[oV + 3 * k] = wF[k, 0] / ml
+                dy[oV + 3 * k + 1] = wF[k, 1] / ml
+                dy[oV + 3 * k + 2] = wF[k, 2] / m
+        jt = p[o + B_JT]
+        jp = p[o + B_JP]
         wx = y[oW + 3 * k]
         wy = y[oW + 3 * k + 1]
         wz = y[oW + 3 * k + 2]
@@ -607,7 +835,9 @@ def rhs3d(t, y, dy, p, ip, fp, u, wR, wF, wM):
         dy[oW + 3 * k + 2] = wM[k, 2] / jp
     if p[BIT_JX] > 0.0:  # bit and bottom-hole assembly: more polar inertia on the bit body
         k = n - 1
-        jpe = jp + p[BIT_JX]
+        o = NP + NB * k
+        jt = p[o + B_JT]
+        jpe = p[o + B_JP] + p[BIT_JX]
         wx = y[oW + 3 * k]
         wy = y[oW + 3 * k + 1]
         wz = y[oW + 3 * k + 2]
@@ -646,46 +876,46 @@ def rhs_at(t, y, dy, p, ip, fp, u, wR, wF, wM):
     """Axial-torsional right-hand side; writes dy (4 n). Unused scratch kept for one signature.
 
     One pass over the bodies: the force and torque of the joint above a body are carried from
-    the previous body (no scratch arrays), end springs and loads added afterwards.
+    the previous body (no scratch arrays), end springs and loads added afterwards. Positions
+    are depths along the (vertical) hole [m].
     """
     n = ip[IP_N]
     ns = ip[IP_NS]
     nl = ip[IP_NL]
-    h = p[HALF]
-    dx = p[HALF] * 2.0
-    m = p[MASS]
-    jp = p[JP]
-    kax = p[K_AX]
-    cax = p[C_AX]
-    kt = p[G1]
-    cto = p[C_TO]
-    mg = m * p[GRAV]
     oV = 2 * n
     oW = 3 * n
     f_up = 0.0  # force [N] / torque [N m] of the joint above body k, acting on body k
     tq_up = 0.0
     for k in range(n - 1):
+        o = NP + NB * k
         dy[k] = y[oV + k]
         dy[n + k] = y[oW + k]
-        d = y[k + 1] - y[k] - dx
-        f = -(kax * d + cax * (y[oV + k + 1] - y[oV + k]))
-        tq = -(kt * sin_small(y[n + k + 1] - y[n + k]) + cto * (y[oW + k + 1] - y[oW + k]))
-        dy[oV + k] = mg + f_up - f
+        d = y[k + 1] - y[k] - p[o + J_LEN]
+        f = -(p[o + J_KAX] * d + p[o + J_CAX] * (y[oV + k + 1] - y[oV + k]))
+        tq = -(p[o + J_G1] * sin_small(y[n + k + 1] - y[n + k])
+               + p[o + J_CTO] * (y[oW + k + 1] - y[oW + k]))
+        dy[oV + k] = p[o + B_W] + f_up - f
         dy[oW + k] = tq_up - tq
         f_up = f
         tq_up = tq
     e = n - 1
     dy[e] = y[oV + e]
     dy[n + e] = y[oW + e]
-    dy[oV + e] = mg + f_up
+    dy[oV + e] = p[NP + NB * e + B_W] + f_up
     dy[oW + e] = tq_up
     ang, om = drive_motion(t, y, p, ip, u)
-    dy[oV] += -(p[KT_AX] * (y[0] - h) + p[CT_AX] * y[oV])
+    h = p[NP + B_H]
+    if p[HOIST] != 0.0:
+        zt, vt = top_hoist(t, p)
+        dy[oV] += -(p[KT_AX] * (y[0] - h - zt) + p[CT_AX] * (y[oV] - vt))
+    else:
+        dy[oV] += -(p[KT_AX] * (y[0] - h) + p[CT_AX] * y[oV])
     if p[KT_TO] > 0.0:
         tq_top = -(p[KT_TO] * sin_small(y[n] - ang) + p[CT_TO] * (y[oW] - om))
         dy[oW] += tq_top
         if ip[IP_TD] != TD_PRESCRIBED:
             drive_rates(y, dy, p, ip, u, tq_top)
+    h = p[NP + NB * e + B_H]
     if ip[IP_BIT] == BIT_CUTTING:
         x = ip[IP_BITX]
         wb, tqb, rop, dcut = cutting_bit(y[e] + h, y[oV + e], y[x], y[n + e], y[oW + e], p)
@@ -705,12 +935,12 @@ def rhs_at(t, y, dy, p, ip, fp, u, wR, wF, wM):
                 dy[oV + k] += fp[row + LD_MAG]
             else:
                 dy[oW + k] += fp[row + LD_MAG]
-    im = 1.0 / m
-    ij = 1.0 / jp
     for k in range(n):
-        dy[oV + k] *= im
-        dy[oW + k] *= ij
+        o = NP + NB * k
+        dy[oV + k] *= p[o + B_IM]
+        dy[oW + k] *= p[o + B_IJP]
     if p[BIT_JX] > 0.0:  # bit and bottom-hole assembly: more polar inertia on the bit body
+        jp = p[NP + NB * e + B_JP]
         dy[oW + e] *= jp / (jp + p[BIT_JX])
 
 

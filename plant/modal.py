@@ -45,17 +45,18 @@ class Mode:
 
 
 def _energy_shares(model: DrillstringModel, vec: np.ndarray) -> np.ndarray:
-    d = model.derived
+    tab = model.bodies
+    m, jp, jt = tab.mass, tab.j_polar, tab.j_transverse
     n = model.n
     if model.kind == "full3d":
         v = np.abs(vec[6 * n: 9 * n]).reshape(n, 3) ** 2
         w = np.abs(vec[9 * n: 12 * n]).reshape(n, 3) ** 2
-        ax = d.mass * v[:, 2].sum()
-        to = d.j_polar * w[:, 2].sum()
-        la = d.mass * (v[:, 0] + v[:, 1]).sum() + d.j_transverse * (w[:, 0] + w[:, 1]).sum()
+        ax = (m * v[:, 2]).sum()
+        to = (jp * w[:, 2]).sum()
+        la = (m * (v[:, 0] + v[:, 1])).sum() + (jt * (w[:, 0] + w[:, 1])).sum()
     else:
-        ax = d.mass * (np.abs(vec[2 * n: 3 * n]) ** 2).sum()
-        to = d.j_polar * (np.abs(vec[3 * n: 4 * n]) ** 2).sum()
+        ax = (m * np.abs(vec[2 * n: 3 * n]) ** 2).sum()
+        to = (jp * np.abs(vec[3 * n: 4 * n]) ** 2).sum()
         la = 0.0
     e = np.array([ax, to, la])
     return e / max(e.sum(), 1e-300)

@@ -48,6 +48,15 @@ from .integrators import (
 )
 from .observables import outputs3d, outputs_at
 from .params import BIT_MODELS, TOP_DRIVE_MODES, PlantParams
+from .sections import (
+    BodyTable,
+    body_fluid,
+    body_table,
+    chain_first_frequency,
+    joint_dampers,
+    local_frequencies,
+    max_joint_frequency,
+)
 from .signals import (
     TOP_DRIVE_SPEED_COMMAND,
     TOP_DRIVE_TORQUE,
@@ -56,6 +65,7 @@ from .signals import (
     plant_outputs,
     site_channels,
 )
+from .trajectory import StringLay, WellPath, lay_string
 
 __all__ = ["DrillstringModel", "FIXED_STEP_METHODS", "ModelKind", "extensions", "needs_lateral",
            "series"]
@@ -99,6 +109,14 @@ def extensions(params: PlantParams) -> list[str]:
         out.append("whirl outputs")
     if params.bit.model != "prescribed":
         out.append(f"bit.model = {params.bit.model!r}")
+    if params.sections:
+        out.append("string sections")
+    if params.trajectory is not None:
+        out.append("well trajectory")
+    if params.fluid.enabled:
+        out.append("drilling fluid")
+    if params.top_drive.hoisting_speed != 0.0:
+        out.append("top-drive hoisting")
     return out
 
 
@@ -109,7 +127,14 @@ def needs_lateral(params: PlantParams) -> list[str]:
         why.append("unbalance")
     if any(ld.is_lateral for ld in params.loads):
         why.append("lateral loads")
+    if params.trajectory is not None and not params.trajectory.vertical:
+        why.append("a deviated well")
     return why
+
+
+def framed(params: PlantParams) -> bool:
+    """Does the 3D model use per-body reference frames (a curved or inclined hole)?"""
+    return params.trajectory is not None and not params.trajectory.vertical
 
 
 @dataclass(frozen=True)
@@ -227,8 +252,13 @@ class DrillstringModel:
         self.extended_outputs = (bool(extensions(params)) if extended_outputs is None
                                  else bool(extended_outputs))
         self.model_id = kern.MODEL_FULL3D if kind == "full3d" else kern.MODEL_AXIAL_TORSIONAL
-        self.derived = derive(params)
-        self.n = params.pipe.n_segments
+        #: per-segment quantities of the uniform pipe (None for a string of sections)
+        self.derived = derive(params) if params.uniform else None
+        #: per-body masses, inertias and per-joint springs (:mod:`plant.sections`)
+        self.bodies: BodyTable = body_table(params)
+        self.n = params.n_bodies
+        #: per-body reference frames along a curved hole (None: positions are inertial)
+        self.lay: StringLay | None = None
         #: length of the bodies' block of the state (12 n or 4 n); auxiliary states follow it
         self.n_body_state = (12 if kind == "full3d" else 4) * self.n
         self.aux_names, aux_units = self._aux_layout()
@@ -237,7 +267,7 @@ class DrillstringModel:
         self.n_state = self.n_body_state + len(self.aux_names)
         self._build_arrays()
         n = self.n
-        self.wR = np.zeros((n + 1, 3, 3))
+        self.wR = np.zeros((n + 2, 3, 3))
         self.wF = np.zeros((n, 3))
         self.wM = np.zeros((n, 3))
         #: integrator scratch, shape (5, n_state): stages k1..k4 and a trial state
@@ -245,7 +275,7 @@ class DrillstringModel:
         self._scratch = list(self.work)
         self.verlet_lambda = 1.0  # velocity predictor of the Verlet damping forces (0.5 .. 1)
         names = plant_outputs(kind == "full3d", list(self.contact_bodies), self.n_sites,
-                              extended=self.extended_outputs)
+                              extended=self.extended_outputs, field=self.field_outputs)
         self.input_names, self.input_units, self.input_docs = self._input_layout()
         self.n_inputs = len(self.input_names)
         #: the inputs that act on this model, in input order: the actuator forces only in the
@@ -309,41 +339,115 @@ class DrillstringModel:
         return names, units, docs
 
     # ------------------------------------------------------------------ arrays for kernels
+    def _damping_rates(self) -> tuple[float, float, float, float, float]:
+        """(beta_axial, beta_tors, beta_bend [s], alpha_lateral [1/s], max_joint_rate [1/s]).
+
+        The uniform pipe: :func:`derive`'s values. Sections: ``beta = 2 zeta / w_1`` with ``w_1``
+        the first mode of the lumped axial / torsional chain (fixed at the top drive, free at
+        the bit); lateral drag or bending dampers only at a given
+        ``damping.lateral_reference_frequency`` (the mud's drag damps a field string laterally).
+        """
+        prm = self.params
+        dmp = prm.damping
+        tab = self.bodies
+        rate = dmp.max_joint_rate
+        if rate == 0.0:
+            rate = max_joint_frequency(tab)
+        if prm.uniform:
+            d = self.derived
+            return d.beta_axial, d.beta_tors, d.beta_bend, d.alpha_lateral, rate
+        seg_ax = self._segment_stiffness("axial")
+        seg_to = self._segment_stiffness("tors")
+        jp = tab.j_polar.copy()
+        jp[-1] += prm.bit.inertia
+        w_ax = chain_first_frequency(tab.mass, tab.k_axial, 2.0 * seg_ax[0])
+        w_to = chain_first_frequency(jp, tab.k_tors, 2.0 * seg_to[0])
+        b_ax = 2.0 * dmp.axial_ratio / w_ax
+        b_to = 2.0 * dmp.torsional_ratio / w_to
+        w_lat = dmp.lateral_reference_frequency
+        if w_lat > 0.0 and dmp.lateral_model == "joint":
+            return b_ax, b_to, 2.0 * dmp.lateral_ratio / w_lat, 0.0, rate
+        alpha = 2.0 * dmp.lateral_ratio * w_lat if w_lat > 0.0 else 0.0
+        return b_ax, b_to, b_ax, alpha, rate
+
+    def _segment_stiffness(self, kind: str) -> np.ndarray:
+        """Per body: the spring of its whole segment [N/m or N m/rad]: ``EA / dx`` (axial),
+        ``kappa G A / dx`` (shear) or ``G J / dx`` (tors)."""
+        from .sections import string_sections
+
+        secs = string_sections(self.params)
+        tab = self.bodies
+        out = np.empty(tab.n)
+        for k in range(tab.n):
+            s = secs[tab.section[k]]
+            if kind == "axial":
+                out[k] = s.youngs_modulus * s.area / tab.length[k]
+            elif kind == "shear":
+                out[k] = s.kappa * s.shear_modulus * s.area / tab.length[k]
+            else:
+                out[k] = s.shear_modulus * s.polar_moment / tab.length[k]
+        return out
+
+    def _hole_diameters(self, md: np.ndarray) -> np.ndarray:
+        """Hole diameter [m] at each measured depth (nan without a trajectory)."""
+        traj = self.params.trajectory
+        if traj is None:
+            return np.full(md.size, np.nan)
+        return np.array([traj.hole_diameter(float(x)) for x in md])
+
     def _build_arrays(self) -> None:
         prm = self.params
-        d = self.derived
+        tab = self.bodies
         n = self.n
-        pipe = prm.pipe
-        p = np.zeros(lay.NP)
-        p[lay.DX] = d.dx
-        p[lay.HALF] = 0.5 * d.dx
-        p[lay.MASS] = d.mass
-        p[lay.JT] = d.j_transverse
-        p[lay.JP] = d.j_polar
+        uniform = prm.uniform
+        beta_ax, beta_to, beta_be, alpha_lat, max_rate = self._damping_rates()
+        if uniform:  # the springs of a body's own segment (the top and bit joints' halves)
+            d = self.derived
+            k_ax0, k_sh0, k_to0 = (np.full(n, d.k_axial), np.full(n, d.k_shear),
+                                   np.full(n, d.k_tors))
+        else:
+            k_ax0, k_sh0, k_to0 = (self._segment_stiffness(s) for s in ("axial", "shear", "tors"))
+        p = np.zeros(lay.NP + lay.NB * n)
+        # scalars of the uniform model (the top body's values for a string of sections: what
+        # code written for a uniform string reads)
+        p[lay.DX] = tab.length[0]
+        p[lay.HALF] = tab.half[0]
+        p[lay.MASS] = tab.mass[0]
+        p[lay.JT] = tab.j_transverse[0]
+        p[lay.JP] = tab.j_polar[0]
         p[lay.GRAV] = prm.gravity
-        p[lay.K_AX] = d.k_axial
-        p[lay.K_SH] = d.k_shear
-        p[lay.K_BE] = d.k_bend
-        p[lay.K_TO] = d.k_tors
-        p[lay.C_AX] = d.beta_axial * d.k_axial
-        p[lay.C_SH] = d.beta_axial * d.k_shear
-        p[lay.C_BE] = d.beta_bend * d.k_bend
-        p[lay.C_TO] = d.beta_tors * d.k_tors
-        p[lay.G1] = d.k_tors
-        p[lay.G3] = 2.0 * d.k_bend - d.k_tors
+        if n > 1:
+            p[lay.K_AX] = tab.k_axial[0]
+            p[lay.K_SH] = tab.k_shear[0]
+            p[lay.K_BE] = tab.k_bend[0]
+            p[lay.K_TO] = tab.k_tors[0]
+            p[lay.C_AX] = beta_ax * tab.k_axial[0]
+            p[lay.C_SH] = beta_ax * tab.k_shear[0]
+            p[lay.C_BE] = beta_be * tab.k_bend[0]
+            p[lay.C_TO] = beta_to * tab.k_tors[0]
+            p[lay.G1] = tab.k_tors[0]
+            p[lay.G3] = 2.0 * tab.k_bend[0] - tab.k_tors[0]
         td = prm.top_drive
-        p[lay.KT_AX] = series(td.axial_stiffness, 2.0 * d.k_axial)
-        p[lay.KT_LAT] = series(td.lateral_stiffness, 2.0 * d.k_shear)
-        p[lay.KT_TO] = series(td.torsional_stiffness, 2.0 * d.k_tors)
-        p[lay.CT_AX] = d.beta_axial * p[lay.KT_AX]
-        p[lay.CT_LAT] = d.beta_axial * p[lay.KT_LAT]
-        p[lay.CT_TO] = d.beta_tors * p[lay.KT_TO]
+        p[lay.KT_AX] = series(td.axial_stiffness, 2.0 * k_ax0[0])
+        p[lay.KT_LAT] = series(td.lateral_stiffness, 2.0 * k_sh0[0])
+        p[lay.KT_TO] = series(td.torsional_stiffness, 2.0 * k_to0[0])
+        def end_damper(beta: float, k: float, inertia: float) -> float:
+            return float(joint_dampers(beta, np.array([k]), np.array([4.0 * k / inertia]),
+                                       max_rate)[0])
+
+        h0 = tab.half[0]
+        rot0 = max(1.0 / tab.mass[0], h0 * h0 / tab.j_transverse[0])
+        p[lay.CT_AX] = end_damper(beta_ax, p[lay.KT_AX], tab.mass[0])
+        p[lay.CT_LAT] = end_damper(beta_ax, p[lay.KT_LAT], 1.0 / rot0)
+        p[lay.CT_TO] = end_damper(beta_to, p[lay.KT_TO], tab.j_polar[0])
         p[lay.OMEGA0] = td.rotary_speed
         p[lay.T_RAMP] = td.ramp_time
         p[lay.TD_INERTIA] = td.inertia
+        p[lay.HOIST] = td.hoisting_speed
+        p[lay.TD_R: lay.TD_R + 9] = np.eye(3).ravel()
         bit = prm.bit
-        p[lay.KB_AX] = series(bit.axial_stiffness, 2.0 * d.k_axial)
-        p[lay.CB_AX] = d.beta_axial * p[lay.KB_AX]
+        p[lay.KB_AX] = series(bit.axial_stiffness, 2.0 * k_ax0[-1])
+        p[lay.CB_AX] = end_damper(beta_ax, p[lay.KB_AX], tab.mass[-1])
         p[lay.BIT_AMP] = bit.displacement_amplitude if bit.axial_stiffness > 0.0 else 0.0
         p[lay.BIT_LOBES] = bit.lobes
         p[lay.BIT_TORQUE] = bit.torque
@@ -358,41 +462,137 @@ class DrillstringModel:
         p[lay.BIT_JX] = bit.inertia
         st = prm.stabilizers
         p[lay.K_STAB] = st.stiffness
-        p[lay.C_STAB] = d.beta_axial * st.stiffness if st.damping < 0.0 else st.damping
+        p[lay.C_STAB] = beta_ax * st.stiffness if st.damping < 0.0 else st.damping
         ct = prm.contact
         p[lay.K_CONT] = ct.stiffness if ct.enabled else 0.0
         p[lay.C_CONT] = ct.damping if ct.enabled else 0.0
         p[lay.CLEAR] = ct.clearance
         p[lay.MU_WALL] = ct.friction_coefficient if ct.enabled else 0.0
         p[lay.V_SLIP] = ct.friction_velocity
-        p[lay.R_OUT] = 0.5 * pipe.outer_diameter
+        ro = tab.outer_radius
+        p[lay.R_OUT] = ro[0]
         ub = prm.unbalance
         p[lay.UNB] = ub.moment if ub.enabled else 0.0
-        p[lay.ALPHA_LAT] = d.alpha_lateral
-        ro = pipe.outer_diameter / 2.0
+        p[lay.ALPHA_LAT] = alpha_lat
         act = prm.actuators
-        p[lay.ACT_ARM] = 2.0 * (act.radius or ro)
-        p[lay.GAUGE_R] = act.gauge_radius or ro
+        p[lay.ACT_ARM] = 2.0 * (act.radius or ro[0])
+        p[lay.GAUGE_R] = act.gauge_radius or ro[0]
         self.p = p
+        self.framed = framed(prm) and self.kind == "full3d"
+        #: the outputs include the field summary (a string of sections or a trajectory)
+        self.field_outputs = not uniform or prm.trajectory is not None
+
+        # per-body records
+        g = prm.gravity
+        mass = tab.mass
+        buoy = body_fluid(prm, tab, np.full(n, np.nan))[0]
+        weight = np.where(buoy == 1.0, mass * g, mass * g * buoy)
+        body_md = tab.top + tab.half
+        if self.framed:
+            self.lay = self._lay_string(weight)
+            body_md = self.lay.md
+        hole = self._hole_diameters(body_md)
+        buoy, madd, clin, cq = body_fluid(prm, tab, hole)
+        w2 = local_frequencies(tab)
+        c_ax = joint_dampers(beta_ax, tab.k_axial, w2["axial"], max_rate)
+        c_sh = joint_dampers(beta_ax, tab.k_shear, w2["shear"], max_rate)
+        c_be = joint_dampers(beta_be, tab.k_bend, w2["bend"], max_rate)
+        c_to = joint_dampers(beta_to, tab.k_tors, w2["tors"], max_rate)
+        if prm.trajectory is None:
+            clear = np.full(n, ct.clearance)
+            rcon = np.full(n, p[lay.R_OUT]) if uniform else tab.contact_radius
+        else:
+            rcon = tab.contact_radius
+            clear = 0.5 * hole - rcon
+            bad = np.flatnonzero(clear < 0.0)
+            if bad.size:
+                k = int(bad[0])
+                raise ValueError(
+                    f"sections: body {k + 1} (contact diameter {2 * rcon[k]:g} m) does not fit "
+                    f"the hole (diameter {hole[k]:g} m at measured depth {body_md[k]:.1f} m): "
+                    "check trajectory.hole and the sections' contact_diameter")
+        for k in range(n):
+            o = lay.NP + lay.NB * k
+            m = mass[k]
+            p[o + lay.B_M] = m
+            p[o + lay.B_IM] = 1.0 / m
+            p[o + lay.B_ML] = m + madd[k] if madd[k] > 0.0 else m
+            # the mud's added mass also follows a segment's rotation: + m_a dx^2 / 12
+            p[o + lay.B_JT] = (tab.j_transverse[k] if madd[k] == 0.0 else
+                               tab.j_transverse[k] + madd[k] * tab.length[k] ** 2 / 12.0)
+            p[o + lay.B_JP] = tab.j_polar[k]
+            p[o + lay.B_IJP] = 1.0 / tab.j_polar[k]
+            p[o + lay.B_H] = tab.half[k]
+            p[o + lay.B_W] = weight[k]
+            p[o + lay.B_CLIN] = alpha_lat * m if clin[k] == 0.0 else alpha_lat * m + clin[k]
+            p[o + lay.B_CQ] = cq[k]
+            p[o + lay.B_R: o + lay.B_R + 9] = np.eye(3).ravel()
+            p[o + lay.B_CLR] = clear[k]
+            p[o + lay.B_RC] = rcon[k]
+            if k < n - 1:
+                p[o + lay.J_KAX] = tab.k_axial[k]
+                p[o + lay.J_KSH] = tab.k_shear[k]
+                p[o + lay.J_G1] = tab.k_tors[k]
+                p[o + lay.J_G3] = 2.0 * tab.k_bend[k] - tab.k_tors[k]
+                p[o + lay.J_CAX] = c_ax[k]
+                p[o + lay.J_CSH] = c_sh[k]
+                p[o + lay.J_CBE] = c_be[k]
+                p[o + lay.J_CTO] = c_to[k]
+                p[o + lay.J_LEN] = tab.joint_length[k]
+                p[o + lay.J_RG] = act.gauge_radius or ro[k]
+                p[o + lay.J_ARM] = 2.0 * (act.radius or ro[k])
+                # the divergence guard's strain per radian: outer radius (the thinner body's)
+                # over the joint's length (the uniform pipe: the pipe's radius / dx)
+                p[o + lay.J_SF] = (0.5 * prm.pipe.outer_diameter / self.derived.dx if uniform
+                                   else min(ro[k], ro[k + 1]) / tab.joint_length[k])
+        if self.lay is not None:
+            lz = self.lay
+            p[lay.TD_R: lay.TD_R + 9] = lz.top_frame.ravel()
+            for k in range(n):
+                o = lay.NP + lay.NB * k
+                F = lz.frame[k]
+                p[o + lay.B_P: o + lay.B_P + 3] = lz.centre[k]
+                p[o + lay.B_R: o + lay.B_R + 9] = F.ravel()
+                kap = F.T @ lz.curvature[k]
+                p[o + lay.B_K1] = kap[0]
+                p[o + lay.B_K2] = kap[1]
 
         # stabilizers at material points: arc length s from the top
+        L = prm.string_length
+        tops = tab.top
         stab_body, stab_z = [], []
         for hgt in st.heights:
-            s = pipe.length - hgt
-            k = min(int(math.floor(s / d.dx + 1e-9)), n - 1)
-            stab_body.append(k)
-            stab_z.append(s - (k + 0.5) * d.dx)
+            s = L - hgt
+            if uniform:
+                dx = tab.length[0]
+                k = min(int(math.floor(s / dx + 1e-9)), n - 1)
+                stab_body.append(k)
+                stab_z.append(s - (k + 0.5) * dx)
+            else:
+                k = min(int(np.searchsorted(tops, s + 1e-9, side="right")) - 1, n - 1)
+                stab_body.append(k)
+                stab_z.append(s - (tops[k] + tab.half[k]))
         if st.stiffness == 0.0:
             stab_body, stab_z = [], []
         self.contact_bodies = prm.contact_bodies
         self.sites = prm.actuator_joints
         self.n_sites = len(self.sites)
+        # contact points: the monitored bodies (no trajectory), or every body and the bit's
+        # gauge (a trajectory: a radial check against the local hole axis everywhere)
+        if prm.trajectory is None:
+            cps = [(b - 1, 0.0, ct.clearance, p[lay.R_OUT]) for b in self.contact_bodies]
+        else:
+            cps = [(k, 0.0, clear[k], rcon[k]) for k in range(n)]
+            cps += self._stabilizer_points(hole)
+            e = n - 1
+            hole_bit = hole[e]
+            cps.append((e, tab.half[e], max(0.0, 0.5 * hole_bit - bit.radius), bit.radius))
         unb = prm.unbalance_body - 1 if (ub.enabled and ub.moment > 0.0) else -1
         aux = {name: self.n_body_state + i for i, name in enumerate(self.aux_names)}
         ip = [n, len(stab_body), len(self.contact_bodies), self.n_sites, unb, len(prm.loads),
               TOP_DRIVE_MODES.index(td.mode), aux.get("top_drive.angle", -1),
               BIT_MODELS.index(prm.bit.model), aux.get("bit.hole_bottom", -1),
-              int(self.extended_outputs)]
+              int(self.extended_outputs), len(cps), int(self.framed), int(self.field_outputs)]
         assert len(ip) == kern.IP_HDR
         ip += stab_body + [b - 1 for b in self.contact_bodies] + [j - 1 for j in self.sites]
         self.ip = np.array(ip, dtype=np.int64)
@@ -403,18 +603,85 @@ class DrillstringModel:
                  ld.magnitude, ld.start, ld.start + ld.duration, 0.0]
             )
         self.fp = np.concatenate([np.array(stab_z, dtype=float),
-                                  np.array(rows, dtype=float).ravel()])
+                                  np.array(rows, dtype=float).ravel(),
+                                  np.array(cps, dtype=float).ravel()])
         # times [s] where an input of the model jumps (loads) or kinks (end of the speed ramp):
         # integrators step exactly to them (see integrators.next_breakpoint)
         bps = [t for ld in prm.loads for t in (ld.start, ld.start + ld.duration)]
-        if td.mode == "prescribed" and td.rotary_speed != 0.0 and td.ramp_time > 0.0:
+        if td.ramp_time > 0.0 and (
+                (td.mode == "prescribed" and td.rotary_speed != 0.0) or td.hoisting_speed != 0.0):
             bps.append(td.ramp_time)
         self.breakpoints = np.unique(np.array([t for t in bps if math.isfinite(t) and t > 0.0],
                                               dtype=float))
 
+    def _stabilizer_points(self, hole: np.ndarray) -> list[tuple[int, float, float, float]]:
+        """Contact points (body, offset from its centre [m], clearance [m], radius [m]) of the
+        sections' stabilizer blades; ``hole`` [m] the hole diameter at every body."""
+        from .sections import string_sections
+
+        tab = self.bodies
+        out = []
+        top = 0.0
+        for i, sec in enumerate(string_sections(self.params)):
+            ks = np.flatnonzero(tab.section == i)
+            for z in sec.stabilizers:
+                s = top + z  # from the top of the string
+                k = int(ks[min(np.searchsorted(tab.top[ks], s + 1e-9, side="right") - 1,
+                               ks.size - 1)])
+                r = 0.5 * sec.stabilizer_diameter
+                clr = 0.5 * hole[k] - r
+                if clr < 0.0:
+                    raise ValueError(
+                        f"sections ({sec.kind}): stabilizer_diameter {sec.stabilizer_diameter:g}"
+                        f" m does not fit the hole (diameter {hole[k]:g} m)")
+                out.append((k, s - (tab.top[k] + tab.half[k]), clr, r))
+            top += sec.length
+        return out
+
+    def static_tensions(self, axis: np.ndarray, weight: np.ndarray) -> np.ndarray:
+        """Static effective tension [N] in the top spring and each joint (shape (n,): entry k is
+        the spring above body k), without wall friction, for body axes ``axis`` (n, 3).
+
+        From the bit up: ``T_k = T_{k+1} (a_{k+1} . a_k) + W_k a_k,Z + F_k . a_k`` with ``W`` the
+        (buoyed) weight [N] (``weight``, per body), ``F`` the axial loads acting for good from
+        t = 0 and ``T_n`` minus the weight on bit: the joint forces act along the lower body's
+        axis (the joints start without shear), so that the laid string is in exact axial
+        balance. Once released the joints shear slightly and the hook load settles at the soft
+        string's (~1 % higher in a 60 deg build).
+        """
+        n = self.n
+        f = np.zeros((n, 3))
+        f[:, 2] = weight
+        for ld in self.params.loads:
+            if ld.kind == "force" and ld.start <= 0.0 and math.isinf(ld.duration):
+                f[ld.body - 1, "xyz".index(ld.direction)] += ld.magnitude
+        T = np.zeros(n)
+        below = -self.params.bit.weight_on_bit
+        for k in range(n - 1, -1, -1):
+            c = float(np.dot(axis[k + 1], axis[k])) if k < n - 1 else 1.0
+            T[k] = below * c + float(np.dot(f[k], axis[k]))
+            below = T[k]
+        return T
+
+    def _lay_string(self, weight: np.ndarray) -> StringLay:
+        """The string along the hole at its static (frictionless) axial stretch."""
+        prm = self.params
+        tab = self.bodies
+        path = WellPath(prm.trajectory.survey)
+        n = self.n
+        k_spring = np.concatenate([[self.p[lay.KT_AX]], tab.k_axial])
+        gaps = np.zeros(n)
+        lz = lay_string(path, tab.length, gaps)
+        for _ in range(2):  # the stretch barely turns the axes: two passes settle it
+            T = self.static_tensions(lz.axis, weight)
+            gaps = np.where(k_spring > 0.0, T / np.where(k_spring > 0.0, k_spring, 1.0), 0.0)
+            lz = lay_string(path, tab.length, gaps)
+        return lz
+
     # ------------------------------------------------------------------ state layout
     def _bit_end_z(self, y: np.ndarray) -> float:
-        h = 0.5 * self.derived.dx
+        """Depth [m] of the bit end along the hole (local to the bit body when framed)."""
+        h = self.bodies.half[-1]
         if self.kind == "full3d":
             n = self.n
             ang = y[3 * n + 3 * (n - 1): 3 * n + 3 * n]
@@ -431,8 +698,7 @@ class DrillstringModel:
         """
         n = self.n
         p = self.p
-        m = self.derived.mass
-        f = np.full(n, m * self.params.gravity)
+        f = p[lay.NP + lay.B_W: lay.NP + lay.NB * n: lay.NB].copy()  # weights [N]
         f[-1] -= self.params.bit.weight_on_bit
         for ld in self.params.loads:  # axial forces acting from t = 0 on, for good
             if ld.kind == "force" and ld.direction == "z" and ld.start <= 0.0 \
@@ -441,36 +707,51 @@ class DrillstringModel:
         if not np.any(f):
             return np.zeros(n)
         kt = p[lay.KT_AX]
-        ka = p[lay.K_AX]
         if kt == 0.0:
             if abs(f.sum()) > 1e-9 * max(1.0, np.abs(f).max()):
                 raise ValueError(
                     "top_drive.axial_stiffness = 0 with a net axial load: the weight "
-                    f"{m * n * self.params.gravity:.6g} N must equal bit.weight_on_bit"
+                    f"{math.fsum(f) + self.params.bit.weight_on_bit:.6g} N (with the axial "
+                    "loads) must equal bit.weight_on_bit"
                 )
+        kj = self.bodies.k_axial
         Kd = np.zeros((n, n))
         for a in range(n - 1):
+            ka = kj[a]
             Kd[a, a] += ka
             Kd[a + 1, a + 1] += ka
             Kd[a, a + 1] -= ka
             Kd[a + 1, a] -= ka
         Kd[0, 0] += kt
         if kt == 0.0:
-            Kd[0, 0] += ka * 1e-12  # fix the floating chain's mean; the shape is what matters
+            Kd[0, 0] += kj[0] * 1e-12  # fix the floating chain's mean; the shape is what matters
         return np.linalg.solve(Kd, f)
 
     def initial_state(self) -> np.ndarray:
-        """Straight string at rest in static axial equilibrium; shape (n_state,)."""
+        """The string at rest along the hole axis in static axial equilibrium (without wall
+        friction); shape (n_state,).
+
+        A vertical hole: body positions are inertial (depths of the mass centres). A curved
+        hole (``framed``): each body sits at its reference frame's origin (local position 0;
+        the stretched string laid along the hole, :func:`plant.trajectory.lay_string`), and the
+        string settles onto the low side once released.
+        """
         n = self.n
-        dx = self.derived.dx
-        z = (np.arange(n) + 0.5) * dx + self.static_axial_displacement()
         y = np.zeros(self.n_state)
-        if self.kind == "full3d":
-            y[2:3 * n:3] = z
+        if self.framed:
+            z = np.zeros(n)
         else:
-            y[:n] = z
+            if self.params.uniform:
+                z = (np.arange(n) + 0.5) * self.derived.dx + self.static_axial_displacement()
+            else:
+                tab = self.bodies
+                z = tab.top + tab.half + self.static_axial_displacement()
+            if self.kind == "full3d":
+                y[2:3 * n:3] = z
+            else:
+                y[:n] = z
         if self.params.bit.axial_stiffness > 0.0:
-            zb = z[-1] + 0.5 * dx
+            zb = z[-1] + self.bodies.half[-1]
             kb = self.p[lay.KB_AX]
             self.p[lay.ZBIT0] = zb - self.params.bit.weight_on_bit / kb
             if self.params.bit.model == "cutting":  # the hole bottom under the pressed bit
@@ -559,10 +840,17 @@ class DrillstringModel:
         the margins of :attr:`max_eigenvalue` for effects the initial state does not show."""
         with threadpool_limits(1):  # 6x faster than multithreaded BLAS on a loaded machine
             lam = float(np.max(np.abs(np.linalg.eigvals(J))))
-        kc = self.p[lay.K_CONT] if self.contact_bodies and self.kind == "full3d" else 0.0
-        cc = self.p[lay.C_CONT] if self.contact_bodies and self.kind == "full3d" else 0.0
-        m = self.derived.mass
+        touching = self.ip[kern.IP_NCP] > 0 and self.kind == "full3d"
+        kc = self.p[lay.K_CONT] if touching else 0.0
+        cc = self.p[lay.C_CONT] if touching else 0.0
+        m = float(self.bodies.mass[self._contact_point_bodies()].min()) if touching else 1.0
         return math.sqrt(lam**2 + kc / m) + cc / m
+
+    def _contact_point_bodies(self) -> np.ndarray:
+        """0-based body of every contact point (rows of the contact-point table)."""
+        ncp = int(self.ip[kern.IP_NCP])
+        o = self.ip[kern.IP_NS] + lay.NLD * self.ip[kern.IP_NL]
+        return self.fp[o + lay.CP_BODY: o + lay.NCP * ncp: lay.NCP].astype(np.int64)
 
     def stable_step(self) -> float:
         """Largest stable RK4 step [s] for this model (from :attr:`max_eigenvalue`)."""

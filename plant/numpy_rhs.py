@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import layout as lay
-from .kernels import IP_HDR, IP_N, IP_NA, IP_NC, IP_NL, IP_NS, IP_UNB
+from .kernels import IP_FIELD, IP_HDR, IP_N, IP_NA, IP_NC, IP_NL, IP_NS, IP_UNB
 
 __all__ = ["NumpyRhs", "cardan_matrices", "rhs3d_numpy"]
 
@@ -115,6 +115,9 @@ def rhs3d_numpy(t: float, y: np.ndarray, p: np.ndarray, ip: np.ndarray, fp: np.n
     numpy.ndarray, shape (12 n,)
         dy/dt.
     """
+    if ip[IP_FIELD]:
+        raise ValueError("rhs3d_numpy is the reference of the uniform pipe's right-hand side; "
+                         "it has no string sections, trajectory or fluid")
     n = int(ip[IP_N])
     ns, nc, na, unb, nl = (int(ip[k]) for k in (IP_NS, IP_NC, IP_NA, IP_UNB, IP_NL))
     h = p[lay.HALF]

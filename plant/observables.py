@@ -16,13 +16,21 @@ from .kernels import (
     BIT_CUTTING,
     IP_BIT,
     IP_BITX,
+    IP_FIELD,
+    IP_FRAMED,
     IP_HDR,
     IP_N,
     IP_NA,
     IP_NC,
+    IP_NCP,
+    IP_NL,
     IP_NS,
     IP_XOUT,
+    _frame_mm,
+    _frame_tmm,
+    _local_rotation,
     bit_rock,
+    body_inertial,
     cardan,
     cutting_bit,
     drive_motion,
@@ -30,9 +38,20 @@ from .kernels import (
     one_minus_cos_small,
     relative_rotation,
     sin_small,
+    top_hoist,
+    top_point,
 )
 from .layout import (
-    ACT_ARM,
+    B_CLR,
+    B_H,
+    B_JP,
+    B_JT,
+    B_K1,
+    B_K2,
+    B_M,
+    B_ML,
+    B_R,
+    B_W,
     BIT_AMP,
     BIT_EPS,
     BIT_JX,
@@ -41,31 +60,37 @@ from .layout import (
     BIT_ZH0,
     C_CONT,
     CB_AX,
-    CLEAR,
+    CP_BODY,
+    CP_CLR,
+    CP_Z,
     CT_AX,
     CT_TO,
-    G1,
-    G3,
-    GAUGE_R,
-    GRAV,
-    HALF,
-    JP,
-    JT,
-    K_AX,
+    HOIST,
+    J_ARM,
+    J_G1,
+    J_G3,
+    J_KAX,
+    J_KSH,
+    J_LEN,
+    J_RG,
     K_CONT,
-    K_SH,
     K_STAB,
     KB_AX,
     KT_AX,
     KT_LAT,
     KT_TO,
-    MASS,
+    NB,
+    NCP,
+    NLD,
+    NP,
+    TD_R,
 )
-from .signals import SCALAR_OUTPUTS, WHIRL_MIN_RADIUS
+from .signals import EXTENDED_SCALAR_OUTPUTS, SCALAR_OUTPUTS, WHIRL_MIN_RADIUS
 
 _CACHE = True
 
 NSCAL = len(SCALAR_OUTPUTS)
+NXSCAL = len(EXTENDED_SCALAR_OUTPUTS)
 
 
 @njit(cache=_CACHE)
@@ -98,37 +123,61 @@ def _scalars_extended(out, o, ip, y, p, fb, rop, dcut):
     out[o + 3] = 1.0 if (cutting and fb > 0.0) else 0.0
 
 
+@njit(cache=_CACHE, inline="always")
+def _point_offset(y, p, oA, oV, oW, k, zl, framed, wR, S):
+    """Lateral offset (X, Y) [m] from the hole axis and velocity (vx, vy) [m/s] of the point
+    ``zl`` [m] along body ``k``'s axis from its mass centre (local frame when framed)."""
+    X = y[3 * k]
+    Y = y[3 * k + 1]
+    Z = y[3 * k + 2]
+    vx = y[oV + 3 * k]
+    vy = y[oV + 3 * k + 1]
+    if zl != 0.0:
+        Rl = _local_rotation(y, oA, k, framed, wR, S)
+        X += zl * Rl[0, 2]
+        Y += zl * Rl[1, 2]
+        Z += zl * Rl[2, 2]
+        vx += zl * (Rl[0, 0] * y[oW + 3 * k + 1] - Rl[0, 1] * y[oW + 3 * k])
+        vy += zl * (Rl[1, 0] * y[oW + 3 * k + 1] - Rl[1, 1] * y[oW + 3 * k])
+    if framed:
+        o = NP + NB * k
+        X -= 0.5 * p[o + B_K1] * Z * Z
+        Y -= 0.5 * p[o + B_K2] * Z * Z
+    return X, Y, vx, vy
+
+
 @njit(cache=_CACHE)
 def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
-    """Fill ``out`` with the 3D model's outputs; wR (n+1, 3, 3) is scratch."""
+    """Fill ``out`` with the 3D model's outputs; wR (n + 2, 3, 3) is scratch."""
     n = ip[IP_N]
     ns = ip[IP_NS]
     nc = ip[IP_NC]
     na = ip[IP_NA]
-    h = p[HALF]
-    dx = 2.0 * h
-    m = p[MASS]
+    nl = ip[IP_NL]
+    ncp = ip[IP_NCP]
+    framed = ip[IP_FRAMED] != 0
     oA = 3 * n
     oV = 6 * n
     oW = 9 * n
     Rrel = wR[n]
+    S = wR[n + 1]
     for k in range(n):
-        cardan(y[oA + 3 * k], y[oA + 3 * k + 1], y[oA + 3 * k + 2], wR[k])
+        if framed:
+            cardan(y[oA + 3 * k], y[oA + 3 * k + 1], y[oA + 3 * k + 2], S)
+            _frame_mm(p, NP + NB * k + B_R, S, wR[k])
+        else:
+            cardan(y[oA + 3 * k], y[oA + 3 * k + 1], y[oA + 3 * k + 2], wR[k])
     o = 0
-    clr = p[CLEAR]
-    e_cont = 0.0
     for s in range(nc):
         k = ip[IP_HDR + ns + s]
-        X = y[3 * k]
-        Y = y[3 * k + 1]
+        X, Y, vx, vy = _point_offset(y, p, oA, oV, oW, k, 0.0, framed, wR, S)
         dl = math.sqrt(X * X + Y * Y)
-        pen = dl - clr
+        pen = dl - p[NP + NB * k + B_CLR]
         fc = 0.0
         if pen > 0.0:
             fc = p[K_CONT] * pen
-            e_cont += 0.5 * p[K_CONT] * pen * pen
             # contact damping acts too, but never pulls
-            vn = (X * y[oV + 3 * k] + Y * y[oV + 3 * k + 1]) / dl
+            vn = (X * vx + Y * vy) / dl
             fc = max(fc + p[C_CONT] * vn, 0.0)
         out[o] = X
         out[o + 1] = Y
@@ -138,8 +187,8 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
         whirl = 0.0
         sense = 0.0
         if dl > WHIRL_MIN_RADIUS:
-            whirl = (X * y[oV + 3 * k + 1] - Y * y[oV + 3 * k]) / (dl * dl)
-            R = wR[k]
+            whirl = (X * vy - Y * vx) / (dl * dl)
+            R = _local_rotation(y, oA, k, framed, wR, S)
             spin = R[2, 0] * y[oW + 3 * k] + R[2, 1] * y[oW + 3 * k + 1] + R[2, 2] * y[oW + 3 * k + 2]
             if whirl * spin > 0.0:
                 sense = 1.0
@@ -151,13 +200,13 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
         out[o + 4] = whirl
         out[o + 5] = sense
         o += 6
-    rg = p[GAUGE_R]
-    arm = p[ACT_ARM]
     for s in range(na):
         a = ip[IP_HDR + ns + nc + s]
         b = a + 1
+        oa = NP + NB * a
+        arm = p[oa + J_ARM]
         relative_rotation(wR[a], wR[b], Rrel)
-        eps_c, eps_e = gauge_strains(Rrel, rg, dx)
+        eps_c, eps_e = gauge_strains(Rrel, p[oa + J_RG], p[oa + J_LEN])
         wxa = y[oW + 3 * a]
         wya = y[oW + 3 * a + 1]
         wza = y[oW + 3 * a + 2]
@@ -169,51 +218,80 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
         out[o + 1] = eps_e
         out[o + 2] = -arm * u[2 * s + 1] * wrx + arm * u[2 * s] * wry
         o += 3
+    # wall contact at every contact point: energy and the field summary
+    e_cont = 0.0
+    max_dl = 0.0
+    f_wall = 0.0
+    touching = 0.0
+    o_cp = ns + NLD * nl
+    for s in range(ncp):
+        row = o_cp + NCP * s
+        k = int(fp[row + CP_BODY])
+        X, Y, vx, vy = _point_offset(y, p, oA, oV, oW, k, fp[row + CP_Z], framed, wR, S)
+        dl = math.sqrt(X * X + Y * Y)
+        max_dl = max(max_dl, dl)
+        pen = dl - fp[row + CP_CLR]
+        if pen > 0.0:
+            e_cont += 0.5 * p[K_CONT] * pen * pen
+            if p[K_CONT] > 0.0 or p[C_CONT] > 0.0:
+                fc = max(p[K_CONT] * pen + p[C_CONT] * (X * vx + Y * vy) / dl, 0.0)
+                f_wall += fc
+                if fc > 0.0:
+                    touching += 1.0
     # energies
-    jt = p[JT]
-    jp = p[JP]
     ke = 0.0
     pe = 0.0
-    g = p[GRAV]
     for k in range(n):
+        ob = NP + NB * k
+        m = p[ob + B_M]
+        ml = p[ob + B_ML]
+        jt = p[ob + B_JT]
+        jp = p[ob + B_JP]
         vx = y[oV + 3 * k]
         vy = y[oV + 3 * k + 1]
         vz = y[oV + 3 * k + 2]
         wx = y[oW + 3 * k]
         wy = y[oW + 3 * k + 1]
         wz = y[oW + 3 * k + 2]
-        ke += 0.5 * m * (vx * vx + vy * vy + vz * vz) + 0.5 * (jt * (wx * wx + wy * wy) + jp * wz * wz)
-        pe -= m * g * y[3 * k + 2]
-    g1 = p[G1]
-    g3 = p[G3]
-    ksh = p[K_SH]
-    kax = p[K_AX]
+        if ml == m:
+            ke += 0.5 * m * (vx * vx + vy * vy + vz * vz) + 0.5 * (jt * (wx * wx + wy * wy) + jp * wz * wz)
+        else:
+            ke += 0.5 * (ml * (vx * vx + vy * vy) + m * vz * vz) + 0.5 * (
+                jt * (wx * wx + wy * wy) + jp * wz * wz)
+        Gk = body_inertial(y, p, k, framed, oV)
+        pe -= p[ob + B_W] * Gk[2]
+    Ga0, Ga1, Ga2, Va0, Va1, Va2 = body_inertial(y, p, 0, framed, oV)
     for a in range(n - 1):
         b = a + 1
+        oa = NP + NB * a
+        ha = p[oa + B_H]
+        hb = p[oa + NB + B_H]
+        Gb0, Gb1, Gb2, Vb0, Vb1, Vb2 = body_inertial(y, p, b, framed, oV)
         Ra = wR[a]
         Rb = wR[b]
-        d0 = (y[3 * b] - h * Rb[0, 2]) - (y[3 * a] + h * Ra[0, 2])
-        d1 = (y[3 * b + 1] - h * Rb[1, 2]) - (y[3 * a + 1] + h * Ra[1, 2])
-        d2 = (y[3 * b + 2] - h * Rb[2, 2]) - (y[3 * a + 2] + h * Ra[2, 2])
+        d0 = (Gb0 - hb * Rb[0, 2]) - (Ga0 + ha * Ra[0, 2])
+        d1 = (Gb1 - hb * Rb[1, 2]) - (Ga1 + ha * Ra[1, 2])
+        d2 = (Gb2 - hb * Rb[2, 2]) - (Ga2 + ha * Ra[2, 2])
         e0 = Rb[0, 0] * d0 + Rb[1, 0] * d1 + Rb[2, 0] * d2
         e1 = Rb[0, 1] * d0 + Rb[1, 1] * d1 + Rb[2, 1] * d2
         e2 = Rb[0, 2] * d0 + Rb[1, 2] * d1 + Rb[2, 2] * d2
-        pe += 0.5 * (ksh * (e0 * e0 + e1 * e1) + kax * e2 * e2)
+        pe += 0.5 * (p[oa + J_KSH] * (e0 * e0 + e1 * e1) + p[oa + J_KAX] * e2 * e2)
         relative_rotation(Ra, Rb, Rrel)
-        pe += 0.5 * (g1 * (2.0 - Rrel[0, 0] - Rrel[1, 1]) + g3 * (1.0 - Rrel[2, 2]))
+        pe += 0.5 * (p[oa + J_G1] * (2.0 - Rrel[0, 0] - Rrel[1, 1])
+                     + p[oa + J_G3] * (1.0 - Rrel[2, 2]))
+        Ga0, Ga1, Ga2 = Gb0, Gb1, Gb2
     # top joint
+    h = p[NP + B_H]
     R0 = wR[0]
-    A0 = y[0] - h * R0[0, 2]
-    A1 = y[1] - h * R0[1, 2]
-    A2 = y[2] - h * R0[2, 2]
+    A0, A1, A2, V0, V1, V2 = top_point(t, y, p, framed, oV, R0, h)
     e0 = R0[0, 0] * A0 + R0[1, 0] * A1 + R0[2, 0] * A2
     e1 = R0[0, 1] * A0 + R0[1, 1] * A1 + R0[2, 1] * A2
     e2 = R0[0, 2] * A0 + R0[1, 2] * A1 + R0[2, 2] * A2
     pe += 0.5 * (p[KT_LAT] * (e0 * e0 + e1 * e1) + p[KT_AX] * e2 * e2)
     # axial tension: the top spring's force, d(body-z) > 0 stretches it (damping included)
-    vA0 = y[oV] + h * (-R0[0, 0] * y[oW + 1] + R0[0, 1] * y[oW])
-    vA1 = y[oV + 1] + h * (-R0[1, 0] * y[oW + 1] + R0[1, 1] * y[oW])
-    vA2 = y[oV + 2] + h * (-R0[2, 0] * y[oW + 1] + R0[2, 1] * y[oW])
+    vA0 = V0 + h * (-R0[0, 0] * y[oW + 1] + R0[0, 1] * y[oW])
+    vA1 = V1 + h * (-R0[1, 0] * y[oW + 1] + R0[1, 1] * y[oW])
+    vA2 = V2 + h * (-R0[2, 0] * y[oW + 1] + R0[2, 1] * y[oW])
     r2 = R0[0, 2] * vA0 + R0[1, 2] * vA1 + R0[2, 2] * vA2
     c2 = y[oW] * e1 - y[oW + 1] * e0
     hook = p[KT_AX] * e2 + p[CT_AX] * (r2 - c2)
@@ -221,17 +299,22 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
     ktt = p[KT_TO]
     tt = 0.0
     if ktt > 0.0:
+        Rt = R0
+        if framed:
+            _frame_tmm(p, TD_R, R0, S)
+            Rt = S
         ca = math.cos(ang)
         sa = math.sin(ang)
         for j in range(3):
-            Rrel[0, j] = ca * R0[0, j] + sa * R0[1, j]
-            Rrel[1, j] = -sa * R0[0, j] + ca * R0[1, j]
-            Rrel[2, j] = R0[2, j]
+            Rrel[0, j] = ca * Rt[0, j] + sa * Rt[1, j]
+            Rrel[1, j] = -sa * Rt[0, j] + ca * Rt[1, j]
+            Rrel[2, j] = Rt[2, j]
         pe += 0.5 * ktt * ((1.0 - Rrel[0, 0]) + (1.0 - Rrel[1, 1]) - (1.0 - Rrel[2, 2]))
-        tt = -0.5 * ktt * (Rrel[1, 0] - Rrel[0, 1]) - p[CT_TO] * (y[oW + 2] - om * R0[2, 2])
-    # bit
+        tt = -0.5 * ktt * (Rrel[1, 0] - Rrel[0, 1]) - p[CT_TO] * (y[oW + 2] - om * Rt[2, 2])
+    # bit (in the bit body's local frame)
     e = n - 1
-    Re = wR[e]
+    h = p[NP + NB * e + B_H]
+    Re = _local_rotation(y, oA, e, framed, wR, S)
     fb = 0.0
     bz = y[3 * e + 2] + h * Re[2, 2]
     tb = 0.0
@@ -254,42 +337,49 @@ def outputs3d(t, y, p, ip, fp, u, wR, zbit_ref, out):
     for s in range(ns):
         k = ip[IP_HDR + s]
         zl = fp[s]
-        P0 = y[3 * k] + zl * wR[k][0, 2]
-        P1 = y[3 * k + 1] + zl * wR[k][1, 2]
+        R = _local_rotation(y, oA, k, framed, wR, S)
+        P0 = y[3 * k] + zl * R[0, 2]
+        P1 = y[3 * k + 1] + zl * R[1, 2]
         pe += 0.5 * p[K_STAB] * (P0 * P0 + P1 * P1)
     pe += e_cont
     _scalars_common(om, out, o, fb, tb, tt, hook, y[oW + 3 * e + 2], bz - zbit_ref,
                     y[oA + 3 * e] - ang, ke + pe)
+    o += NSCAL
     if ip[IP_XOUT] != 0:
-        _scalars_extended(out, o + NSCAL, ip, y, p, fb, rop, dcut)
+        _scalars_extended(out, o, ip, y, p, fb, rop, dcut)
+        o += NXSCAL
+    if ip[IP_FIELD] != 0:
+        out[o] = max_dl
+        out[o + 1] = f_wall
+        out[o + 2] = touching
 
 
 @njit(cache=_CACHE)
 def outputs_at(t, y, p, ip, fp, u, wR, zbit_ref, out):
     """Fill ``out`` with the axial-torsional model's outputs."""
     n = ip[IP_N]
-    h = p[HALF]
-    dx = 2.0 * h
-    m = p[MASS]
-    jp = p[JP]
-    g = p[GRAV]
     ke = 0.0
     pe = 0.0
     for k in range(n):
-        ke += 0.5 * m * y[2 * n + k] ** 2 + 0.5 * jp * y[3 * n + k] ** 2
-        pe -= m * g * y[k]
+        o = NP + NB * k
+        ke += 0.5 * p[o + B_M] * y[2 * n + k] ** 2 + 0.5 * p[o + B_JP] * y[3 * n + k] ** 2
+        pe -= p[o + B_W] * y[k]
     for a in range(n - 1):
-        d = y[a + 1] - y[a] - dx
-        pe += 0.5 * p[K_AX] * d * d + p[G1] * one_minus_cos_small(y[n + a + 1] - y[n + a])
-    pe += 0.5 * p[KT_AX] * (y[0] - h) ** 2
-    hook = p[KT_AX] * (y[0] - h) + p[CT_AX] * y[2 * n]
+        o = NP + NB * a
+        d = y[a + 1] - y[a] - p[o + J_LEN]
+        pe += 0.5 * p[o + J_KAX] * d * d + p[o + J_G1] * one_minus_cos_small(y[n + a + 1] - y[n + a])
+    h = p[NP + B_H]
+    zt, vt = top_hoist(t, p)
+    stretch = y[0] - h - zt if p[HOIST] != 0.0 else y[0] - h
+    pe += 0.5 * p[KT_AX] * stretch ** 2
+    hook = p[KT_AX] * stretch + p[CT_AX] * (y[2 * n] - vt)
     ang, om = drive_motion(t, y, p, ip, u)
     tt = 0.0
     if p[KT_TO] > 0.0:
         pe += p[KT_TO] * one_minus_cos_small(y[n] - ang)
         tt = -(p[KT_TO] * sin_small(y[n] - ang) + p[CT_TO] * (y[3 * n] - om))
     e = n - 1
-    bz = y[e] + h
+    bz = y[e] + p[NP + NB * e + B_H]
     fb = 0.0
     tb = 0.0
     rop = 0.0
@@ -309,4 +399,3 @@ def outputs_at(t, y, p, ip, fp, u, wR, zbit_ref, out):
                     y[n + e] - ang, ke + pe)
     if ip[IP_XOUT] != 0:
         _scalars_extended(out, NSCAL, ip, y, p, fb, rop, dcut)
-

@@ -26,6 +26,10 @@ __all__ = [
     "UnbalanceParams",
     "ActuatorParams",
     "LoadParams",
+    "SECTION_KINDS",
+    "SectionParams",
+    "TrajectoryParams",
+    "FluidParams",
     "PlantParams",
     "describe",
 ]
@@ -106,38 +110,11 @@ def _validate_types(obj: Any) -> None:
                 raise ValueError(f"{owner}.{f.name} = {v!r} is not allowed: must be a list")
 
 
-@dataclass(frozen=True)
-class PipeParams:
-    """Geometry and material of the collar section (hollow circular steel pipe)."""
+class _Tube:
+    """Section properties of a hollow circular steel tube (fields ``outer_diameter``,
+    ``inner_diameter``, ``youngs_modulus``, ``shear_modulus``, ``density``,
+    ``shear_coefficient``), shared by :class:`PipeParams` and :class:`SectionParams`."""
 
-    OWNER = "pipe"
-    length: float = _f(80.0, "m", "length of the modelled collar section")
-    n_segments: int = _f(30, "1", "number of rigid segments (bodies)", integer=True)
-    outer_diameter: float = _f(0.110, "m", "outer diameter")
-    inner_diameter: float = _f(0.045, "m", "inner diameter (0 for a solid bar)")
-    youngs_modulus: float = _f(208e9, "Pa", "Young's modulus E")
-    shear_modulus: float = _f(81e9, "Pa", "shear modulus G")
-    density: float = _f(7850.0, "kg/m^3", "density rho")
-    shear_coefficient: float = _f(
-        0.0, "1", "Timoshenko shear coefficient kappa; 0 = Cowper's value for a hollow circle"
-    )
-
-    def __post_init__(self) -> None:
-        _validate_types(self)
-        o = self.OWNER
-        _check_range(o, "length", self.length, 0.0, None, lo_open=True, unit="m")
-        _check_range(o, "n_segments", self.n_segments, 2, 2000)
-        _check_range(o, "outer_diameter", self.outer_diameter, 0.0, 5.0, lo_open=True, unit="m")
-        _check_range(
-            o, "inner_diameter", self.inner_diameter, 0.0, self.outer_diameter, hi_open=True,
-            unit="m",
-        )
-        _check_range(o, "youngs_modulus", self.youngs_modulus, 0.0, 1e13, lo_open=True, unit="Pa")
-        _check_range(o, "shear_modulus", self.shear_modulus, 0.0, 1e13, lo_open=True, unit="Pa")
-        _check_range(o, "density", self.density, 0.0, 1e5, lo_open=True, unit="kg/m^3")
-        _check_range(o, "shear_coefficient", self.shear_coefficient, 0.0, 1.0)
-
-    # --- derived section properties -------------------------------------------------------
     @property
     def area(self) -> float:
         """Cross-section area A [m^2]."""
@@ -169,11 +146,6 @@ class PipeParams:
         return 6.0 * (1.0 + nu) * a / ((7.0 + 6.0 * nu) * a + (20.0 + 12.0 * nu) * m2)
 
     @property
-    def segment_length(self) -> float:
-        """dx = L / n [m]."""
-        return self.length / self.n_segments
-
-    @property
     def axial_wave_speed(self) -> float:
         """c = sqrt(E / rho) [m/s]."""
         return math.sqrt(self.youngs_modulus / self.density)
@@ -182,6 +154,47 @@ class PipeParams:
     def torsional_wave_speed(self) -> float:
         """c_t = sqrt(G / rho) [m/s]."""
         return math.sqrt(self.shear_modulus / self.density)
+
+
+def _check_tube(obj: Any) -> None:
+    """Range checks of the fields every tube has (see :class:`_Tube`)."""
+    o = obj.OWNER
+    _check_range(o, "length", obj.length, 0.0, None, lo_open=True, unit="m")
+    _check_range(o, "outer_diameter", obj.outer_diameter, 0.0, 5.0, lo_open=True, unit="m")
+    _check_range(
+        o, "inner_diameter", obj.inner_diameter, 0.0, obj.outer_diameter, hi_open=True, unit="m",
+    )
+    _check_range(o, "youngs_modulus", obj.youngs_modulus, 0.0, 1e13, lo_open=True, unit="Pa")
+    _check_range(o, "shear_modulus", obj.shear_modulus, 0.0, 1e13, lo_open=True, unit="Pa")
+    _check_range(o, "density", obj.density, 0.0, 1e5, lo_open=True, unit="kg/m^3")
+    _check_range(o, "shear_coefficient", obj.shear_coefficient, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class PipeParams(_Tube):
+    """Geometry and material of the collar section (hollow circular steel pipe)."""
+
+    OWNER = "pipe"
+    length: float = _f(80.0, "m", "length of the modelled collar section")
+    n_segments: int = _f(30, "1", "number of rigid segments (bodies)", integer=True)
+    outer_diameter: float = _f(0.110, "m", "outer diameter")
+    inner_diameter: float = _f(0.045, "m", "inner diameter (0 for a solid bar)")
+    youngs_modulus: float = _f(208e9, "Pa", "Young's modulus E")
+    shear_modulus: float = _f(81e9, "Pa", "shear modulus G")
+    density: float = _f(7850.0, "kg/m^3", "density rho")
+    shear_coefficient: float = _f(
+        0.0, "1", "Timoshenko shear coefficient kappa; 0 = Cowper's value for a hollow circle"
+    )
+
+    def __post_init__(self) -> None:
+        _validate_types(self)
+        _check_range(self.OWNER, "n_segments", self.n_segments, 2, 2000)
+        _check_tube(self)
+
+    @property
+    def segment_length(self) -> float:
+        """dx = L / n [m]."""
+        return self.length / self.n_segments
 
 
 @dataclass(frozen=True)
@@ -214,6 +227,13 @@ class DampingParams:
         "'drag': viscous drag on lateral velocity c = alpha m (external, fluid-like); 'joint': "
         "bending dampers c = beta_l k_bend (internal: destabilizes whirl above the first critical speed)",
     )
+    max_joint_rate: float = _f(
+        math.inf, "1/s",
+        "cap of each joint damper: c <= k * max_joint_rate / w_j^2 with w_j = 2 sqrt(k / m) the "
+        "joint's highest local frequency, so that no overdamped joint mode decays faster than "
+        "max_joint_rate (short stiff segments otherwise set the time step); inf = no cap (the "
+        "paper's model), 0 = the string's highest undamped joint frequency",
+    )
 
     def __post_init__(self) -> None:
         _validate_types(self)
@@ -225,6 +245,8 @@ class DampingParams:
             o, "lateral_reference_frequency", self.lateral_reference_frequency, 0.0, 1e4,
             unit="rad/s",
         )
+        _check_range(o, "max_joint_rate", self.max_joint_rate, 0.0, None, unit="1/s",
+                     allow_inf=True)
         if self.lateral_model not in ("joint", "drag"):
             raise ValueError(
                 f"damping.lateral_model = {self.lateral_model!r} is not allowed: 'joint' or 'drag'"
@@ -252,6 +274,11 @@ class TopDriveParams:
     inertia: float = _f(
         0.0, "kg m^2", "rotor inertia of the top drive (mode 'torque'; must then be > 0)"
     )
+    hoisting_speed: float = _f(
+        0.0, "m/s",
+        "axial speed of the top drive along the well axis, > 0 lowering the string (tripping "
+        "in), < 0 raising it (tripping out); ramped from 0 over ramp_time",
+    )
 
     def __post_init__(self) -> None:
         _validate_types(self)
@@ -265,6 +292,7 @@ class TopDriveParams:
             raise ValueError(f"{o}.mode = {self.mode!r} is not allowed: one of "
                              + ", ".join(repr(m) for m in TOP_DRIVE_MODES))
         _check_range(o, "inertia", self.inertia, 0.0, 1e6, unit="kg m^2")
+        _check_range(o, "hoisting_speed", self.hoisting_speed, -10.0, 10.0, unit="m/s")
         if self.mode == "torque" and self.inertia <= 0.0:
             raise ValueError(f"{o}.inertia = {self.inertia!r} is out of range for mode = "
                              "'torque': allowed (0, 1e+06] kg m^2")
@@ -456,6 +484,191 @@ class ActuatorParams:
         _check_range(o, "gauge_radius", self.gauge_radius, 0.0, 5.0, unit="m")
 
 
+#: Kinds of string sections (``[[sections]] kind``); a "stabilizer" is a lateral support (a contact
+#: point of its blades' gauge diameter) for the span logic; the others are labels.
+SECTION_KINDS = ("drill_pipe", "heavy_weight", "collar", "stabilizer", "mwd", "motor", "sub")
+
+
+@dataclass(frozen=True)
+class SectionParams(_Tube):
+    """One section of a multi-section string (``[[sections]]``, listed from the top drive down).
+
+    A section is cut into ``round(length / segment_length)`` equal rigid bodies (at least one;
+    ``segment_length = 0``: one rigid body, e.g. an MWD tool, a motor or a stabilizer).
+    """
+
+    OWNER = "sections"
+    kind: str = _f("drill_pipe", "-", "drill_pipe, heavy_weight, collar, stabilizer, mwd, motor "
+                   "or sub (a stabilizer is a lateral support of the spans)")
+    length: float = _f(0.0, "m", "length of the section along the string (> 0)")
+    outer_diameter: float = _f(0.127, "m", "outer diameter of the tube body")
+    inner_diameter: float = _f(0.1086, "m", "inner diameter (0 for a solid bar)")
+    youngs_modulus: float = _f(208e9, "Pa", "Young's modulus E")
+    shear_modulus: float = _f(81e9, "Pa", "shear modulus G")
+    density: float = _f(7850.0, "kg/m^3", "density of the steel rho")
+    shear_coefficient: float = _f(
+        0.0, "1", "Timoshenko shear coefficient kappa; 0 = Cowper's value for a hollow circle"
+    )
+    linear_mass: float = _f(
+        0.0, "kg/m", "mass per length including tool joints and upsets; 0 = density x area"
+    )
+    contact_diameter: float = _f(
+        0.0, "m", "diameter that touches the hole wall (tool joints of drill pipe, blade gauge of "
+        "a stabilizer); 0 = outer diameter"
+    )
+    segment_length: float = _f(
+        0.0, "m", "target length of the rigid segments (fine in the BHA, ~9-30 m in drill pipe); "
+        "0 = one rigid body for the whole section"
+    )
+    stabilizers: tuple = _f(
+        (), "m", "positions of stabilizer blades along the section, from its top (contact points "
+        "of stabilizer_diameter on the section's bodies; a trajectory is needed)"
+    )
+    stabilizer_diameter: float = _f(
+        0.0, "m", "gauge diameter of the blades at the positions in stabilizers"
+    )
+    added_mass_coefficient: float = _f(
+        -1.0, "1", "lateral added-mass coefficient C_a of the displaced mud ([fluid] on); -1 = "
+        "the potential-flow value for a cylinder in the concentric hole, (D_h^2 + D_o^2) / "
+        "(D_h^2 - D_o^2) (Chen, Wambsganss and Jendrzejczyk 1976), 1 = unconfined"
+    )
+
+    def __post_init__(self) -> None:
+        _validate_types(self)
+        o = self.OWNER
+        if self.kind not in SECTION_KINDS:
+            raise ValueError(f"{o}.kind = {self.kind!r} is not allowed: one of "
+                             + ", ".join(SECTION_KINDS))
+        _check_tube(self)
+        _check_range(o, "linear_mass", self.linear_mass, 0.0, 1e5, unit="kg/m")
+        _check_range(o, "contact_diameter", self.contact_diameter, 0.0, 5.0, unit="m")
+        if 0.0 < self.contact_diameter < self.outer_diameter:
+            raise ValueError(f"{o}.contact_diameter = {self.contact_diameter!r} is out of range: "
+                             f"allowed 0 or [{self.outer_diameter:g}, 5] m (not below the outer "
+                             "diameter)")
+        _check_range(o, "segment_length", self.segment_length, 0.0, 1e4, unit="m")
+        for z in self.stabilizers:
+            if isinstance(z, bool) or not isinstance(z, (int, float)):
+                raise ValueError(f"{o}.stabilizers: {z!r} is not allowed: must be numbers (m)")
+            _check_range(o, "stabilizers", float(z), 0.0, self.length, unit="m")
+        _check_range(o, "stabilizer_diameter", self.stabilizer_diameter, 0.0, 5.0, unit="m")
+        if self.stabilizers and self.stabilizer_diameter < self.outer_diameter:
+            raise ValueError(f"{o}.stabilizer_diameter = {self.stabilizer_diameter!r} is out of "
+                             f"range with stabilizers given: allowed [{self.outer_diameter:g}, 5] m")
+        if self.added_mass_coefficient != -1.0:
+            _check_range(o, "added_mass_coefficient", self.added_mass_coefficient, 0.0, 100.0)
+
+    @property
+    def mass_per_length(self) -> float:
+        """Mass per length [kg/m]: ``linear_mass`` or density x area."""
+        return self.linear_mass or self.density * self.area
+
+    @property
+    def n_bodies(self) -> int:
+        """Number of rigid bodies of the section [1]."""
+        if self.segment_length <= 0.0:
+            return 1
+        return max(1, int(round(self.length / self.segment_length)))
+
+    @property
+    def contact_radius(self) -> float:
+        """Radius [m] at which the section touches the wall."""
+        return 0.5 * (self.contact_diameter or self.outer_diameter)
+
+
+@dataclass(frozen=True)
+class TrajectoryParams:
+    """Well path and hole size: a survey interpolated by the minimum-curvature method.
+
+    Inertial axes: X north, Y east, Z down (true vertical depth), origin at the top drive.
+    """
+
+    OWNER = "trajectory"
+    survey: tuple = _f(
+        (), "m, deg, deg", "survey stations [measured depth, inclination, azimuth], MD rising "
+        "from 0; beyond the last station the hole goes on straight; [] = vertical"
+    )
+    hole: tuple = _f(
+        (), "m, m", "hole sections [bottom measured depth, diameter] from the top (casing inner "
+        "diameter, then open hole); the last one extends to any depth"
+    )
+
+    def __post_init__(self) -> None:
+        _validate_types(self)
+        o = self.OWNER
+        rows = []
+        for r in self.survey:
+            if (not isinstance(r, (list, tuple)) or len(r) != 3
+                    or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in r)):
+                raise ValueError(f"{o}.survey: {r!r} is not allowed: each station is [measured "
+                                 "depth m, inclination deg, azimuth deg]")
+            md, inc, azi = (float(v) for v in r)
+            _check_range(o, "survey measured depth", md, 0.0, 1e5, unit="m")
+            _check_range(o, "survey inclination", inc, 0.0, 180.0, unit="deg")
+            _check_range(o, "survey azimuth", azi, -360.0, 720.0, unit="deg")
+            if rows and md <= rows[-1][0]:
+                raise ValueError(f"{o}.survey: measured depth {md:g} m is not above the previous "
+                                 f"station's {rows[-1][0]:g} m: stations must be in rising MD")
+            rows.append((md, inc, azi))
+        if rows and rows[0][0] != 0.0:
+            raise ValueError(f"{o}.survey: the first station is at {rows[0][0]:g} m: it must be "
+                             "at measured depth 0 (the top drive)")
+        object.__setattr__(self, "survey", tuple(rows))
+        holes = []
+        for r in self.hole:
+            if (not isinstance(r, (list, tuple)) or len(r) != 2
+                    or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in r)):
+                raise ValueError(f"{o}.hole: {r!r} is not allowed: each entry is [bottom measured "
+                                 "depth m, diameter m]")
+            md, dia = float(r[0]), float(r[1])
+            _check_range(o, "hole measured depth", md, 0.0, 1e5, lo_open=True, unit="m",
+                         allow_inf=True)
+            _check_range(o, "hole diameter", dia, 0.0, 5.0, lo_open=True, unit="m")
+            if holes and md <= holes[-1][0]:
+                raise ValueError(f"{o}.hole: bottom depth {md:g} m is not below the previous "
+                                 f"{holes[-1][0]:g} m")
+            holes.append((md, dia))
+        if not holes:
+            raise ValueError(f"{o}.hole = [] is not allowed: give at least one [bottom measured "
+                             "depth, diameter] (e.g. [[3000.0, 0.2159]])")
+        object.__setattr__(self, "hole", tuple(holes))
+
+    @property
+    def vertical(self) -> bool:
+        """True when every station has zero inclination (a vertical hole)."""
+        return all(inc == 0.0 for _md, inc, _azi in self.survey)
+
+    def hole_diameter(self, md: float) -> float:
+        """Hole diameter [m] at measured depth ``md`` [m]."""
+        for bottom, dia in self.hole:
+            if md <= bottom:
+                return dia
+        return self.hole[-1][1]
+
+
+@dataclass(frozen=True)
+class FluidParams:
+    """Drilling fluid (mud) in and around the string: buoyancy, lateral added mass and drag."""
+
+    OWNER = "fluid"
+    enabled: bool = _f(False, "-", "drilling fluid on/off (off: the string in air)")
+    density: float = _f(1200.0, "kg/m^3", "mud density (1200 kg/m^3 = 10 ppg)")
+    drag_coefficient: float = _f(
+        1.0, "1", "quadratic lateral drag F = 1/2 rho C_d D |v| v per length (cylinder in cross "
+        "flow, Re 1e3-2e5: C_d ~ 1.0-1.2, Morison et al. 1950)"
+    )
+    linear_drag: float = _f(
+        0.0, "N s/m^2", "linear lateral drag per length and velocity (viscous; 0 = none)"
+    )
+
+    def __post_init__(self) -> None:
+        _validate_types(self)
+        o = self.OWNER
+        _check_range(o, "density", self.density, 0.0, 3000.0, unit="kg/m^3")
+        _check_range(o, "drag_coefficient", self.drag_coefficient, 0.0, 10.0)
+        _check_range(o, "linear_drag", self.linear_drag, 0.0, 1e6, unit="N s/m^2")
+
+
 @dataclass(frozen=True)
 class LoadParams:
     """An external load on one body: a rectangular pulse (or a step when duration is inf)."""
@@ -489,23 +702,56 @@ class LoadParams:
 
 @dataclass(frozen=True)
 class PlantParams:
-    """The whole plant: one frozen tree in SI units, validated as a whole on construction."""
+    """The whole plant: one frozen tree in SI units, validated as a whole on construction.
+
+    The string is either one uniform ``pipe`` (the paper's collar section, the default) or a
+    list of ``sections`` from the top drive down (field strings: drill pipe, heavy-weight pipe,
+    collars, stabilizers ...). With sections, the ``stabilizers`` springs act only where their
+    heights are given (the default heights, the paper's, are dropped): field stabilizers are
+    sections of kind "stabilizer", touching the wall with their gauge diameter. A
+    ``trajectory`` (survey + hole sizes) curves the hole and puts a contact check at every body
+    (then ``contact.bodies`` only lists the bodies whose outputs are wanted); ``fluid`` adds the
+    mud's buoyancy, added mass and drag.
+    """
 
     OWNER = "plant"
     pipe: PipeParams = field(default_factory=PipeParams)
     damping: DampingParams = field(default_factory=DampingParams)
     top_drive: TopDriveParams = field(default_factory=TopDriveParams)
     bit: BitParams = field(default_factory=BitParams)
-    stabilizers: StabilizerParams = field(default_factory=StabilizerParams)
+    stabilizers: StabilizerParams | None = None  # None: the paper's (pipe), none (sections)
     contact: ContactParams = field(default_factory=ContactParams)
     unbalance: UnbalanceParams = field(default_factory=UnbalanceParams)
     actuators: ActuatorParams = field(default_factory=ActuatorParams)
     loads: tuple = field(default_factory=tuple)
-    gravity: float = _f(0.0, "m/s^2", "gravity along the well axis (0 = off; 9.81 = on)")
+    sections: tuple = field(default_factory=tuple)
+    trajectory: TrajectoryParams | None = None
+    fluid: FluidParams = field(default_factory=FluidParams)
+    gravity: float = _f(0.0, "m/s^2", "gravity along inertial Z, the vertical (0 = off; 9.81 = on)")
 
     def __post_init__(self) -> None:
-        n = self.pipe.n_segments
-        L = self.pipe.length
+        sections = tuple(self.sections)
+        for sec in sections:
+            if not isinstance(sec, SectionParams):
+                raise ValueError(f"sections: {sec!r} is not allowed: must be SectionParams")
+        object.__setattr__(self, "sections", sections)
+        if sections and self.pipe != PipeParams():
+            raise ValueError("pipe and sections are both given: describe the string either as "
+                             "one [pipe] or as [[sections]]")
+        if self.stabilizers is None:
+            object.__setattr__(self, "stabilizers", StabilizerParams(heights=()) if sections
+                               else StabilizerParams())
+        if self.trajectory is not None and not isinstance(self.trajectory, TrajectoryParams):
+            raise ValueError(f"trajectory: {self.trajectory!r} is not allowed: must be "
+                             "TrajectoryParams")
+        n = self.n_bodies
+        if n < 2:
+            raise ValueError(f"sections: the string has {n} body; it needs at least 2 (a "
+                             "segment_length below the length of a section)")
+        if n > 2000:
+            raise ValueError(f"sections: the string has {n} bodies; at most 2000 are allowed "
+                             "(longer segment_length)")
+        L = self.string_length
         if isinstance(self.gravity, bool) or not isinstance(self.gravity, (int, float)):
             raise ValueError(f"gravity = {self.gravity!r} is not allowed: must be a number (m/s^2)")
         _check_range("plant", "gravity", self.gravity, -100.0, 100.0, unit="m/s^2")
@@ -514,13 +760,15 @@ class PlantParams:
                 raise ValueError(
                     f"stabilizers.heights: {h!r} m is beyond the string: allowed [0, {L:g}] m"
                 )
+        if self.trajectory is None and any(s.stabilizers for s in sections):
+            raise ValueError("sections.stabilizers need a [trajectory] (the hole the blades touch)")
         for b in self.contact.bodies:
             if not 1 <= b <= n:
                 raise ValueError(f"contact.bodies: {b} is out of range: allowed [1, {n}]")
         for j in self.actuators.joints:
             if not 1 <= j <= n - 1:
                 raise ValueError(f"actuators.joints: {j} is out of range: allowed [1, {n - 1}]")
-        if not self.span_middle_bodies():
+        if not self.span_middle_bodies() and self.trajectory is None:
             if self.contact.enabled and not self.contact.bodies:
                 raise ValueError("contact.bodies = [] needs at least one span (two lateral "
                                  "supports); list the bodies explicitly")
@@ -538,41 +786,110 @@ class PlantParams:
                 "bit.weight_on_bit must be 0 when bit.axial_stiffness = 0 (an axially free bit)"
             )
 
+    # --- the string's bodies --------------------------------------------------------------
+    @property
+    def uniform(self) -> bool:
+        """True for the one-``pipe`` string (equal bodies; the paper's model)."""
+        return not self.sections
+
+    @property
+    def n_bodies(self) -> int:
+        """Number of rigid bodies of the whole string [1]."""
+        if self.uniform:
+            return self.pipe.n_segments
+        return sum(s.n_bodies for s in self.sections)
+
+    @property
+    def string_length(self) -> float:
+        """Length of the string from the top drive to the bit [m]."""
+        if self.uniform:
+            return self.pipe.length
+        return math.fsum(s.length for s in self.sections)
+
+    def body_sections(self) -> tuple[int, ...]:
+        """Index of the section of each body (0 for the uniform pipe), top first."""
+        if self.uniform:
+            return (0,) * self.pipe.n_segments
+        return tuple(i for i, s in enumerate(self.sections) for _ in range(s.n_bodies))
+
+    def body_lengths(self) -> tuple[float, ...]:
+        """Length [m] of each body, top first."""
+        if self.uniform:
+            return (self.pipe.segment_length,) * self.pipe.n_segments
+        return tuple(s.length / s.n_bodies for s in self.sections for _ in range(s.n_bodies))
+
+    def body_tops(self) -> tuple[float, ...]:
+        """Distance [m] of each body's top end from the top of the string (undeformed)."""
+        if self.uniform:
+            dx = self.pipe.segment_length
+            return tuple(k * dx for k in range(self.pipe.n_segments))
+        out, z = [], 0.0
+        for ln in self.body_lengths():
+            out.append(z)
+            z += ln
+        return tuple(out)
+
     def spans(self) -> list[tuple[float, float]]:
-        """Spans [m from the top] between lateral supports (top pin and stabilizers), top first."""
-        L = self.pipe.length
+        """Spans [m from the top] between lateral supports (top pin, stabilizers), top first.
+
+        Supports: the top drive (lateral spring > 0), the ``stabilizers`` heights and, with
+        sections, the middle of every stabilizer section, the sections' stabilizer blades and
+        (with a trajectory: the bit touches the hole with its gauge) the bit.
+        """
+        L = self.string_length
         sup = sorted({L - h for h in self.stabilizers.heights}) if self.stabilizers.stiffness else []
+        if not self.uniform:
+            z = 0.0
+            for s in self.sections:
+                if s.kind == "stabilizer":
+                    sup.append(z + 0.5 * s.length)
+                sup += [z + x for x in s.stabilizers]
+                z += s.length
+            if self.trajectory is not None:
+                sup.append(L)
+            sup = sorted(set(sup))
         if self.top_drive.lateral_stiffness > 0.0:
             sup = sorted({0.0, *sup})
         return [(a, b) for a, b in zip(sup[:-1], sup[1:]) if b - a > 1e-9]
 
     def span_middle_bodies(self) -> tuple[int, ...]:
         """Per span, the 1-based body whose top end is nearest the span's middle (paper: 11, 26)."""
-        dx = self.pipe.segment_length
-        n = self.pipe.n_segments
-        return tuple(min(max(int(round(0.5 * (a + b) / dx)) + 1, 1), n) for a, b in self.spans())
+        n = self.n_bodies
+        if self.uniform:
+            dx = self.pipe.segment_length
+            return tuple(min(max(int(round(0.5 * (a + b) / dx)) + 1, 1), n)
+                         for a, b in self.spans())
+        tops = self.body_tops()
+        return tuple(min(range(n), key=lambda k: abs(tops[k] - 0.5 * (a + b))) + 1
+                     for a, b in self.spans())
 
     @property
     def contact_bodies(self) -> tuple[int, ...]:
         """Monitored contact bodies (1-based): the given ones, or each span's middle body.
 
         They exist (with their X, Y, radial deflection outputs) even when contact is off; the
-        contact force is then zero.
+        contact force is then zero. With a trajectory every body is checked for contact, and
+        only the given ones are monitored (no default: a field string has hundreds).
         """
+        if self.trajectory is not None:
+            return tuple(self.contact.bodies)
         return tuple(self.contact.bodies) or self.span_middle_bodies()
 
     @property
     def actuator_joints(self) -> tuple[int, ...]:
-        """Actuator/gauge sites: joint below body k (1-based), given or below each span's middle."""
+        """Actuator/gauge sites: joint below body k (1-based), given or (the uniform pipe) below
+        each span's middle; a string of sections has sites only where they are given."""
         if self.actuators.joints:
             return tuple(self.actuators.joints)
-        n = self.pipe.n_segments
+        if not self.uniform:  # a field string: sites only where asked
+            return ()
+        n = self.n_bodies
         return tuple(min(b, n - 1) for b in self.span_middle_bodies())
 
     @property
     def unbalance_body(self) -> int:
         """1-based body index of the unbalance (0 in the parameters means the bit body)."""
-        return self.unbalance.body or self.pipe.n_segments
+        return self.unbalance.body or self.n_bodies
 
 
 def describe(cls: type) -> list[tuple[str, Any, str, str]]:

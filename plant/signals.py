@@ -24,7 +24,8 @@ from __future__ import annotations
 
 from collections.abc import Collection, Iterable
 
-__all__ = ["AXES", "CONTACT_QUANTITIES", "CONTROLLER", "EXTENDED_SCALAR_OUTPUTS", "INSTANCES",
+__all__ = ["AXES", "CONTACT_QUANTITIES", "CONTROLLER", "EXTENDED_SCALAR_OUTPUTS",
+           "FIELD_SCALAR_OUTPUTS", "INSTANCES",
            "PLANT", "SCALAR_OUTPUTS", "TOP_DRIVE", "TOP_DRIVE_SPEED_COMMAND",
            "TOP_DRIVE_TORQUE", "WHIRL_MIN_RADIUS", "actuator_force", "actuator_inputs", "fmi_unit",
            "actuator_power", "body_signal", "plant_outputs", "ref", "site_channels",
@@ -61,6 +62,13 @@ EXTENDED_SCALAR_OUTPUTS = (
     ("drilled_depth", "m", "hole drilled since the start (bit.model 'cutting')"),
     ("depth_of_cut", "m", "depth of cut per bit revolution d (bit.model 'cutting')"),
     ("bit_on_bottom", "1", "1 while the bit presses on the rock, 0 off bottom (bit bounce)"),
+)
+#: Summary of a field string (sections or a trajectory; 3D model), after the extensions'.
+FIELD_SCALAR_OUTPUTS = (
+    ("max_radial_deflection", "m",
+     "largest lateral deflection of a contact point (any body, the bit) from the hole axis"),
+    ("wall_contact_force", "N", "sum of the normal forces of the hole wall on the string"),
+    ("bodies_in_contact", "1", "number of contact points touching the hole wall"),
 )
 
 
@@ -130,7 +138,7 @@ def sites_in(names: Collection[str], signal=None) -> list[int]:
 
 
 def plant_outputs(full3d: bool, contact_bodies: Iterable[int], n_sites: int,
-                  extended: bool = False) -> list[tuple[str, str, str]]:
+                  extended: bool = False, field: bool = False) -> list[tuple[str, str, str]]:
     """(name, unit, description) of each output of a plant model, in the kernels' order.
 
     Parameters
@@ -146,6 +154,9 @@ def plant_outputs(full3d: bool, contact_bodies: Iterable[int], n_sites: int,
         and direction per contact body). The kernels always fill the extended list
         (:class:`plant.model.DrillstringModel` uses it); ``False`` gives the paper's interface
         (the default plant FMU's outputs), a subset of it.
+    field : bool
+        Include the field summary (:data:`FIELD_SCALAR_OUTPUTS`; 3D model only): a string of
+        sections or in a trajectory, whose contact is checked at every body.
     """
     rows: list[tuple[str, str, str]] = []
     if full3d:
@@ -174,4 +185,6 @@ def plant_outputs(full3d: bool, contact_bodies: Iterable[int], n_sites: int,
     rows += list(SCALAR_OUTPUTS)
     if extended:
         rows += list(EXTENDED_SCALAR_OUTPUTS)
+    if field and full3d:
+        rows += list(FIELD_SCALAR_OUTPUTS)
     return rows

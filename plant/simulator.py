@@ -107,8 +107,6 @@ class PlantSimulator:
         self._names = self._state_names()
         #: names of the entries of the input vector (see ``DrillstringModel.input_names``)
         self.input_names = list(model.input_names)
-        #: gauge radius / dx: turns a relative bending angle into surface strain [1/rad]
-        self.strain_factor = 0.5 * model.params.pipe.outer_diameter / model.derived.dx
         #: the most internal steps one step may take (:data:`MAX_SUBSTEPS`)
         self.max_substeps = MAX_SUBSTEPS
 
@@ -182,7 +180,7 @@ class PlantSimulator:
         """Is the state finite and inside the model's range of validity? (compiled check)"""
         m = self.model
         code, i, val = check_state(m.kind == "full3d", m.n, self.y, *self.limits(),
-                                   self.strain_factor, m.wR)
+                                   m.wR, m.p, m.ip)
         return self.report(code, i, val)
 
     @staticmethod
@@ -237,7 +235,7 @@ class PlantSimulator:
         done, code, i, val = run_record(
             m.model_id, code_m, self.time, h, n_out, self.max_step, m.breakpoints, self.y, m.p,
             m.ip, m.fp, self.u, m.wR, m.wF, m.wM, k1, k2, k3, k4, yt, *op, m._zbit_ref, m._out,
-            idx, rec, np.array(self.limits()), self.strain_factor)
+            idx, rec, np.array(self.limits()))
         self.time = self.time + done * h
         return rec[:done + 1], self.report(code, i, val)
 

@@ -96,6 +96,35 @@ def test_the_automatic_method_follows_the_step_size():
     assert step.sim.method == "kutta3"
 
 
+@pytest.mark.parametrize("method, h", [("rk4", 1e-3), ("kutta3", 2.5e-4)])
+def test_field_string_in_a_curved_hole(method, h):
+    """A field string (sections, a build-and-hold well: per-body frames, contact at every body
+    and blade, mud, a cutting bit, hoisting, a BHA actuator site): the longer header, the
+    per-body records and the contact-point table read as the Python step reads them."""
+    step, inp, out, ref = _pair("field_deviated_3km_bha_control", method)
+    m = step.sim.model
+    assert m.framed and m.n > 100 and m.ip[m.ip.size - 1] == 116  # the site's joint
+    n = int(round(0.05 / h))
+    _run_both(step, inp, out, ref, [k * h for k in range(n)], h, np.random.default_rng(8), 1e4)
+    assert ref.outputs()[m.output_names.index("bodies_in_contact")] > 0
+
+
+def test_field_string_divergence_is_reported_like_python():
+    """The strain guard on a curved hole (the bodies' inertial rotations, per-joint factors)."""
+    step, inp, out, ref = _pair("field_deviated_3km_bha_control", "rk4")
+    h = 1e-3
+    for k in range(100):
+        inp[:] = 0.0
+        inp[0] = 5e7  # N: a bending couple far beyond the collars' elastic range
+        ref.u[:] = inp
+        a, b = step.step(k * h, h), ref.do_step(k * h, h)
+        assert a == b
+        if not a.ok:
+            break
+    assert not a.ok and a.quantity == "joint117.strain", a
+    np.testing.assert_array_equal(_bits(step.sim.y), _bits(ref.y))
+
+
 def test_refused_steps_leave_the_state_and_give_the_python_message():
     step, inp, out, ref = _pair("paper_closed_loop")
     rng = np.random.default_rng(5)

@@ -188,15 +188,17 @@ def test_plant_divergence_is_discarded_naming_time_and_quantity(project_fmus,
 @pytest.fixture(scope="module")
 def variant_fmus(tmp_path_factory) -> dict[str, Path]:
     """Plant variants: the torque-driven axial-torsional chain (aux states, an input that is not
-    the model's first), and the linear time-invariant pulse scene (exponential Euler, load
-    switch times inside steps); a two-site controller with a gain matrix."""
+    the model's first), the linear time-invariant pulse scene (exponential Euler, load switch
+    times inside steps) and a field string in a curved hole (sections, per-body frames and
+    records, contact at every body, mud, a cutting bit, a BHA site); a two-site controller
+    with a gain matrix."""
     out = tmp_path_factory.mktemp("compiled_variants")
     pulse = out / "pulse_chain.toml"  # the axial-torsional chain only: its own FMU
     pulse.write_text('extends = "table1_axial_pulse"\nmodel = "axial_torsional"\n\n'
                      '[contact]\nbodies = [10, 20]\n')
     fmus = {}
     for key, scene in (("stick_slip_soft_torque", "stick_slip_soft_torque"),
-                       ("pulse_chain", pulse)):
+                       ("pulse_chain", pulse), ("field", "field_deviated_3km_bha_control")):
         recipe = plant_recipe(load_scene(scene))
         assert recipe.base  # a variant
         fmus[key] = build_one(recipe, out)
@@ -223,6 +225,17 @@ def test_plant_variants_compiled_equal_python(variant_fmus, monkeypatch) -> None
     fast = assert_same(pulse, [("init",)] + [("step", k * h, h) for k in range(n)], monkeypatch,
                        max_python=1 + 2 * inside)
     assert fast["failed"] >= 1 + inside
+
+
+def test_field_plant_compiled_equals_python(variant_fmus, monkeypatch) -> None:
+    """The field scene's FMU: its first step picks the method in Python (RK4 at 1 ms), the
+    others run compiled; then at 0.25 ms (Kutta's method) after one more Python step."""
+    fmu = variant_fmus["field"]
+    names = _inputs(fmu)
+    assert names == ["actuator1_force_C", "actuator1_force_E"]
+    script = [("init",)] + _steps(names, 100, 1e4, 9, h=1e-3)
+    script += _steps(names, 200, 1e4, 10, t0=0.1, h=H)
+    assert_same(fmu, script, monkeypatch, max_python=2)
 
 
 # ----------------------------------------------------------------------------- controllers

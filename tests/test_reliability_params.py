@@ -27,19 +27,22 @@ from typing import Any
 import pytest
 
 from drillcosim.controller.params import ControllerParams
-from drillcosim.plant.params import LoadParams, PlantParams
+from drillcosim.plant.params import LoadParams, PlantParams, SectionParams
 from drillcosim.plant.scene import SECTIONS, SceneError, load_scene, scene_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
-ALL_SECTIONS: dict[str, type] = {**SECTIONS, "loads": LoadParams}
+ALL_SECTIONS: dict[str, type] = {**SECTIONS, "loads": LoadParams, "sections": SectionParams}
+#: A valid [[sections]] entry the bad value is added to (a string needs two bodies).
+SECTION_BASE = {"length": 10.0, "segment_length": 1.0}
 
 #: Fields that accept negative values (their range is still bounded below).
-NEGATIVE_OK = {"top_drive.rotary_speed", "bit.weight_on_bit", "loads.magnitude", "gravity"}
+NEGATIVE_OK = {"top_drive.rotary_speed", "bit.weight_on_bit", "loads.magnitude", "gravity",
+               "top_drive.hoisting_speed"}
 #: Fields that accept +inf (documented: rigid springs, a load that never ends).
 INF_OK = {"top_drive.axial_stiffness", "top_drive.lateral_stiffness",
-          "top_drive.torsional_stiffness", "loads.duration"}
+          "top_drive.torsional_stiffness", "loads.duration", "damping.max_joint_rate"}
 #: Sentinel values that look bad but are documented (stabilizers.damping = -1: material).
-SENTINELS = {"stabilizers.damping": -1.0}
+SENTINELS = {"stabilizers.damping": -1.0, "sections.added_mass_coefficient": -1.0}
 
 
 def _param_fields() -> list[tuple[str, str, Any]]:
@@ -78,9 +81,13 @@ def _bad_values(key: str, default: Any) -> list[tuple[str, Any, str]]:
                   ("nan", math.nan, "nan")]
     elif isinstance(default, tuple):
         cases += [("str", "abc", "'abc'"), ("number", 5, "5")]
-        if key == "stabilizers.heights":
+        if key in ("stabilizers.heights", "sections.stabilizers"):
             cases += [("nan_element", [math.nan], "nan"), ("negative_element", [-1.0], "-1.0"),
-                      ("str_element", ["a"], "'a'"), ("beyond_string", [1e3], "1000.0")]
+                      ("str_element", ["a"], "'a'"), ("beyond_string", [1e3], "1000")]
+        elif key.startswith("trajectory."):  # rows of numbers
+            nan_row = [0.0, math.nan, 0.0] if key.endswith("survey") else [math.nan, 0.2]
+            cases += [("number_element", [0], "0"), ("short_row", [[1.0]], "[1.0]"),
+                      ("str_row", [["a", 1, 2]], "'a'"), ("nan_row", [nan_row], "nan")]
         else:  # 1-based body / joint numbers
             cases += [("zero_element", [0], "0"), ("fraction_element", [1.5], "1.5"),
                       ("bool_element", [True], "True"), ("beyond_n", [31], "31")]
@@ -125,6 +132,9 @@ def _scene_text(sec: str, name: str, value: Any) -> str:
     if sec == "loads":
         return "[[loads]]\nmagnitude = 1.0\n" + line if name != "magnitude" else \
             "[[loads]]\n" + line
+    if sec == "sections":
+        base = "".join(f"{k} = {v!r}\n" for k, v in SECTION_BASE.items() if k != name)
+        return "[contact]\nbodies = [1]\n\n[[sections]]\n" + base + line
     return f"[{sec}]\n{line}"
 
 
@@ -133,6 +143,8 @@ def _library_call(sec: str, name: str, value: Any) -> None:
         PlantParams(**{name: value})
     elif sec == "loads":
         PlantParams(loads=(LoadParams(**{name: value}),))
+    elif sec == "sections":
+        PlantParams(sections=(SectionParams(**{**SECTION_BASE, name: value}),))
     else:
         PlantParams(**{sec: ALL_SECTIONS[sec](**{name: value})})
 
