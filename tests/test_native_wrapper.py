@@ -619,7 +619,7 @@ def test_the_host_keeps_its_locale_and_signal_handlers(host: Path, native_dir: P
     env = plain_env(tmp_path, LANG="C.UTF-8", LC_CTYPE="C.UTF-8")
     proc = controller_run(host, native_dir, tmp_path, env)
     assert proc.returncode == 0, proc.stderr
-    assert "HOST locale=C sigint=default" in proc.stderr.splitlines(), proc.stderr
+    assert "HOST locale=C sigint=unchanged" in proc.stderr.splitlines(), proc.stderr
 
 
 def test_no_usable_python_is_one_message_listing_what_each_candidate_lacked(

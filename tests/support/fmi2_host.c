@@ -10,8 +10,9 @@
  * size the difference of two (as fmpy.simulate_fmu steps). Exit status: 0 all calls OK, 3 fmi2Instantiate
  * returned NULL, 4 a call returned fmi2Error or worse, 2 bad usage or a missing library.
  * The logger prints "[instance status category] message" to stderr. After fmi2Instantiate
- * the host prints "HOST locale=<LC_CTYPE> sigint=<default|changed>" to stderr: what an FMU
- * that starts Python in the process left of the host's locale and signal handlers.
+ * the host prints "HOST locale=<LC_CTYPE> sigint=<unchanged|changed>" to stderr: what an FMU
+ * that starts Python in the process left of the host's locale and SIGINT disposition (compared with
+ * the one the host had before fmi2Instantiate: a background job inherits SIG_IGN).
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -75,19 +76,20 @@ int main(int argc, char **argv)
         long k, n_steps = (long)(stop / h + 0.5);
         fmi2Component c;
         fmi2Status st = fmi2OK;
+        struct sigaction before, after;
         for (sep = 5; sep < argc && strcmp(argv[sep], "--") != 0; sep++) {
         }
         for (i = sep + 1; i < argc && n_out < 256; i++)
             out[n_out++] = (fmi2ValueReference)strtoul(argv[i], NULL, 10);
+        sigaction(SIGINT, NULL, &before); /* inherited: SIG_IGN in a background job */
         c = fmi2Instantiate("chost", fmi2CoSimulation, "", uri, &cb, fmi2False, fmi2True);
         if (c == NULL)
             return 3;
         {
-            struct sigaction sa;
             const char *loc = setlocale(LC_CTYPE, NULL);
-            sigaction(SIGINT, NULL, &sa);
+            sigaction(SIGINT, NULL, &after);
             fprintf(stderr, "HOST locale=%s sigint=%s\n", loc != NULL ? loc : "?",
-                    sa.sa_handler == SIG_DFL ? "default" : "changed");
+                    after.sa_handler == before.sa_handler ? "unchanged" : "changed");
         }
         st = fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0);
         if (st < fmi2Error)
