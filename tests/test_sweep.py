@@ -52,16 +52,24 @@ def dying_runner(scene, gain, delay, step, stop_time, engine, open_loop=False, o
 
 
 #: Completion order of :func:`ordered_runner`, from the environment (spawned workers inherit
-#: it): "<folder>:references_first" or "<folder>:references_last"; the folder holds one marker
-#: file per finished point, the barrier that enforces the order across worker processes.
+#: it): "<sweep folder>:<order>". The barrier is the sweep's own table: a point waits until
+#: the rows it must follow are *written* (a worker having finished them is not enough: under
+#: load the sweep can receive a closed-loop and an open-loop result in one batch).
+#: references_first: closed-loop points wait for both open-loop rows; references_last:
+#: open-loop points wait for all 12 closed-loop rows; references_held: open-loop points never
+#: finish (the sweep is killed while they wait).
 ORDER_ENV = "DRILLCOSIM_TEST_SWEEP_ORDER"
+BARRIER_TIMEOUT = 300.0     # s; a barrier never met is a bug of the test: the point errors
 
 
-def _wait_for(folder: Path, prefix: str, count: int) -> None:
-    deadline = time.time() + 60
-    while len(list(folder.glob(prefix + "*"))) < count and time.time() < deadline:
+def _wait_for_rows(folder: Path, kind: str, count: int) -> None:
+    deadline = time.time() + BARRIER_TIMEOUT
+    while time.time() < deadline:
+        if sum(r["kind"] == kind for r in read_table(folder)) >= count:
+            return
         time.sleep(0.01)
-    time.sleep(0.2)    # let the points awaited be received by the sweep first
+    raise RuntimeError(f"test barrier: {count} {kind} rows not written in {folder} after "
+                       f"{BARRIER_TIMEOUT:g} s")
 
 
 def ordered_runner(scene, gain, delay, step, stop_time, engine, open_loop=False, overrides=None,
@@ -72,19 +80,16 @@ def ordered_runner(scene, gain, delay, step, stop_time, engine, open_loop=False,
     (excess = gain): 0.1 stable, 0.55 undecided (within the noise), 2.0 unstable; gain 3
     diverges, gain 13 raises; gain 0.2 at H = 2 ms is too short (min_stop_time 9 s).
     """
-    kind = "open" if open_loop else "closed"
     order = os.environ.get(ORDER_ENV)
     if order:
         folder, how = order.rsplit(":", 1)
         if how == "references_last" and open_loop:
-            _wait_for(Path(folder), "closed", 12)
+            _wait_for_rows(Path(folder), "closed_loop", 12)
         if how == "references_first" and not open_loop:
-            _wait_for(Path(folder), "open", 2)
-    try:
-        return _ordered_result(gain, step, stop_time, open_loop)
-    finally:
-        if order:
-            (Path(folder) / f"{kind}-{gain}-{step}").touch()
+            _wait_for_rows(Path(folder), "open_loop", 2)
+        if how == "references_held" and open_loop:
+            _wait_for_rows(Path(folder), "open_loop", 1)      # never: none can finish
+    return _ordered_result(gain, step, stop_time, open_loop)
 
 
 def _ordered_result(gain, step, stop_time, open_loop):
@@ -293,9 +298,7 @@ def test_table_and_summary_do_not_depend_on_completion_order(clean_ordered_run, 
     """A process pool whose points finish in a forced order (open-loop references first, or
     last: closed-loop rows are written before the reference they are judged against): the
     CSV equals the Parquet copy, and both equal the clean run's table; same summary."""
-    barrier = tmp_path / "barrier"
-    barrier.mkdir()
-    monkeypatch.setenv(ORDER_ENV, f"{barrier}:{order}")
+    monkeypatch.setenv(ORDER_ENV, f"{tmp_path / 'sweep'}:{order}")
     out = execute_sweep(ORDERED, tmp_path / "sweep", workers=3, measure=ordered_runner,
                     progress=False)
     tmp_path = tmp_path / "sweep"
@@ -314,21 +317,19 @@ def test_table_and_summary_do_not_depend_on_completion_order(clean_ordered_run, 
 @pytest.mark.slow
 def test_killed_process_group_then_resume_equals_a_clean_run(clean_ordered_run, tmp_path):
     """Kill a sweep's whole process group (the sweep and its pool workers) once a few
-    closed-loop rows are written before their references; the resumed sweep re-judges them
-    and its table and summary equal a clean run's."""
+    closed-loop rows are written while their references are still running; the resumed sweep
+    re-judges them and its table and summary equal a clean run's."""
     script = (
         "import sys; sys.path.insert(0, {!r})\n"
         "from test_sweep import ORDERED, ordered_runner\n"
         "from drillcosim.cosim.study.sweep import execute_sweep\n"
         "execute_sweep(ORDERED, {!r}, workers=3, measure=ordered_runner, progress=False)\n"
     ).format(str(ROOT / "tests"), str(tmp_path))
-    barrier = tmp_path.parent / f"{tmp_path.name}_barrier"
-    barrier.mkdir()
-    env = {**os.environ, ORDER_ENV: f"{barrier}:references_last"}
+    env = {**os.environ, ORDER_ENV: f"{tmp_path}:references_held"}
     proc = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, env=env,
                             start_new_session=True)
     csv_path = tmp_path / "results.csv"
-    deadline = time.time() + 120
+    deadline = time.time() + BARRIER_TIMEOUT
     try:
         while time.time() < deadline:
             text = csv_path.read_text() if csv_path.exists() else ""
