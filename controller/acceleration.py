@@ -34,4 +34,4 @@ def compiled_law(entry: str, pack: Callable[[], tuple[object, list[Any]]]) -> An
         from . import compiled
     except ImportError:  # pragma: no cover - numba loaded but unusable
         return None
-    return compiled.CompiledLaw(getattr(compiled, entry).address, pack)
+    return compiled.CompiledLaw(compiled.addresses()[entry], pack)

@@ -1,8 +1,9 @@
 """Compiled steps of the controller laws: one step as a C function, without the GIL.
 
-:func:`strain_step` and :func:`top_drive_step` (numba ``@cfunc``, ``int32 step(void *context,
-double t, double h)``) do what :meth:`controller.StrainController.step` (any number of sites,
-SISO or gain matrix, saturation, switch-on, lag) and :meth:`controller.TopDriveController.step`
+:func:`strain_step` and :func:`top_drive_step` (numba ``cfunc`` entry points, :func:`cfuncs`,
+``int32 step(void *context, double t, double h)``) do what
+:meth:`controller.StrainController.step` (any number of sites, SISO or gain matrix, saturation,
+switch-on, lag) and :meth:`controller.TopDriveController.step`
 do, bit for bit, and :func:`state_space_step` what
 :meth:`controller.StateSpaceController.step` does (to rounding: its matrix-vector product is a
 call of numba's BLAS, numpy's of numpy's), reading the inputs from an input buffer and writing
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -30,8 +32,8 @@ from numba import carray, cfunc, njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-__all__ = ["FALLBACK", "INTERNAL", "OK", "REFUSED", "CompiledLaw", "state_space_step",
-           "strain_step", "top_drive_step"]
+__all__ = ["ENTRIES", "FALLBACK", "INTERNAL", "OK", "REFUSED", "CompiledLaw", "addresses",
+           "cfuncs", "state_space_step", "strain_step", "top_drive_step", "use_addresses"]
 
 OK = 0
 FALLBACK = 1  # run this step in Python (nothing changed)
@@ -113,7 +115,6 @@ def strain_core(t, dt, params, matrix, decay, force, inputs, outputs):
     return OK
 
 
-@cfunc(types.int32(types.voidptr, types.float64, types.float64), nopython=True, cache=True)
 def strain_step(context, t, h):
     """C entry point of the strain law: slots params, matrix, decay, force, inputs, outputs."""
     c = carray(context, 6 * _WIDTH, dtype=np.int64)
@@ -153,7 +154,6 @@ def top_drive_core(t, dt, params, state, inputs, outputs):
     return OK
 
 
-@cfunc(types.int32(types.voidptr, types.float64, types.float64), nopython=True, cache=True)
 def top_drive_step(context, t, h):
     """C entry point of the top-drive law: slots params, state, inputs, outputs."""
     c = carray(context, 4 * _WIDTH, dtype=np.int64)
@@ -200,7 +200,6 @@ def state_space_core(t, h, timing, matrix, w, scratch, lower, upper, law_outputs
     return OK
 
 
-@cfunc(types.int32(types.voidptr, types.float64, types.float64), nopython=True, cache=True)
 def state_space_step(context, t, h):
     """C entry point of the state-space law: slots timing, matrix, w, scratch, lower, upper,
     law outputs, inputs, outputs."""
@@ -210,6 +209,36 @@ def state_space_step(context, t, h):
                                 _f1(c, 5), _f1(c, 6), _f1(c, 7), _f1(c, 8))
     except Exception:  # noqa: BLE001 - never reported as a success
         return INTERNAL
+
+
+#: The C entry points (``int32 f(void *context, double t, double h)``), in image order.
+ENTRIES: tuple[str, ...] = ("strain_step", "top_drive_step", "state_space_step")
+_SIGNATURE = types.int32(types.voidptr, types.float64, types.float64)
+_CFUNCS: dict[str, Any] = {}
+_ADDRESSES: dict[str, int] = {}
+
+
+def cfuncs() -> dict[str, Any]:
+    """The entry points as numba ``cfunc`` objects (compiled, or loaded from numba's cache, at
+    the first call: that sets numba up in the process)."""
+    if not _CFUNCS:
+        for name in ENTRIES:
+            _CFUNCS[name] = cfunc(_SIGNATURE, nopython=True, cache=True)(globals()[name])
+    return _CFUNCS
+
+
+def use_addresses(addresses: Mapping[str, int]) -> None:
+    """Take the entry points' addresses from elsewhere: a native image of this very module's
+    cfuncs (``fmu_src/slave_support/native.py``), which needs no numba set-up."""
+    _ADDRESSES.update({name: int(addresses[name]) for name in ENTRIES})
+
+
+def addresses() -> dict[str, int]:
+    """Entry point -> address of its C function (given by :func:`use_addresses`, else
+    numba's)."""
+    if not _ADDRESSES:
+        _ADDRESSES.update({name: cf.address for name, cf in cfuncs().items()})
+    return _ADDRESSES
 
 
 _CALL = ctypes.CFUNCTYPE(ctypes.c_int32, ctypes.c_void_p, ctypes.c_double, ctypes.c_double)
@@ -222,7 +251,7 @@ class CompiledLaw:
     Parameters
     ----------
     function : int
-        :func:`strain_step` or :func:`top_drive_step` (``.address``).
+        Address of an entry point (:func:`addresses`).
     pack : callable
         ``pack()`` -> ``(key, arrays)``: the context's arrays (float64, C-contiguous, 1-D or
         2-D) in the function's slot order, and what they depend on besides the law's arrays

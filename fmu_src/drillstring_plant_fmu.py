@@ -117,6 +117,7 @@ from the instance's rebuilds the model first.
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import math
 import sys
 import traceback
@@ -138,7 +139,8 @@ from _dcs_pythonfmu_0_7_0 import (
 )
 from _dcs_pythonfmu_0_7_0.enums import Fmi2Status
 from _dcs_slave_support_0_1_0 import DcsSlave
-from _dcs_slave_support_0_1_0.vendored import import_vendored
+from _dcs_slave_support_0_1_0.native import provide
+from _dcs_slave_support_0_1_0.vendored import cache_file, import_vendored, read_memo, write_memo
 
 #: Name under which the build vendors ``plant/`` into this FMU's resources.
 VENDORED_PLANT = "_dcs_plant_0_1_0"
@@ -160,6 +162,34 @@ _scene_mod = sys.modules[f"{VENDORED_PLANT}.scene"]
 _model_mod = sys.modules[f"{VENDORED_PLANT}.model"]
 _sim_mod = sys.modules[f"{VENDORED_PLANT}.simulator"]
 _signals_mod = sys.modules[f"{VENDORED_PLANT}.signals"]
+
+
+#: The spectral radii of the models built (``plant.model.SPECTRAL_RADII``), kept beside the
+#: stable copy per numpy version: a second process skips the Jacobian and eigenvalue problem.
+_RADII_FILE = f"spectral-radii-numpy-{np.__version__}.json"
+
+
+def _with_spectral_memo(make: Any) -> Any:
+    """``make()`` with the spectral radii memo filled from, and new ones saved to, its file."""
+    radii = _model_mod.SPECTRAL_RADII
+    path = cache_file(_PLANT, _RADII_FILE)
+    radii.update({k: v for k, v in read_memo(path).items() if k not in radii})
+    known = set(radii)
+    made = make()
+    if set(radii) - known:
+        write_memo(path, radii)
+    return made
+
+
+def _compiled_entries() -> bool:
+    """Whether compiled steps are on; the first call in the process gives the plant's compiled
+    entry points their addresses: from the native image beside the stable copy when there is
+    one (no numba set-up), else from numba (which writes the image; ``slave_support.native``)."""
+    cs = importlib.import_module(f"{VENDORED_PLANT}.compiled_step")
+    if not cs.enabled():
+        return False
+    provide(_PLANT, cs)
+    return True
 
 
 def scenes_folder(resources: str | None = None) -> Path:
@@ -452,7 +482,8 @@ class DrillstringPlant(DcsSlave):
                 f"scene {self.scene!r} with model = {self.model!r} builds the {model.kind} model "
                 f"whose inputs are [{', '.join(acting)}]; this FMU's inputs are "
                 f"[{', '.join(declared)}]: {fix}")
-        sim = _sim_mod.PlantSimulator(model, None if step == 0.0 else step)
+        sim = _with_spectral_memo(lambda: _sim_mod.PlantSimulator(
+            model, None if step == 0.0 else step))
         sim.time = float(self._start_time)
         self._out_index = np.array([model.output_names.index(n) for n in self.REAL_OUTPUTS])
         self._in_index = np.array([model.input_names.index(n) for n in declared],
@@ -482,7 +513,11 @@ class DrillstringPlant(DcsSlave):
             self._write_outputs()
 
     def _write_outputs(self) -> None:
-        self._sim.outputs().take(self._out_index, out=self.outputs)
+        step = self._compiled()
+        if step is not None:
+            step.write_outputs()
+        else:
+            self._sim.outputs().take(self._out_index, out=self.outputs)
 
     # ---------------------------------------------------------------- FMI calls
     def setup_experiment(self, start_time: float, stop_time: float | None = None,
@@ -529,18 +564,26 @@ class DrillstringPlant(DcsSlave):
         """The simulator's compiled step for the wrapper (``plant.compiled_step``), or None:
         no valid model, diverged (every later doStep is discarded in Python), or none for the
         method or switched off (``DRILLCOSIM_COMPILED_STEP=0``)."""
-        sim = self._sim
-        if sim is None or self._init_error is not None or self._halted is not None:
+        if self._init_error is not None or self._halted is not None:
             return None
-        if self._step_sim is not sim:
-            self._step_sim = sim
-            self._step = sim.compiled_step(self.inputs, self._in_index, self.outputs,
-                                           self._out_index)
-        step = self._step
+        step = self._compiled()
         if step is None:
             return None
         step.refresh()
         return step.function, step.context
+
+    def _compiled(self) -> Any:
+        """The compiled step of the current simulator (made at its first use), or None."""
+        sim = self._sim
+        if sim is None:
+            return None
+        if self._step_sim is not sim:
+            self._step_sim = sim
+            self._step = None
+            if _compiled_entries():
+                self._step = sim.compiled_step(self.inputs, self._in_index, self.outputs,
+                                               self._out_index)
+        return self._step
 
     def _fmi2_compiled_step_failed(self, code: int, t: float, h: float) -> None:
         """Status and message of a compiled step that returned ``code`` (as :meth:`do_step`)."""

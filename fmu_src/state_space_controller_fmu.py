@@ -106,6 +106,7 @@ class StateSpaceController(LawSlave):
     REAL_OUTPUTS = tuple(r[0] for r in DEFAULT_LAYOUT["outputs"])
     TUNABLE = _limit_names(list(REAL_OUTPUTS))
     FIXED = ()
+    LAW_PACKAGE = _CONTROLLER
     VARIABLE_UNITS: ClassVar[dict[str, str]] = {}
     DIRECT_FEEDTHROUGH: ClassVar[dict[str, tuple[str, ...]]] = {}
 

@@ -137,6 +137,7 @@ class StrainController(LawSlave):
     REAL_OUTPUTS = OUTPUTS
     TUNABLE = TUNABLE
     FIXED = FIXED
+    LAW_PACKAGE = _CONTROLLER
     #: Units of the Real variables, written into modelDescription.xml by the build.
     VARIABLE_UNITS: ClassVar[dict[str, str]] = _units(INPUTS, OUTPUTS, 0)
     #: Inputs each output depends on *directly* (within the same communication

@@ -81,6 +81,7 @@ class TopDriveController(LawSlave):
     REAL_OUTPUTS = OUTPUTS
     TUNABLE = tuple(row[0] for row in PARAMETERS)
     FIXED = ("enabled",)
+    LAW_PACKAGE = _CONTROLLER
     #: Units of the Real variables, written into modelDescription.xml by the build.
     VARIABLE_UNITS: ClassVar[dict[str, str]] = {
         "top_rotary_speed": "rad/s", "top_torque": "N.m", "top_drive_torque": "N.m",

@@ -35,7 +35,8 @@ from __future__ import annotations
 import ctypes
 import math
 import os
-from typing import TYPE_CHECKING
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import carray, cfunc, njit, types
@@ -63,8 +64,8 @@ from .observables import outputs3d, outputs_at
 if TYPE_CHECKING:
     from .simulator import PlantSimulator, StepResult
 
-__all__ = ["DIVERGED", "FALLBACK", "INTERNAL", "OK", "REFUSED", "CompiledStep", "enabled",
-           "plant_step"]
+__all__ = ["DIVERGED", "ENTRIES", "FALLBACK", "INTERNAL", "OK", "REFUSED", "CompiledStep",
+           "addresses", "cfuncs", "enabled", "plant_outputs", "plant_step", "use_addresses"]
 
 #: Return codes of :func:`plant_step`.
 OK = 0
@@ -236,9 +237,8 @@ def step_core(t, h, meta, settings, clock, y, p, ip, fp, u, wR, wF, wM, work, br
     return OK
 
 
-@cfunc(types.int32(types.voidptr, types.float64, types.float64), nopython=True, cache=True)
 def plant_step(context, t, h):
-    """The C entry point: ``context`` is the int64 slot array of :class:`CompiledStep`.
+    """The C entry point of a step: ``context`` is the int64 slot array of :class:`CompiledStep`.
 
     An exception inside (a bug: nopython code raises e.g. on a division by an exact zero) is
     :data:`INTERNAL`, never a success: numba's cfunc wrapper would print it and return 0.
@@ -253,6 +253,60 @@ def plant_step(context, t, h):
             _f2(c, 26), _f2(c, 27))
     except Exception:  # noqa: BLE001 - reported as INTERNAL (see the docstring)
         return INTERNAL
+
+
+@njit(cache=True)
+def outputs_core(meta, settings, clock, y, p, ip, fp, u, wR, outputs, out_index, out):
+    """The outputs at the simulator's time, as ``PlantSimulator.outputs()`` gives them (into
+    the model's scratch ``out``), put into the output buffer."""
+    if meta[M_MODEL] == MODEL_FULL3D:
+        outputs3d(clock[0], y, p, ip, fp, u, wR, settings[S_ZBIT_REF], out)
+    else:
+        outputs_at(clock[0], y, p, ip, fp, u, wR, settings[S_ZBIT_REF], out)
+    for j in range(out_index.size):
+        outputs[j] = out[out_index[j]]
+    return OK
+
+
+def plant_outputs(context, t, h):
+    """The C entry point of the outputs (``t`` and ``h`` unused: the simulator's own time)."""
+    c = carray(context, len(_SLOTS) * _WIDTH, dtype=np.int64)
+    try:
+        return outputs_core(_i1(c, 0), _f1(c, 1), _f1(c, 2), _f1(c, 3), _f1(c, 4), _i1(c, 5),
+                            _f1(c, 6), _f1(c, 7), _f3(c, 8), _f1(c, 15), _i1(c, 16),
+                            _f1(c, 17))
+    except Exception:  # noqa: BLE001 - reported as INTERNAL
+        return INTERNAL
+
+
+#: The C entry points (``int32 f(void *context, double t, double h)``), in image order.
+ENTRIES: tuple[str, ...] = ("plant_step", "plant_outputs")
+_SIGNATURE = types.int32(types.voidptr, types.float64, types.float64)
+_CFUNCS: dict[str, Any] = {}
+_ADDRESSES: dict[str, int] = {}
+
+
+def cfuncs() -> dict[str, Any]:
+    """The entry points as numba ``cfunc`` objects (compiled, or loaded from numba's cache, at
+    the first call: that sets numba up in the process)."""
+    if not _CFUNCS:
+        for name in ENTRIES:
+            _CFUNCS[name] = cfunc(_SIGNATURE, nopython=True, cache=True)(globals()[name])
+    return _CFUNCS
+
+
+def use_addresses(addresses: Mapping[str, int]) -> None:
+    """Take the entry points' addresses from elsewhere: a native image of this very module's
+    cfuncs (``fmu_src/slave_support/native.py``), which needs no numba set-up."""
+    _ADDRESSES.update({name: int(addresses[name]) for name in ENTRIES})
+
+
+def addresses() -> dict[str, int]:
+    """Entry point -> address of its C function (given by :func:`use_addresses`, else
+    numba's)."""
+    if not _ADDRESSES:
+        _ADDRESSES.update({name: cf.address for name, cf in cfuncs().items()})
+    return _ADDRESSES
 
 
 _CALL = ctypes.CFUNCTYPE(ctypes.c_int32, ctypes.c_void_p, ctypes.c_double, ctypes.c_double)
@@ -277,13 +331,11 @@ class CompiledStep:
     Attributes
     ----------
     function : int
-        Address of :func:`plant_step`.
+        Address of :func:`plant_step` (:func:`addresses`).
     context : int
         Address of the slot array (valid while this object lives and :meth:`refresh` has not
         rebuilt it).
     """
-
-    function: int = plant_step.address
 
     def __init__(self, sim: PlantSimulator, inputs: np.ndarray, in_index: np.ndarray,
                  outputs: np.ndarray, out_index: np.ndarray) -> None:
@@ -296,7 +348,10 @@ class CompiledStep:
                                  "float64 arrays")
         self.report = np.zeros(3)
         self._key: tuple | None = None
+        entry = addresses()
+        self.function = entry["plant_step"]
         self._call = _CALL(self.function)
+        self._outputs_call = _CALL(entry["plant_outputs"])
         self.refresh()
 
     def refresh(self) -> None:
@@ -353,6 +408,16 @@ class CompiledStep:
         self.context = ctx.ctypes.data
         self._key = key
 
+    def write_outputs(self) -> None:
+        """Put the outputs at the simulator's time into the output buffer (compiled: what
+        ``sim.outputs().take(out_index, out=outputs)`` does, bit for bit)."""
+        self.refresh()
+        code = self._outputs_call(self.context, 0.0, 0.0)
+        if code != OK:
+            raise RuntimeError(f"the compiled plant outputs raised an exception inside their "
+                               f"compiled code at t = {self.sim.time!r} s; run with "
+                               f"DRILLCOSIM_COMPILED_STEP=0 to see it in Python")
+
     def step(self, t: float, h: float) -> StepResult:
         """One step through the compiled function (ctypes; the GIL is released)."""
         code = self._call(self.context, t, h)
@@ -363,9 +428,12 @@ class CompiledStep:
     def finish(self, code: int, t: float, h: float) -> StepResult:
         """The result of a step whose compiled call returned ``code`` (not OK).
 
-        :data:`FALLBACK`: the step runs in Python now (``PlantSimulator.do_step``; outputs put
-        into the buffer on success) and the context follows the simulator's new method or
-        operator. :data:`REFUSED` / :data:`DIVERGED`: the simulator's own message.
+        :data:`FALLBACK`: for the automatic method's first step of a step size, the method is
+        chosen for it (``PlantSimulator.refusal`` does the same) and the step runs compiled;
+        otherwise (an exponential operator for a new step size) it runs in Python now
+        (``PlantSimulator.do_step``; outputs put into the buffer on success) and the context
+        follows the simulator's new method or operator. :data:`REFUSED` / :data:`DIVERGED`:
+        the simulator's own message.
 
         Raises
         ------
@@ -375,6 +443,13 @@ class CompiledStep:
             names the exception), or a code this module does not know.
         """
         sim = self.sim
+        if code == FALLBACK and sim.automatic and h != sim.automatic_step and h > 0.0 \
+                and math.isfinite(h):
+            sim.choose_method(h)
+            self.refresh()
+            code = self._call(self.context, t, h)
+            if code == OK:
+                return sim.ok
         if code == FALLBACK:
             res = sim.do_step(t, h)
             if res.ok:

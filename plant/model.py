@@ -11,6 +11,7 @@ the pipe. Body k (1-based) spans depth [(k-1) dx, k dx] in the undeformed state.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
@@ -78,11 +79,19 @@ MODEL_KINDS = ("full3d", "axial_torsional")
 # (None: no stability limit; exponential integrators treat the linear part exactly; 0: none
 # automatic). The table itself: :data:`plant.integrators.METHODS`.
 FIXED_STEP_METHODS = {name: m.radius for name, m in METHODS.items()}
-#: Spectral radius [1/s] (with margins) of every (parameters, model kind) built in this process:
-#: it costs an eigenvalue problem (~50 ms for 30 bodies) that another model of the same
-#: parameters (a second FMU instance, a sweep point, a re-run) need not repeat. A pure function
-#: of the key, so results are unchanged.
-_SPECTRAL_RADII: dict[tuple[PlantParams, str], float] = {}
+#: Spectral radius [1/s] (with margins) of every (parameters, model kind) built in this process,
+#: by :func:`spectral_key`: it costs a Jacobian (2 n_state right-hand sides) and an eigenvalue
+#: problem (~50 ms for 30 bodies) that another model of the same parameters (a second FMU
+#: instance, a sweep point, a re-run) need not repeat. A pure function of the key, so results
+#: are unchanged; a caller may fill it from a store of its own (the plant FMU keeps one beside
+#: its stable copy, per numpy version).
+SPECTRAL_RADII: dict[str, float] = {}
+
+
+def spectral_key(params: PlantParams, kind: str) -> str:
+    """Key of :data:`SPECTRAL_RADII`: SHA-256 (hex) of ``repr((params, kind))`` (the frozen
+    parameter tree's repr is complete: floats round-trip, strings are quoted)."""
+    return hashlib.sha256(repr((params, kind)).encode()).hexdigest()
 
 
 def series(k_boundary: float, k_half: float) -> float:
@@ -685,9 +694,10 @@ class DrillstringModel:
         if self.kind == "full3d":
             n = self.n
             ang = y[3 * n + 3 * (n - 1): 3 * n + 3 * n]
-            R = np.empty((3, 3))
-            kern.cardan(ang[0], ang[1], ang[2], R)
-            return float(y[3 * (n - 1) + 2] + h * R[2, 2])
+            # R[2, 2] of kern.cardan (the same libm calls, the same bits), without a numba
+            # dispatch: a model built only to declare an FMU's layout sets no numba up
+            r22 = math.cos(float(ang[1])) * math.cos(float(ang[2]))
+            return float(y[3 * (n - 1) + 2] + h * r22)
         return float(y[self.n - 1] + h)
 
     def static_axial_displacement(self) -> np.ndarray:
@@ -830,10 +840,10 @@ class DrillstringModel:
         that the step stays stable when the pipe touches the wellbore. Computed once per
         parameter set and model kind in a process.
         """
-        key = (self.params, self.kind)
-        if key not in _SPECTRAL_RADII:
-            _SPECTRAL_RADII[key] = self.spectral_radius_with_margins(self.initial_jacobian)
-        return _SPECTRAL_RADII[key]
+        key = spectral_key(self.params, self.kind)
+        if key not in SPECTRAL_RADII:
+            SPECTRAL_RADII[key] = self.spectral_radius_with_margins(self.initial_jacobian)
+        return SPECTRAL_RADII[key]
 
     def spectral_radius_with_margins(self, J: np.ndarray) -> float:
         """Spectral radius [1/s] of ``J`` (a Jacobian of this model, possibly augmented) plus

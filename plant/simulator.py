@@ -142,8 +142,9 @@ class PlantSimulator:
         if spec is None or spec.radius is not None:
             self.operator_dt = None
 
-    def _choose(self, h: float) -> None:
-        """The automatic method for communication steps of ``h`` [s]."""
+    def choose_method(self, h: float) -> None:
+        """Take the automatic method for communication steps of ``h`` [s] (:attr:`automatic`;
+        a step of a new size does it first)."""
         method = self.model.method_for_step(h)
         if method != self.method:
             self._use_method(method)
@@ -223,7 +224,7 @@ class PlantSimulator:
         m = self.model
         idx = np.asarray(idx, dtype=np.int64)
         if self.automatic and h > 0.0 and math.isfinite(h) and h != self.automatic_step:
-            self._choose(h)
+            self.choose_method(h)
         if self.method == "rk4":
             code_m, op = RECORD_RK4, _NO_OPERATOR
         elif self.method == "expeuler" and self._expeuler_compiled(h, n_out):
@@ -289,7 +290,7 @@ class PlantSimulator:
             return StepResult(False, f"step size {h!r} s at t = {t!r} s is not allowed: must be "
                                      f"> 0 and finite; step rejected (state unchanged)")
         if self.automatic and h != self.automatic_step:
-            self._choose(h)
+            self.choose_method(h)
         if not (math.isfinite(t) and abs(t - self.time) <= 1e-9 * max(1.0, abs(t))):
             return StepResult(False, f"communication point t = {t!r} s is not the plant's time "
                                      f"{self.time!r} s; step rejected (state unchanged)")

@@ -25,14 +25,19 @@ run on our C wrapper (``fmu_src/wrapper``), whose status protocol this class spe
 
 from __future__ import annotations
 
+import importlib
 import json
 import math
+import sys
 from collections.abc import Callable
+from types import ModuleType
 from typing import Any, ClassVar
 
 import numpy as np
 from _dcs_pythonfmu_0_7_0 import Boolean, Fmi2Slave, Integer, Real, String
 from _dcs_pythonfmu_0_7_0.enums import Fmi2Causality, Fmi2Status
+
+from .native import provide
 
 __all__ = ["DcsSlave", "LawSlave"]
 
@@ -194,6 +199,9 @@ class LawSlave(DcsSlave):
 
     TUNABLE: ClassVar[tuple[str, ...]] = ()
     FIXED: ClassVar[tuple[str, ...]] = ()
+    #: The vendored ``controller`` package of the adapter: its compiled entry points get their
+    #: addresses from its native image when there is one (``native.provide``).
+    LAW_PACKAGE: ClassVar[ModuleType | None] = None
     _STATE_KEY = "__dcs_controller_state__"
     _INIT_KEY = "__dcs_initialized__"
     _INIT_ERROR_KEY = "__dcs_init_error__"
@@ -276,12 +284,22 @@ class LawSlave(DcsSlave):
             return None
         if self._step_law_obj is not self._law:  # once per law (per initialization)
             self._step_law_obj = self._law
+            self._provide_entries()
             self._step = self._law.compiled_step(self.inputs, self.outputs)
         step = self._step
         if step is None:
             return None
         step.refresh()  # the law's parameters may have been replaced
         return step.function, step.context
+
+    def _provide_entries(self) -> None:
+        """Where the law would get a compiled step (numba loaded, compiled steps on), give the
+        package's entry points their addresses first (once per process: ``native.provide``)."""
+        package = self.LAW_PACKAGE
+        if package is None or "numba" not in sys.modules:
+            return
+        if importlib.import_module(f"{package.__name__}.acceleration").enabled():
+            provide(package, importlib.import_module(f"{package.__name__}.compiled"))
 
     def _fmi2_compiled_step_failed(self, code: int, t: float, h: float) -> None:
         """A step the compiled law left to Python (nothing changed): :meth:`do_step`. An

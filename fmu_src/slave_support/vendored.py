@@ -20,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import importlib
 import importlib.util
+import json
 import os
 import shutil
 import sys
@@ -28,7 +29,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
 
-__all__ = ["cache_root", "import_vendored", "stable_copy"]
+__all__ = ["cache_file", "cache_root", "import_vendored", "read_memo", "stable_copy",
+           "write_memo"]
 
 _COMPLETE = "COMPLETE"  # marker written last into a stable copy
 
@@ -136,3 +138,37 @@ def import_vendored(name: str, beside: str, submodules: Sequence[str] = (),
         finally:
             sys.path.remove(str(base))  # submodules resolve through the package's __path__
     return sys.modules[name], warning
+
+
+def cache_file(package: ModuleType, name: str) -> Path:
+    """The file ``name`` beside the imported vendored ``package`` (in its stable copy's folder,
+    which is named by the package's content hash: what it holds is of this code only)."""
+    return Path(package.__file__).resolve().parent.parent / name
+
+
+def read_memo(path: Path) -> dict[str, float]:
+    """The ``{key: number}`` memo at ``path`` ({} if missing or unreadable: it is recomputed)."""
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    if not isinstance(data, dict):
+        return {}
+    return {k: float(v) for k, v in data.items() if isinstance(v, (int, float))}
+
+
+def write_memo(path: Path, memo: dict[str, float]) -> bool:
+    """Write ``memo`` to ``path`` atomically (floats round-trip); whether it was written."""
+    path = Path(path)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}-", dir=path.parent)
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as fh:
+                json.dump(memo, fh, sort_keys=True)
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+    except OSError:
+        return False
+    return True
