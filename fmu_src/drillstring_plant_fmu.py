@@ -20,6 +20,14 @@ its content hash and imported from there (``slave_support.vendored``: ``$DRILLCO
 default ``~/.cache/drillcosim``); if that folder cannot be written, a warning is logged at
 instantiation and every new unzip folder recompiles.
 
+Beside that copy the FMU keeps two things a later process reuses, so that one needs no numba
+set-up at all (~0.25 s): the *native image* of the compiled entry points (the machine code numba
+cached, loaded with llvmlite: ``slave_support.native``), and the spectral radius of each model
+built (``plant.model.SPECTRAL_RADII``: the automatic method's stable step, a Jacobian and an
+eigenvalue problem otherwise; one file per Python and numpy version). The outputs at
+initialization and the automatic method's first step of a step size run through the compiled
+entry points too.
+
 The wrapper imports this module once per process (``sys.modules``) and the first
 instance's unzip folder may be deleted while later instances run: module-level code
 therefore reads no files, and each instance finds the scenes through its own
@@ -165,8 +173,10 @@ _signals_mod = sys.modules[f"{VENDORED_PLANT}.signals"]
 
 
 #: The spectral radii of the models built (``plant.model.SPECTRAL_RADII``), kept beside the
-#: stable copy per numpy version: a second process skips the Jacobian and eigenvalue problem.
-_RADII_FILE = f"spectral-radii-numpy-{np.__version__}.json"
+#: stable copy per Python and numpy version (the eigenvalue solver's): a second process skips
+#: the Jacobian and the eigenvalue problem.
+_RADII_FILE = (f"spectral-radii-py{sys.version_info[0]}{sys.version_info[1]}"
+               f"-numpy-{np.__version__}.json")
 
 
 def _with_spectral_memo(make: Any) -> Any:
