@@ -36,6 +36,7 @@ import datetime
 import json
 import os
 import platform
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -150,10 +151,16 @@ def tasks(tree: Path, args: argparse.Namespace) -> dict[str, tuple[str, list[str
     }
 
 
+#: Every kept value [s] per tree and task, in round order (filled by :func:`measure`).
+RUNS: dict[str, dict[str, list[float]]] = {}
+
+
 def measure(trees: dict[str, Path], args: argparse.Namespace) -> dict[str, dict[str, float]]:
-    """Best wall time [s] per tree and task (trees interleaved per task and repeat)."""
+    """Best wall time [s] per tree and task (trees interleaved per task and repeat); every
+    value in :data:`RUNS`."""
     plans = {name: tasks(tree, args) for name, tree in trees.items()}
     best: dict[str, dict[str, float]] = {name: {} for name in trees}
+    RUNS.update({name: {} for name in trees})
     for rnd in range(args.repeat + 1):            # round 0: warm-up, not kept
         for task in plans[next(iter(trees))]:
             if args.only and not any(o in task for o in args.only):
@@ -164,8 +171,18 @@ def measure(trees: dict[str, Path], args: argparse.Namespace) -> dict[str, dict[
                     value = (_timed if kind == "wall" else _reported)(cmd, cwd)
                 if rnd:
                     best[name][task] = min(best[name].get(task, float("inf")), value)
+                    RUNS[name].setdefault(task, []).append(value)
                 print(f"[{rnd}] {name:6s} {task}: {value:.3f} s", file=sys.stderr)
     return best
+
+
+def _median_share(runs: dict[str, list[float]], t: str) -> float:
+    """Median over the rounds of 1 - (main job --no-plots) / (main job with plots), each
+    round's two runs taken side by side (NaN without both)."""
+    plots, bare = runs.get(f"main job, {t} s, plots"), runs.get(f"main job, {t} s, --no-plots")
+    if not plots or not bare:
+        return float("nan")
+    return statistics.median(1.0 - b / p for p, b in zip(plots, bare))
 
 
 def report(best: dict[str, dict[str, float]], trees: dict[str, Path],
@@ -202,6 +219,8 @@ def report(best: dict[str, dict[str, float]], trees: dict[str, Path],
         "plots' share of the main job (<= 10 %)": lambda n: (
             100 * (1 - get(n, f"main job, {t} s, --no-plots") / get(n, f"main job, {t} s, plots")),
             "{:.1f} %"),
+        "plots' share, median over the rounds (each round's pair)": lambda n: (
+            100 * _median_share(RUNS.get(n, {}), t), "{:.1f} %"),
         "start-up to the first step minus the floor (<= 0.3 s)": lambda n: (
             get(n, "start-up: to the first step") - get(n, "floor"), "{:.2f} s"),
         "one-step run (whole process) minus the floor": lambda n: (
