@@ -26,13 +26,12 @@ import hashlib
 import json
 import os
 import sys
-import tempfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from .vendored import cache_file
+from .vendored import cache_file, write_atomic
 
 __all__ = ["ENV", "MAGIC", "image_path", "native_addresses", "provide", "read_image", "sources",
            "write_image"]
@@ -177,18 +176,7 @@ def write_image(path: Path, cfuncs: Mapping[str, Any]) -> bool:
         blobs.append(obj)
         offset += len(obj)
     header = json.dumps({"key": target_key(), "entries": table}, sort_keys=True).encode()
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}-", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                fh.write(MAGIC + header + b"\n" + b"".join(blobs))
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-    except OSError:
-        return False
-    return True
+    return write_atomic(Path(path), MAGIC + header + b"\n" + b"".join(blobs))
 
 
 def native_addresses(package: ModuleType, entries: Sequence[str],

@@ -30,7 +30,7 @@ from pathlib import Path
 from types import ModuleType
 
 __all__ = ["cache_file", "cache_root", "import_vendored", "read_memo", "stable_copy",
-           "write_memo"]
+           "write_atomic", "write_memo"]
 
 _COMPLETE = "COMPLETE"  # marker written last into a stable copy
 
@@ -159,12 +159,18 @@ def read_memo(path: Path) -> dict[str, float]:
 
 def write_memo(path: Path, memo: dict[str, float]) -> bool:
     """Write ``memo`` to ``path`` atomically (floats round-trip); whether it was written."""
+    return write_atomic(path, json.dumps(memo, sort_keys=True).encode())
+
+
+def write_atomic(path: Path, data: bytes) -> bool:
+    """Write ``data`` to ``path`` through a temporary file beside it and ``os.replace``
+    (readers see the old file or the new one, never a part); whether it was written."""
     path = Path(path)
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}-", dir=path.parent)
         try:
-            with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                json.dump(memo, fh, sort_keys=True)
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
             os.replace(tmp, path)
         finally:
             if os.path.exists(tmp):
