@@ -155,3 +155,43 @@ def test_an_image_of_another_key_or_cut_or_without_the_entry_is_not_used(tiny_im
     for path in (other, cut, bad_magic, tmp_path / "missing.bin"):
         assert _load(where, path)["value"] is None, path.name
     assert _load(where, image, ("scaled_sine", "another"))["value"] is None
+
+
+# --- the spectral-radius memo the plant FMU keeps beside its stable copy -----------------------
+KEY = textwrap.dedent("""
+    import sys
+    from drillcosim.plant.model import spectral_key
+    from drillcosim.plant.scene import load_scene
+    print(spectral_key(load_scene(sys.argv[1]).plant, "full3d"))
+""")
+
+
+def test_the_spectral_memo_key_is_the_same_in_every_process_and_tells_scenes_apart():
+    """A key that changed between processes would only miss; one shared by two parameter sets
+    would give a model another's stable step: neither happens."""
+    keys = {scene: {_py(KEY, scene) for _ in range(2)}
+            for scene in ("paper_closed_loop", "paper_calibrated_closed_loop")}
+    assert all(len(k) == 1 for k in keys.values()), keys
+    assert keys["paper_closed_loop"] != keys["paper_calibrated_closed_loop"]
+
+
+def test_a_remembered_spectral_radius_gives_the_computed_one_bit_for_bit():
+    from drillcosim.plant import model as model_mod
+    from drillcosim.plant.scene import load_scene
+
+    scene = load_scene("paper_closed_loop")
+    saved = dict(model_mod.SPECTRAL_RADII)
+    try:
+        model_mod.SPECTRAL_RADII.clear()
+        computed = model_mod.DrillstringModel(scene.plant, scene.model).max_eigenvalue
+        stored = json.loads(json.dumps(model_mod.SPECTRAL_RADII))  # the memo file's round trip
+        assert list(stored.values()) == [computed]
+        model_mod.SPECTRAL_RADII.clear()
+        model_mod.SPECTRAL_RADII.update(stored)
+        again = model_mod.DrillstringModel(scene.plant, scene.model)
+        assert "initial_jacobian" not in again.__dict__
+        assert again.max_eigenvalue == computed
+        assert "initial_jacobian" not in again.__dict__          # taken from the memo
+    finally:
+        model_mod.SPECTRAL_RADII.clear()
+        model_mod.SPECTRAL_RADII.update(saved)
