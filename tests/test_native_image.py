@@ -139,7 +139,8 @@ def test_an_image_loads_in_a_fresh_process_without_numba_and_computes_the_same(t
     assert _load(where, image) == {"value": value, "numba_set_up": False}
 
 
-def test_an_image_of_another_key_or_cut_or_without_the_entry_is_not_used(tiny_image, tmp_path):
+def test_an_image_of_another_key_cut_damaged_or_without_the_entry_is_not_used(tiny_image,
+                                                                               tmp_path):
     where, image, _value = tiny_image
     data = image.read_bytes()
     magic_end = data.index(b"\n") + 1
@@ -152,7 +153,10 @@ def test_an_image_of_another_key_or_cut_or_without_the_entry_is_not_used(tiny_im
     cut.write_bytes(data[:-100])
     bad_magic = tmp_path / "bad_magic.bin"
     bad_magic.write_bytes(b"X" + data[1:])
-    for path in (other, cut, bad_magic, tmp_path / "missing.bin"):
+    damaged = tmp_path / "damaged.bin"
+    middle = (end + 1 + len(data)) // 2        # a byte inside the object code
+    damaged.write_bytes(data[:middle] + bytes([data[middle] ^ 0xFF]) + data[middle + 1:])
+    for path in (other, cut, bad_magic, damaged, tmp_path / "missing.bin"):
         assert _load(where, path)["value"] is None, path.name
     assert _load(where, image, ("scaled_sine", "another"))["value"] is None
 

@@ -16,7 +16,8 @@ truncated image, or a symbol missing from it, falls back to numba, which compile
 before and writes a new image. ``DRILLCOSIM_NATIVE_IMAGE=0`` switches images off.
 
 Format: the line ``DCS-NATIVE-IMAGE 1``, one line of JSON (the key and, per entry point, its
-symbol, offset and size), then the object files back to back. Written to a temporary file and
+symbol, offset, size and SHA-256: a damaged image is not loaded), then the object files back to
+back. Written to a temporary file and
 renamed (atomic; concurrent writers write the same bytes).
 """
 
@@ -105,7 +106,8 @@ def _prepare_symbols() -> None:
 
 def read_image(path: Path, entries: Sequence[str]) -> dict[str, int] | None:
     """Load the image at ``path``; the addresses of ``entries``, or None if it is missing,
-    unreadable, of another key or lacks an entry (the caller falls back to numba)."""
+    unreadable, of another key, cut, damaged (an object's SHA-256 differs) or lacks an entry
+    (the caller falls back to numba)."""
     path = Path(path)
     if path in _LOADED:
         return _LOADED[path]
@@ -126,6 +128,11 @@ def read_image(path: Path, entries: Sequence[str]) -> dict[str, int] | None:
         return None
     if any(v["offset"] + v["size"] > len(body) for v in table.values()):
         return None  # truncated
+    objects = {name: bytes(body[table[name]["offset"]:table[name]["offset"] + table[name]["size"]])
+               for name in entries}
+    if any(hashlib.sha256(obj).hexdigest() != table[name].get("sha256")
+           for name, obj in objects.items()):
+        return None  # damaged: machine code is loaded only as it was written
     import llvmlite.binding as ll
 
     _prepare_symbols()
@@ -135,8 +142,7 @@ def read_image(path: Path, entries: Sequence[str]) -> dict[str, int] | None:
         machine = ll.Target.from_triple(header["key"]["target"][0]).create_target_machine(
             cpu=header["key"]["target"][1], features=header["key"]["target"][2], jit=True)
         engine = ll.create_mcjit_compiler(ll.parse_assembly(""), machine)
-        obj = bytes(body[entry["offset"]:entry["offset"] + entry["size"]])
-        engine.add_object_file(ll.ObjectFileRef.from_data(obj))
+        engine.add_object_file(ll.ObjectFileRef.from_data(objects[name]))
         engine.finalize_object()
         address = engine.get_function_address(entry["symbol"])
         _ENGINES.append(engine)
@@ -172,7 +178,8 @@ def write_image(path: Path, cfuncs: Mapping[str, Any]) -> bool:
         obj = _object_code(cf)
         if obj is None:
             return False
-        table[name] = {"symbol": cf.native_name, "offset": offset, "size": len(obj)}
+        table[name] = {"symbol": cf.native_name, "offset": offset, "size": len(obj),
+                       "sha256": hashlib.sha256(obj).hexdigest()}
         blobs.append(obj)
         offset += len(obj)
     header = json.dumps({"key": target_key(), "entries": table}, sort_keys=True).encode()
