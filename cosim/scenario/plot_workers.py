@@ -43,6 +43,9 @@ __all__ = ["FIGURES", "GROUPS", "PlotFeed", "PlotWorkers"]
 FIGURES = ("orbit", "orbit_steady", "deflection_contact", "actuators", "axial_torsional")
 #: The figures each worker draws (about equal drawing times at the end of a run).
 GROUPS = (("deflection_contact", "orbit_steady", "axial_torsional"), ("actuators", "orbit"))
+#: Thread-count variables of the BLAS libraries numpy may load, set to 1 for the workers
+#: (unless the user set them).
+_ONE_THREAD = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 #: Longest wait for a worker's figures [s] (then this process draws them).
 TIMEOUT = 600.0
 #: Row updates the feed sends over a run.
@@ -66,11 +69,14 @@ class PlotWorkers:
         if n < 2:
             n = 0
         self.procs: list[subprocess.Popen] = []
+        # one BLAS thread: the figures need none, and OpenBLAS's thread pool costs each worker
+        # ~0.1 s of CPU at numpy's import (CPU the run loses on 2 cores; BENCHMARKS.md)
+        env = {**os.environ, **{k: os.environ.get(k, "1") for k in _ONE_THREAD}}
         for _ in range(n):
             try:
                 self.procs.append(subprocess.Popen(
                     [sys.executable, "-m", __name__], stdin=subprocess.PIPE,
-                    stdout=subprocess.PIPE, stderr=subprocess.DEVNULL))
+                    stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env))
             except OSError:
                 break
         self.groups = GROUPS if len(self.procs) == len(GROUPS) else ()
