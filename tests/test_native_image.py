@@ -156,7 +156,9 @@ def test_an_image_of_another_key_cut_damaged_or_without_the_entry_is_not_used(ti
     damaged = tmp_path / "damaged.bin"
     middle = (end + 1 + len(data)) // 2        # a byte inside the object code
     damaged.write_bytes(data[:middle] + bytes([data[middle] ^ 0xFF]) + data[middle + 1:])
-    for path in (other, cut, bad_magic, damaged, tmp_path / "missing.bin"):
+    not_a_table = tmp_path / "not_a_table.bin"
+    not_a_table.write_bytes(data[:magic_end] + b"[1, 2]" + data[end:])
+    for path in (other, cut, bad_magic, damaged, not_a_table, tmp_path / "missing.bin"):
         assert _load(where, path)["value"] is None, path.name
     assert _load(where, image, ("scaled_sine", "another"))["value"] is None
 

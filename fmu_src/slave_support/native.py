@@ -123,16 +123,20 @@ def read_image(path: Path, entries: Sequence[str]) -> dict[str, int] | None:
     except ValueError:
         return None
     body = memoryview(data)[end + 1:]
-    table = header.get("entries", {})
-    if header.get("key") != target_key() or any(e not in table for e in entries):
+    try:
+        table = header["entries"]
+        if header["key"] != target_key() or any(e not in table for e in entries):
+            return None
+        if any(v["offset"] + v["size"] > len(body) for v in table.values()):
+            return None  # truncated
+        objects = {name: bytes(body[table[name]["offset"]:
+                                    table[name]["offset"] + table[name]["size"]])
+                   for name in entries}
+        if any(hashlib.sha256(obj).hexdigest() != table[name]["sha256"]
+               for name, obj in objects.items()):
+            return None  # damaged: machine code is loaded only as it was written
+    except (KeyError, TypeError, AttributeError):  # a header not of this format
         return None
-    if any(v["offset"] + v["size"] > len(body) for v in table.values()):
-        return None  # truncated
-    objects = {name: bytes(body[table[name]["offset"]:table[name]["offset"] + table[name]["size"]])
-               for name in entries}
-    if any(hashlib.sha256(obj).hexdigest() != table[name].get("sha256")
-           for name, obj in objects.items()):
-        return None  # damaged: machine code is loaded only as it was written
     import llvmlite.binding as ll
 
     _prepare_symbols()
