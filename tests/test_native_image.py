@@ -201,3 +201,24 @@ def test_a_remembered_spectral_radius_gives_the_computed_one_bit_for_bit():
     finally:
         model_mod.SPECTRAL_RADII.clear()
         model_mod.SPECTRAL_RADII.update(saved)
+
+
+ENABLED = textwrap.dedent(r"""
+    import sys
+    sys.path.insert(0, sys.argv[1])
+    import numba
+    numba.__version__ = sys.argv[2]
+    from ssx import native
+    print(native.enabled())
+""")
+
+
+@pytest.mark.parametrize(("release", "env", "expected"), [
+    ("0.68.1", "1", "True"), ("0.58.0", "1", "True"),
+    ("0.69.0", "1", "False"),       # a release whose helper registration is not checked
+    ("0.57.1", "1", "False"), ("0.68.1", "0", "False")])
+def test_images_only_with_the_checked_numba_releases_and_not_when_switched_off(
+        tiny_image, release, env, expected, monkeypatch):
+    monkeypatch.setenv("DRILLCOSIM_NATIVE_IMAGE", env)
+    where, _image, _value = tiny_image
+    assert _py(ENABLED, str(where), release) == expected

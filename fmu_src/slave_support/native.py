@@ -11,9 +11,11 @@ step runs the very machine code numba made, so its results are the numba path's,
 
 An image is used only where it was made for: the same package code (the stable copy's folder is
 named by its content hash), the same numba, llvmlite and Python versions, and the same target as
-numba keys its own cache by (triple, CPU name, CPU features). Anything else, an unreadable or
-truncated image, or a symbol missing from it, falls back to numba, which compiles or loads as
-before and writes a new image. ``DRILLCOSIM_NATIVE_IMAGE=0`` switches images off.
+numba keys its own cache by (triple, CPU name, CPU features). Anything else, an unreadable,
+cut or damaged image, or a symbol missing from it, falls back to numba, which compiles or loads
+as before and writes a new image. ``DRILLCOSIM_NATIVE_IMAGE=0`` switches images off, and so does
+a numba release outside :data:`NUMBA_RELEASES` (the loader repeats numba's registration of its C
+helpers, which the machine code calls on its error paths).
 
 Format: the line ``DCS-NATIVE-IMAGE 1``, one line of JSON (the key and, per entry point, its
 symbol, offset, size and SHA-256: a damaged image is not loaded), then the object files back to
@@ -26,6 +28,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import pickle
 import sys
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -34,8 +37,8 @@ from typing import Any
 
 from .vendored import cache_file, write_atomic
 
-__all__ = ["ENV", "MAGIC", "image_path", "native_addresses", "provide", "read_image", "sources",
-           "write_image"]
+__all__ = ["ENV", "MAGIC", "NUMBA_RELEASES", "image_path", "native_addresses", "provide",
+           "read_image", "sources", "write_image"]
 
 ENV = "DRILLCOSIM_NATIVE_IMAGE"
 MAGIC = b"DCS-NATIVE-IMAGE 1\n"
@@ -46,9 +49,24 @@ _SYMBOLS_READY = False
 _PROVIDED: dict[str, str] = {}  # module name -> where its entry points came from
 
 
+#: The numba releases whose C-helper registration :func:`_prepare_symbols` repeats (checked
+#: with 0.68; the same since before the project's minimum, 0.58). With another release the
+#: compiled steps come from numba, as without images.
+NUMBA_RELEASES = ((0, 58), (0, 68))
+
+
 def enabled() -> bool:
-    """Whether native images are used: ``$DRILLCOSIM_NATIVE_IMAGE`` is not ``0`` (default on)."""
-    return os.environ.get(ENV, "1").strip() != "0"
+    """Whether native images are used: ``$DRILLCOSIM_NATIVE_IMAGE`` is not ``0`` (default on)
+    and numba's release is one of :data:`NUMBA_RELEASES`."""
+    if os.environ.get(ENV, "1").strip() == "0":
+        return False
+    import numba
+
+    try:
+        release = tuple(int(x) for x in numba.__version__.split(".")[:2])
+    except ValueError:
+        return False
+    return NUMBA_RELEASES[0] <= release <= NUMBA_RELEASES[1]
 
 
 def target_key() -> dict[str, Any]:
@@ -146,8 +164,11 @@ def read_image(path: Path, entries: Sequence[str]) -> dict[str, int] | None:
         machine = ll.Target.from_triple(header["key"]["target"][0]).create_target_machine(
             cpu=header["key"]["target"][1], features=header["key"]["target"][2], jit=True)
         engine = ll.create_mcjit_compiler(ll.parse_assembly(""), machine)
-        engine.add_object_file(ll.ObjectFileRef.from_data(objects[name]))
-        engine.finalize_object()
+        try:
+            engine.add_object_file(ll.ObjectFileRef.from_data(objects[name]))
+            engine.finalize_object()
+        except RuntimeError:  # LLVM refused the object: numba's path instead
+            return None
         address = engine.get_function_address(entry["symbol"])
         _ENGINES.append(engine)
         if not address:
@@ -179,7 +200,11 @@ def write_image(path: Path, cfuncs: Mapping[str, Any]) -> bool:
     writable)."""
     table, blobs, offset = {}, [], 0
     for name, cf in cfuncs.items():
-        obj = _object_code(cf)
+        try:
+            obj = _object_code(cf)
+        except (AttributeError, LookupError, OSError, ValueError, EOFError,
+                pickle.UnpicklingError):  # numba's cache not as this code reads it: no image
+            return False
         if obj is None:
             return False
         table[name] = {"symbol": cf.native_name, "offset": offset, "size": len(obj),
