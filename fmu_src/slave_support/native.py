@@ -19,8 +19,7 @@ helpers, which the machine code calls on its error paths).
 
 Format: the line ``DCS-NATIVE-IMAGE 1``, one line of JSON (the key and, per entry point, its
 symbol, offset, size and SHA-256: a damaged image is not loaded), then the object files back to
-back. Written to a temporary file and
-renamed (atomic; concurrent writers write the same bytes).
+back. Written to a temporary file and renamed (atomic; concurrent writers write the same bytes).
 """
 
 from __future__ import annotations
@@ -158,11 +157,13 @@ def read_image(path: Path, entries: Sequence[str]) -> dict[str, int] | None:
     import llvmlite.binding as ll
 
     _prepare_symbols()
+    triple, cpu, features = header["key"]["target"]
     addresses = {}
     for name in entries:
         entry = table[name]
-        machine = ll.Target.from_triple(header["key"]["target"][0]).create_target_machine(
-            cpu=header["key"]["target"][1], features=header["key"]["target"][2], jit=True)
+        # an engine takes its target machine over (llvmlite): one each
+        machine = ll.Target.from_triple(triple).create_target_machine(cpu=cpu, features=features,
+                                                                      jit=True)
         engine = ll.create_mcjit_compiler(ll.parse_assembly(""), machine)
         try:
             engine.add_object_file(ll.ObjectFileRef.from_data(objects[name]))
