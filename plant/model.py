@@ -136,7 +136,7 @@ def needs_lateral(params: PlantParams) -> list[str]:
         why.append("unbalance")
     if any(ld.is_lateral for ld in params.loads):
         why.append("lateral loads")
-    if params.trajectory is not None and not params.trajectory.vertical:
+    if framed(params):
         why.append("a deviated well")
     return why
 

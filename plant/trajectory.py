@@ -86,7 +86,7 @@ class WellPath:
         i = self._segment(md)
         s = md - self.md[i]
         if i >= len(self.md) - 1 or self.beta[i] < 1e-9:
-            t = self.t[i] if i >= len(self.md) - 1 else self.t[i]
+            t = self.t[i]
             return self.pos[i] + s * t, t.copy(), np.zeros(3)
         t1, t2 = self.t[i], self.t[i + 1]
         L = self.md[i + 1] - self.md[i]
@@ -106,10 +106,6 @@ class WellPath:
     def tangent(self, md: float) -> np.ndarray:
         """Unit tangent of the hole axis at ``md`` [m] (pointing down the hole)."""
         return self.evaluate(md)[1]
-
-    def inclination(self, md: float) -> float:
-        """Inclination [rad] from the vertical at ``md`` [m]."""
-        return math.acos(min(1.0, max(-1.0, float(self.tangent(md)[2]))))
 
     def md_at_distance(self, md0: float, q: np.ndarray, dist: float) -> float:
         """The MD > ``md0`` whose axis point lies at distance ``dist`` [m] from point ``q``.
