@@ -68,8 +68,8 @@ from .signals import (
 )
 from .trajectory import StringLay, WellPath, lay_string
 
-__all__ = ["DrillstringModel", "FIXED_STEP_METHODS", "ModelKind", "extensions", "needs_lateral",
-           "series"]
+__all__ = ["DrillstringModel", "FIXED_STEP_METHODS", "ModelKind", "extensions", "field_outputs",
+           "needs_lateral", "series"]
 
 ModelKind = str  # "full3d" | "axial_torsional"
 # exponential-integrator matrices kept per step size (each costs one expm, ~10 ms at n = 30)
@@ -139,6 +139,11 @@ def needs_lateral(params: PlantParams) -> list[str]:
     if framed(params):
         why.append("a deviated well")
     return why
+
+
+def field_outputs(params: PlantParams) -> bool:
+    """Do the outputs include the field summary (a string of sections or a trajectory)?"""
+    return not params.uniform or params.trajectory is not None
 
 
 def framed(params: PlantParams) -> bool:
@@ -489,7 +494,7 @@ class DrillstringModel:
         self.p = p
         self.framed = framed(prm) and self.kind == "full3d"
         #: the outputs include the field summary (a string of sections or a trajectory)
-        self.field_outputs = not uniform or prm.trajectory is not None
+        self.field_outputs = field_outputs(prm)
 
         # per-body records
         g = prm.gravity

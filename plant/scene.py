@@ -34,7 +34,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from .model import MODEL_KINDS, extensions, needs_lateral
+from .model import MODEL_KINDS, extensions, field_outputs, needs_lateral
 from .params import (
     ActuatorParams,
     BitParams,
@@ -293,7 +293,7 @@ def scene_from_dict(data: dict[str, Any], name: str = "scene", source: str = "<d
     if model not in MODEL_CHOICES:
         raise SceneError(f"{source}: model = {model!r} is not allowed{_suggest(str(model), MODEL_CHOICES)}")
     ext = bool(extensions(plant))  # the outputs DrillstringModel lists for these parameters
-    field_out = not plant.uniform or plant.trajectory is not None
+    field_out = field_outputs(plant)
     lateral_names = {r[0] for r in plant_outputs(True, list(plant.contact_bodies),
                                                 len(plant.actuator_joints), extended=ext,
                                                 field=field_out)}
