@@ -35,6 +35,7 @@ from drillcosim.cosim.scenario.config import load_config
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.scene import load_scene
 from drillcosim.plant.simulator import PlantSimulator, simulate
+from support.required import missing
 
 ROOT = Path(__file__).resolve().parents[1]
 #: main when the field branch last merged it (issues 22-24, 26), without the field-scale plant
@@ -58,7 +59,7 @@ def base_plant() -> tuple[tuple[ModuleType, ModuleType, ModuleType], Path]:
     """main's plant (imported as ``plant_<sha>``): its scene, model and simulator modules; its
     scenes folder."""
     if not _have_base():
-        pytest.skip(f"needs this repository's git history (commit {BASE[:12]})")
+        missing("git-history", f"git, or commit {BASE[:12]} in this clone's history")
     name = f"plant_{BASE[:12]}"
     home = user_cache() / "baseline" / BASE[:12]
     if not (home / name / "__init__.py").exists():
