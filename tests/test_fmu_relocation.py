@@ -1,6 +1,6 @@
 """The FMUs on "another machine": built by an interpreter that is gone, run by a plain C host.
 
-Issue 12: an FMU must not need the building machine. Here the FMUs are built by a throw-away
+An FMU must not need the building machine. Here the FMUs are built by a throw-away
 venv (the building interpreter, the last discovery candidate), that venv is renamed away, and a
 different venv with the packages sits elsewhere on ``PATH`` (offline: its site-packages holds a
 ``.pth`` line pointing at this environment's site-packages). A plain C host (no Python in its
