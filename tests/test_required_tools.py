@@ -45,11 +45,37 @@ def test_every_row_is_used_by_a_test() -> None:
 
 
 def test_ci_script_reads_the_list() -> None:
-    """.ci/run reads the list (and holds no second list of apt packages)."""
+    """.ci/run installs the list through .ci/install-tools (and holds no second list)."""
     script = (ROOT / ".ci" / "run").read_text()
-    assert "required-tools" in script
-    assert re.findall(r"apt-get install -y -q [a-z]", script) == [], \
-        "a package installed by .ci/run outside .ci/required-tools"
+    assert "bash .ci/install-tools" in script
+    assert "apt-get install" not in script, "a package installed by .ci/run outside the list"
+
+
+def test_install_tools_installs_or_fails_naming_the_tool(tmp_path: Path) -> None:
+    """A row whose check fails is installed by its install command (then checked again); a row
+    that nothing installs ("-") or whose install does not help makes the script exit 1 naming
+    it, after trying every row."""
+    flag = tmp_path / "installed"
+    rows = (f"present :: true :: false\n"
+            f"installable :: test -f {flag} :: touch {flag}\n"
+            f"# a comment\n\n"
+            f"absent :: false :: -\n"
+            f"broken :: false :: true\n")
+    (tmp_path / "tools").write_text(rows)
+    proc = subprocess.run(["bash", str(ROOT / ".ci" / "install-tools"), str(tmp_path / "tools")],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1
+    assert flag.is_file()
+    assert proc.stdout.splitlines() == [
+        "ci: installing installable",
+        "ci: required tool absent is missing and could not be installed (check: false)",
+        "ci: installing broken",
+        "ci: required tool broken is missing and could not be installed (check: false)",
+        "ci: missing: absent broken"]
+    (tmp_path / "tools").write_text(rows.split("# a comment")[0])
+    again = subprocess.run(["bash", str(ROOT / ".ci" / "install-tools"), str(tmp_path / "tools")],
+                           capture_output=True, text=True, timeout=60)
+    assert (again.returncode, again.stdout) == (0, "")
 
 
 HELPER = """
