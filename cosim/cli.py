@@ -24,6 +24,7 @@ import errno
 import json
 import math
 import os
+import re
 import sys
 import threading
 import warnings
@@ -35,6 +36,32 @@ __all__ = ["main"]
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_USAGE = 2
+
+
+#: the API's keyword (a ConfigError's ``given_as``) -> the option of the command line that gives it
+_OPTION_OF = {"stop_time": "--stop-time", "step": "--step", "delay": "--delay", "gain": "--gain",
+              "overrides": "--set", "plant_fmu": "--plant-fmu",
+              "controller_fmu": "--controller-fmu"}
+#: a negative number, also in exponent notation (argparse takes "-1e-4" for an option)
+_NEGATIVE = re.compile(r"-(\d|\.\d)")
+
+
+def _error_text(exc: BaseException) -> str:
+    """A user error's one line; a value given on the command line is named by its option."""
+    option = _OPTION_OF.get(getattr(exc, "given_as", None) or "")
+    return f"{option}: {exc.detail}" if option else str(exc)
+
+
+def _negative_values_joined(argv: Sequence[str]) -> list[str]:
+    """``--opt -1e-4`` -> ``--opt=-1e-4``: argparse reads a negative number in exponent
+    notation after an option as an option of its own ("expected one argument")."""
+    out: list[str] = []
+    for arg in argv:
+        if out and _NEGATIVE.match(arg) and out[-1].startswith("--") and "=" not in out[-1]:
+            out[-1] = f"{out[-1]}={arg}"
+        else:
+            out.append(arg)
+    return out
 
 
 def _user_errors() -> tuple[type[BaseException], ...]:
@@ -181,10 +208,8 @@ def _cmd_ssp(args: argparse.Namespace) -> int:
     from drillcosim.api import load_scene
     from drillcosim.cosim.scenario.ssp_run import write_scene_ssp
 
-    over = _parse_set(args.set)
-    over.update({k: v for k, v in (("cosim.step", args.step), ("cosim.stop_time", args.stop_time))
-                 if v is not None})
-    config = load_scene(args.scene, overrides=over, plant_fmu=args.plant_fmu,
+    config = load_scene(args.scene, step=args.step, stop_time=args.stop_time,
+                        overrides=_parse_set(args.set), plant_fmu=args.plant_fmu,
                         controller_fmu=args.controller_fmu)
     written = write_scene_ssp(config, args.out, fmu_dir=args.fmu_dir,
                               omit_unsupported=args.omit_unsupported)
@@ -325,8 +350,24 @@ def _add_engine_option(p: argparse.ArgumentParser) -> None:
                         "same numbers)")
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: print ``drillcosim <version>`` and exit 0 (the version is looked up only
+    then: :mod:`importlib.metadata` costs ~40 ms of every start otherwise)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str = argparse.SUPPRESS,
+                 default: str = argparse.SUPPRESS, help: str | None = None) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=default, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        from drillcosim import __version__
+
+        print(f"drillcosim {__version__}")  # to stdout, as argparse's own "version" action
+        parser.exit()
+
+
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="drillcosim", description=__doc__.splitlines()[0])
+    ap.add_argument("--version", action=_VersionAction, help="print the version and exit")
     sub = ap.add_subparsers(dest="command", required=True)
     p = sub.add_parser("modes", help="first axial, torsional and lateral modes of a scene")
     p.add_argument("scene", nargs="?", default="table1_lateral_step",
@@ -489,7 +530,7 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``drillcosim`` console script; returns the exit code."""
     ap = _parser()
-    args = ap.parse_args(argv)
+    args = ap.parse_args(_negative_values_joined(sys.argv[1:] if argv is None else argv))
 
     def one_line(message, category, filename, lineno, file=None, line=None):
         if category.__module__.startswith("drillcosim."):
@@ -502,7 +543,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except _user_errors() as exc:
-        print(f"drillcosim {args.command}: error: {exc}", file=sys.stderr)
+        print(f"drillcosim {args.command}: error: {_error_text(exc)}", file=sys.stderr)
         return EXIT_USAGE
     except OSError as exc:  # read-only folder: bad input (2); disk full, I/O error: failure (1)
         print(f"drillcosim {args.command}: error: {exc}", file=sys.stderr)

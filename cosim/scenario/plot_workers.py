@@ -70,7 +70,7 @@ class PlotWorkers:
             n = 0
         self.procs: list[subprocess.Popen] = []
         # one BLAS thread: the figures need none, and OpenBLAS's thread pool costs each worker
-        # ~0.1 s of CPU at numpy's import (CPU the run loses on 2 cores; BENCHMARKS.md)
+        # ~0.1 s of CPU at numpy's import (CPU the run loses on 2 cores; docs/performance.md)
         env = {**os.environ, **{k: os.environ.get(k, "1") for k in _ONE_THREAD}}
         for _ in range(n):
             try:
@@ -263,7 +263,7 @@ def main() -> int:
     if hasattr(os, "nice"):
         # below the run: on 2 cores the workers' imports and early draws otherwise take CPU
         # from the master (main job with plots, 30 s, quiet machine: 2.67-2.89 s at nice 10
-        # vs 3.00-3.29 s at 0, 2.42-2.61 s without plots; BENCHMARKS.md)
+        # vs 3.00-3.29 s at 0, 2.42-2.61 s without plots; docs/performance.md)
         os.nice(10)
     state: dict[str, Any] = {"gen": 0, "n": 0, "t_end": None}
     ready = threading.Condition()
