@@ -117,11 +117,11 @@ HERE = Path(__file__).resolve().parent
 #: the sources stays), and a stray ``.c`` would be linked in.
 SOURCES: tuple[Path, ...] = tuple(HERE / n for n in (
     "dcs_discover.c", "dcs_instance.c", "dcs_python.c", "dcs_registry.c", "dcs_slave.c",
-    "dcs_state.c", "fmi2_functions.c"))
+    "dcs_state.c", "dcs_state_format.c", "fmi2_functions.c"))
 #: The official FMI 2.0.5 headers and our internal ones.
 HEADERS: tuple[Path, ...] = tuple(HERE / n for n in (
-    "dcs_discover.h", "dcs_python.h", "dcs_registry.h", "dcs_wrapper.h", "fmi2/fmi2FunctionTypes.h",
-    "fmi2/fmi2Functions.h", "fmi2/fmi2TypesPlatform.h"))
+    "dcs_discover.h", "dcs_python.h", "dcs_registry.h", "dcs_state_format.h", "dcs_wrapper.h",
+    "fmi2/fmi2FunctionTypes.h", "fmi2/fmi2Functions.h", "fmi2/fmi2TypesPlatform.h"))
 
 
 def python_range() -> tuple[int, int]:
