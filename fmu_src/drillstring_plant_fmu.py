@@ -97,8 +97,8 @@ Error handling (the wrapper's status protocol, see ``fmu_src/slave_support``)
 ------------------------------------------------------------------------------
 * invalid parameter (out of range, wrong ``scene`` / ``model``, missing outputs):
   fmi2ExitInitializationMode -> fmi2Error with the message naming it; the instance stays
-  in initialization mode (a doStep is refused). Free (or ``fmi2Reset``) and use valid
-  parameters;
+  in initialization mode (a doStep is refused): correct the parameters and call it again,
+  or reset;
 * non-finite input, non-positive or too large step, wrong communication point ->
   fmi2Error from that doStep, state unchanged; doStep before initialization ->
   fmi2Error (checked by the wrapper itself);
@@ -151,7 +151,7 @@ from _dcs_pythonfmu_0_7_0 import (
 from _dcs_pythonfmu_0_7_0.enums import Fmi2Status
 from _dcs_slave_support_0_1_0 import DcsSlave
 from _dcs_slave_support_0_1_0.native import provide
-from _dcs_slave_support_0_1_0.state import number_problem
+from _dcs_slave_support_0_1_0.state import number_problem, numbers_problem
 from _dcs_slave_support_0_1_0.vendored import cache_file, import_vendored, read_memo, write_memo
 
 #: Name under which the build vendors ``plant/`` into this FMU's resources.
@@ -690,7 +690,6 @@ def _sim_problem(sim: Any, finite: bool) -> str | None:
     if not (isinstance(sim, list) and len(sim) == 3 and isinstance(sim[1], list)
             and isinstance(sim[2], list)):
         return "its simulator state is not [time, state vector, inputs]"
-    values = enumerate((*sim[1], *sim[2]))
-    problem = next((p for p in (number_problem(f"its simulator state[{i}]", v, finite)
-                                for i, v in values) if p), None)
-    return problem or number_problem("its time", sim[0])
+    return (numbers_problem("its state vector", sim[1], finite)
+            or numbers_problem("its held inputs", sim[2], finite)
+            or number_problem("its time", sim[0]))

@@ -529,3 +529,31 @@ def test_setting_a_fixed_parameter_after_initialization_changes_nothing(units, n
     assert unit.get(a, param) == old and a.getReal(unit.inputs) == ins
     assert_same_future(unit, a, b)
     unit.free()
+
+
+# ------------------------------------------------------- fmi2Error leaves the instance usable
+RETRY = {"DrillstringPlant": ("pipe.n_segments", 1, 30),
+         "StrainController": ("lag_time_constant", -1.0, 0.01),
+         "StrainControllerC": ("lag_time_constant", -1.0, 0.01),
+         "TopDriveController": ("p_gain", -1.0, 100.0),
+         "StateSpaceController": ("lower_limit_actuator1_force_C", math.inf, -1e3)}
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_a_failed_initialization_can_be_corrected_and_retried(units, name) -> None:
+    """fmi2Error from fmi2ExitInitializationMode leaves the instance in initialization mode,
+    its (fixed) parameters settable: the corrected retry runs as an instance set right."""
+    unit = units[name]
+    param, bad, good = RETRY[name]
+    a = unit.new()
+    a.setupExperiment(startTime=0.0)
+    a.enterInitializationMode()
+    unit.set(a, {"max_internal_step": 2.5e-4} if name == "DrillstringPlant" else {})
+    unit.set(a, {param: bad})
+    refused(unit, a.exitInitializationMode, fragment=param.split("_actuator")[0])
+    refused(unit, a.doStep, 0.0, DT)  # never a silent run
+    unit.set(a, {param: good})
+    a.exitInitializationMode()
+    b = unit.start({param: good})
+    assert_same_future(unit, a, b, start=0)
+    unit.free()

@@ -354,8 +354,8 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
     BEGIN(fmi2ExitInitializationMode)
     if (law_check_params(&inst->d.params, inst->message, sizeof inst->message)) {
-        return fail(inst, "fmi2ExitInitializationMode", "invalid parameter: %s; reset or "
-                    "re-instantiate with valid parameters", inst->message);
+        return fail(inst, "fmi2ExitInitializationMode", "invalid parameter: %s; correct it "
+                    "and call fmi2ExitInitializationMode again (or reset)", inst->message);
     }
     inst->d.applied = inst->d.params;
     law_reset(&inst->d.law);

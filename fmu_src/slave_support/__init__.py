@@ -219,8 +219,8 @@ class LawSlave(DcsSlave):
     :meth:`_step_law` (one step: read ``self.inputs``, write ``self.outputs``; ValueError for bad
     inputs). The rules (the status protocol of :class:`DcsSlave`):
 
-    * invalid parameters at ``fmi2ExitInitializationMode``: fmi2Error naming them, every doStep
-      refused until a reset or a new instance;
+    * invalid parameters at ``fmi2ExitInitializationMode``: fmi2Error naming them; the instance
+      stays in initialization mode (no doStep) until corrected parameters initialize it;
     * a fixed parameter set after initialization: fmi2Error from that set call, nothing set;
     * an invalid tunable parameter, a bad input: fmi2Error from that doStep, state unchanged;
     * FMU state: the registered variables plus the law's state; after initialization a state's
@@ -280,7 +280,7 @@ class LawSlave(DcsSlave):
             self._init_error = f"invalid parameter: {exc}"
             self._initialized = False
             self._error(f"fmi2ExitInitializationMode: {self._init_error}; every doStep "
-                        f"will be rejected (reset or re-instantiate with valid parameters)")
+                        f"will be rejected (correct the parameters and call it again, or reset)")
             return
         self._init_error = None
         self._law = self._make_law(params)
@@ -353,22 +353,22 @@ class LawSlave(DcsSlave):
         law = internal.get("law")
         if set(internal) != {"law"} or not isinstance(law, list):
             return f"not a state of this FMU (internal part {sorted(internal)})"
-        problem = next((p for p in (fmu_state.number_problem(f"law state[{i}]", v)
-                                    for i, v in enumerate(law)) if p), None)
+        problem = fmu_state.numbers_problem("its law state", law)
         shape = self._law.get_state().shape
         if problem is None and len(law) != shape[0]:
             problem = f"its law state has {len(law)} values; this law has {shape[0]}"
         if problem is not None:
             return problem
-        if self._initialized:  # as fmi2ExitInitializationMode checks them
+        fixed, tunable = self._snapshot(self.FIXED), self._snapshot(self.TUNABLE)
+        changed = (fixed, tunable) != (self._fixed_values, self._tunable_values)
+        if self._initialized and changed:  # checked as fmi2ExitInitializationMode checks them
             try:
                 self._params_from_variables()
             except ValueError as exc:
                 return f"invalid parameter: {exc}"
-        # every check passed: apply. Parameters that differ from the law's reach it at the
-        # next doStep, in Python (as a tunable one set through FMI does)
-        fixed, tunable = self._snapshot(self.FIXED), self._snapshot(self.TUNABLE)
-        if self._initialized and (fixed, tunable) != (self._fixed_values, self._tunable_values):
+        # every check passed: apply. Parameters other than the law's reach it at the next
+        # doStep, in Python (as a tunable one set through FMI does)
+        if self._initialized and changed:
             self._fixed_values, self._tunable_values = fixed, None
         self._law.set_state(np.array(law, dtype=float))
         return None

@@ -28,17 +28,27 @@ from typing import Any
 
 from _dcs_pythonfmu_0_7_0 import Boolean, Integer, Real, String
 
-__all__ = ["capture", "decode", "encode", "number_problem", "restore"]
+__all__ = ["capture", "decode", "encode", "number_problem", "numbers_problem", "restore"]
 
 VARIABLES, INTERNAL = "variables", "internal"
 
-#: variable class -> (test of a value of that type, what is allowed)
-_TYPES: dict[type, tuple[Any, str]] = {
-    Real: (lambda v: isinstance(v, (int, float)) and not isinstance(v, bool), "a number"),
-    Integer: (lambda v: isinstance(v, int) and not isinstance(v, bool), "an integer"),
-    Boolean: (lambda v: isinstance(v, bool), "true or false"),
-    String: (lambda v: isinstance(v, str), "a string"),
-}
+#: variable class -> (the exact Python types a value of it may have, what is allowed); JSON
+#: decodes to exactly these (a bool is not an int here)
+_TYPES: dict[type, tuple[tuple[type, ...], str]] = {
+    Real: ((float, int), "a number"), Integer: ((int,), "an integer"),
+    Boolean: ((bool,), "true or false"), String: ((str,), "a string")}
+
+
+def _table(slave: Any) -> list[tuple[str, Any, Any, tuple[type, ...], str]]:
+    """(name, getter, setter, allowed types, what is allowed) of every registered variable, made
+    once per instance (the variables are registered in its constructor)."""
+    table = slave.__dict__.get("_dcs_state_table")
+    if table is None:
+        table = [(var.name, var.getter, var.setter,
+                  *next(t for cls, t in _TYPES.items() if isinstance(var, cls)))
+                 for var in slave.vars.values()]
+        slave._dcs_state_table = table
+    return table
 
 
 def encode(state: dict[str, Any]) -> bytes:
@@ -65,17 +75,26 @@ def decode(payload: bytes) -> dict[str, Any]:
 
 def capture(slave: Any) -> dict[str, Any]:
     """The state of ``slave`` (a ``DcsSlave``): its variables and its internal part."""
-    return {VARIABLES: {var.name: var.getter() for var in slave.vars.values()},
+    return {VARIABLES: {name: get() for name, get, *_ in _table(slave)},
             INTERNAL: slave._internal_state()}
 
 
 def number_problem(name: str, value: Any, finite: bool = True) -> str | None:
     """Why ``value`` is not a (finite) number, or None."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if type(value) not in (float, int):
         return f"{name} = {value!r} is not a number"
     if finite and not math.isfinite(value):
         return f"{name} = {value!r} is not finite"
     return None
+
+
+def numbers_problem(name: str, values: list, finite: bool = True) -> str | None:
+    """Why the list ``values`` does not hold only (finite) numbers (naming the first entry that
+    is not one, ``name[i]``), or None. Loops in C: a state holds thousands of them."""
+    if set(map(type, values)) <= {float, int} and (not finite or all(map(math.isfinite, values))):
+        return None
+    return next(p for p in (number_problem(f"{name}[{i}]", v, finite)
+                            for i, v in enumerate(values)) if p)
 
 
 def _shape_problem(slave: Any, state: Any) -> str | None:
@@ -86,22 +105,22 @@ def _shape_problem(slave: Any, state: Any) -> str | None:
     values, internal = state[VARIABLES], state[INTERNAL]
     if not isinstance(values, dict) or not isinstance(internal, dict):
         return "not a state of this FMU (its variables or internal part is not an object)"
-    names = {var.name for var in slave.vars.values()}
-    missing, unknown = sorted(names - set(values)), sorted(set(values) - names)
-    if missing or unknown:
+    table = _table(slave)
+    if len(values) != len(table) or any(name not in values for name, *_ in table):
+        names = {name for name, *_ in table}
+        missing, unknown = sorted(names - set(values)), sorted(set(values) - names)
         return (f"its variables do not match this FMU's (missing {missing[:5]}, unknown "
                 f"{unknown[:5]})")
-    for var in slave.vars.values():
-        test, allowed = next(t for cls, t in _TYPES.items() if isinstance(var, cls))
-        if not test(values[var.name]):
-            return f"{var.name} = {values[var.name]!r} is not {allowed}"
+    for name, _get, _set, types, allowed in table:
+        if type(values[name]) not in types:
+            return f"{name} = {values[name]!r} is not {allowed}"
     return None
 
 
 def _write(slave: Any, values: dict[str, Any]) -> None:
-    for var in slave.vars.values():
-        if var.setter is not None:
-            var.setter(values[var.name])
+    for name, _get, setter, *_ in _table(slave):
+        if setter is not None:
+            setter(values[name])
 
 
 def restore(slave: Any, state: Any) -> str | None:
@@ -113,7 +132,7 @@ def restore(slave: Any, state: Any) -> str | None:
     problem = _shape_problem(slave, state)
     if problem is not None:
         return problem
-    before = {var.name: var.getter() for var in slave.vars.values()}
+    before = {name: get() for name, get, *_ in _table(slave)}
     try:
         _write(slave, state[VARIABLES])
         problem = slave._restore_internal(state[INTERNAL])

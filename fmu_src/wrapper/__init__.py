@@ -88,8 +88,14 @@ Other behaviour
   states: fmi2Error (handles are looked up in registries of the live ones, ``dcs_registry.c``,
   never probed through a pointer that may be freed).
 * ``fmi2Reset``: ``slave.reset()`` if it exists, else a new slave object replaces the old one.
-* FMU state: the object of ``slave._get_fmu_state()`` is held by the C state (freed by
-  ``fmi2FreeFMUstate``); serialization through ``_fmu_state_to_bytes``/``_fmu_state_from_bytes``.
+* FMU state: the object of ``slave._get_fmu_state()`` is held by the C state with the phase
+  (FMI state) it was taken in (freed by ``fmi2FreeFMUstate``); ``fmi2SetFMUstate`` refuses a
+  state of another phase, else calls ``slave._set_fmu_state(obj)``. Serialized: the payload of
+  ``_fmu_state_to_bytes(obj)`` sealed with the FMU's identity (the slave class = model
+  identifier, ``build`` of ``resources/dcs_build.json``) and a SHA-256 (``dcs_state_format.h``;
+  docs/reliability.md, "FMU state and call order"); ``fmi2DeSerializeFMUstate`` checks all of it
+  in C, then ``_fmu_state_from_bytes(payload)`` makes the object (a status raised through
+  ``_fmi2_status`` refuses it).
 * Strings of ``fmi2GetString`` stay valid until the next ``fmi2GetString`` on the instance.
 * Unsupported FMI 2.0 features (directional derivatives, input/output derivatives,
   ``fmi2CancelStep``) return fmi2Error; ``fmi2Get*Status`` returns fmi2Discard except

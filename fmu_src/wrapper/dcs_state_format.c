@@ -15,36 +15,40 @@
 static const unsigned char MAGIC[8] = {'D', 'C', 'S', 'S', 'T', 'A', 'T', 'E'};
 
 /* ---------------------------------------------------------------- little endian */
-void dcs_put_u32(unsigned char *p, uint32_t v)
+static void put_le(unsigned char *p, uint64_t v, int bytes)
 {
     int i;
-    for (i = 0; i < 4; i++)
+    for (i = 0; i < bytes; i++)
         p[i] = (unsigned char)(v >> (8 * i));
+}
+
+static uint64_t get_le(const unsigned char *p, int bytes)
+{
+    uint64_t v = 0;
+    int i;
+    for (i = bytes - 1; i >= 0; i--)
+        v = (v << 8) | p[i];
+    return v;
+}
+
+void dcs_put_u32(unsigned char *p, uint32_t v)
+{
+    put_le(p, v, 4);
 }
 
 uint32_t dcs_get_u32(const unsigned char *p)
 {
-    uint32_t v = 0;
-    int i;
-    for (i = 3; i >= 0; i--)
-        v = (v << 8) | p[i];
-    return v;
+    return (uint32_t)get_le(p, 4);
 }
 
 void dcs_put_u64(unsigned char *p, uint64_t v)
 {
-    int i;
-    for (i = 0; i < 8; i++)
-        p[i] = (unsigned char)(v >> (8 * i));
+    put_le(p, v, 8);
 }
 
 uint64_t dcs_get_u64(const unsigned char *p)
 {
-    uint64_t v = 0;
-    int i;
-    for (i = 7; i >= 0; i--)
-        v = (v << 8) | p[i];
-    return v;
+    return get_le(p, 8);
 }
 
 void dcs_put_f64(unsigned char *p, double v)
