@@ -5,8 +5,8 @@
 
 For the plant (paper_open_loop, full 3D, 30 bodies), the Python strain controller and the C
 controller, in one process, this build and (``--baseline DIR``: e.g. main's ``build/fmus``)
-an earlier one interleaved, best of ``--repeat`` x ``--calls``, us per call through fmpy's
-``FMU2Slave`` (its ctypes wrapper costs the same for both builds):
+an earlier one interleaved, best of ``--repeat`` x ``--calls``, us of CPU time (this thread's)
+per call through fmpy's ``FMU2Slave`` (its ctypes wrapper costs the same for both builds):
 
 * ``fmi2GetFMUstate`` (a state given back is overwritten: no allocation per call);
 * ``fmi2SetFMUstate`` of that state (same parameters, same phase: the common restore);
@@ -57,10 +57,11 @@ def _instance(folder: Path, name: str, tag: str) -> FMU2Slave:
 
 
 def _per_call(fn, calls: int) -> float:
-    t0 = time.perf_counter()
+    """us of this thread's CPU time per call (steadier than wall time on a shared machine)."""
+    t0 = time.thread_time()
     for _ in range(calls):
         fn()
-    return (time.perf_counter() - t0) / calls * 1e6
+    return (time.thread_time() - t0) / calls * 1e6
 
 
 def _measure(s: FMU2Slave, calls: int) -> dict[str, float]:
@@ -69,9 +70,9 @@ def _measure(s: FMU2Slave, calls: int) -> dict[str, float]:
 
     def serialize() -> float:  # a fresh state each time: the payload is made once per state
         fresh = s.getFMUstate()
-        t0 = time.perf_counter()
+        t0 = time.thread_time()
         s.serializeFMUstate(fresh)  # fmpy: the size call, then the copy
-        t1 = time.perf_counter()
+        t1 = time.thread_time()
         s.freeFMUstate(fresh)
         return t1 - t0
 
@@ -120,7 +121,8 @@ def main(argv: list[str] | None = None) -> int:
         + " ".join(argv if argv is not None else sys.argv[1:]) + "`; "
         + time.strftime("%Y-%m-%d %H:%M") + f"; {platform.platform()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}, load average {os.getloadavg()[0]:.1f} at the end; "
-        f"best of {args.repeat} x {args.calls} calls, builds interleaved.", "",
+        f"best of {args.repeat} x {args.calls} calls, builds interleaved; us of CPU time (the "
+        f"calling thread's) per call.", "",
         "| FMU | build | state bytes | get [us] | set [us] | serialize [us] | deserialize [us] "
         "| SHA-256 of it, C / hashlib [us] |", "|---|---|---:|---:|---:|---:|---:|---:|"]
     for n in NAMES:
