@@ -224,7 +224,7 @@ class LawSlave(DcsSlave):
     * a fixed parameter set after initialization: fmi2Error from that set call, nothing set;
     * an invalid tunable parameter, a bad input: fmi2Error from that doStep, state unchanged;
     * FMU state: the registered variables plus the law's state; after initialization a state's
-      parameters must pass the checks of initialization, and they are applied with it;
+      parameters must pass the checks of initialization (they reach the law at the next doStep);
     * compiled step (the wrapper's accelerator, ``fmu_src/wrapper``): the law's, made at the
       first request after initialization (where numba is loaded in the process by then: the
       hosts instantiate every FMU, the plant's import loads it, before they initialize any),
@@ -279,8 +279,8 @@ class LawSlave(DcsSlave):
         except ValueError as exc:
             self._init_error = f"invalid parameter: {exc}"
             self._initialized = False
-            self._error(f"fmi2ExitInitializationMode: {self._init_error}; every doStep "
-                        f"will be rejected (correct the parameters and call it again, or reset)")
+            self._error(f"fmi2ExitInitializationMode: {self._init_error}; correct the "
+                        f"parameters and call it again (or reset)")
             return
         self._init_error = None
         self._law = self._make_law(params)
