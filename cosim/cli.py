@@ -220,10 +220,13 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     print(f"ran {res.n_run} of {res.n_points} points ({res.n_skipped} already done) in "
           f"{res.wall_time:.1f} s")
     print(res.summary())
+    for line in res.notes:
+        print(f"note: {line}")
     if args.maps:
         from drillcosim.cosim.study.maps import plot_maps
 
-        for path in plot_maps(res.folder, predict=not args.no_prediction):
+        for path in plot_maps(res.folder, predict=not args.no_prediction,
+                              progress=_progress(args)):
             print(path)
     return EXIT_OK
 
