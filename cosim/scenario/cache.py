@@ -16,6 +16,9 @@ import functools
 import hashlib
 import io
 import json
+import os
+import tempfile
+import zipfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -25,7 +28,8 @@ import numpy as np
 from drillcosim._toolchain import user_cache
 from drillcosim.cosim.master.files import atomic_write
 
-__all__ = ["cache_key", "cached_arrays", "source_hash"]
+__all__ = ["cache_key", "cached_arrays", "cached_file", "is_cached", "load_arrays",
+           "source_hash"]
 
 
 @functools.lru_cache(maxsize=32)
@@ -56,6 +60,25 @@ def _path(kind: str, key: str) -> Path:
     return user_cache() / kind / f"{key}.npz"
 
 
+def _load(path: Path) -> dict[str, np.ndarray] | None:
+    """Every array of ``path`` (read in full: a damaged file fails here), or None."""
+    try:
+        with np.load(path, allow_pickle=False) as saved:
+            return {name: saved[name] for name in saved.files}
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return None             # missing, cut short or damaged
+
+
+def _store(path: Path, arrays: Mapping[str, np.ndarray]) -> Path | None:
+    buf = io.BytesIO()
+    np.savez(buf, **{name: np.asarray(a) for name, a in arrays.items()})
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return atomic_write(path, buf.getvalue())
+    except OSError:             # a read-only cache: the result stands, uncached
+        return None
+
+
 def cached_arrays(kind: str, ident: Any, compute: Callable[[], Mapping[str, np.ndarray]]
                   ) -> dict[str, np.ndarray]:
     """The arrays ``compute()`` returns for ``ident``, from the cache or computed and stored.
@@ -74,17 +97,36 @@ def cached_arrays(kind: str, ident: Any, compute: Callable[[], Mapping[str, np.n
     dict of str -> numpy.ndarray
     """
     path = _path(kind, cache_key(ident))
-    try:
-        with np.load(path, allow_pickle=False) as saved:
-            return {name: saved[name] for name in saved.files}
-    except (OSError, ValueError, KeyError, EOFError):
-        pass                    # missing, cut short or damaged: compute it again
-    arrays = {name: np.asarray(a) for name, a in compute().items()}
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write(path, buf.getvalue())
-    except OSError:             # a read-only cache: the result stands, uncached
-        pass
-    return arrays
+    got = _load(path)
+    if got is None:
+        got = {name: np.asarray(a) for name, a in compute().items()}
+        _store(path, got)
+    return got
+
+
+def cached_file(kind: str, ident: Any, compute: Callable[[], Mapping[str, np.ndarray]]
+                ) -> Path:
+    """:func:`cached_arrays`, returning the file that holds them (for another process to read:
+    :func:`load_arrays`); a read-only cache gets a temporary file."""
+    path = _path(kind, cache_key(ident))
+    if _load(path) is None:
+        arrays = compute()
+        if _store(path, arrays) is None:
+            fd, name = tempfile.mkstemp(prefix=f"drillcosim_{kind}_", suffix=".npz")
+            os.close(fd)
+            path = Path(name)
+            np.savez(path, **arrays)
+    return path
+
+
+def is_cached(kind: str, ident: Any) -> bool:
+    """Does the cache hold a readable file for ``ident``?"""
+    return _load(_path(kind, cache_key(ident))) is not None
+
+
+def load_arrays(path: str | Path) -> dict[str, np.ndarray]:
+    """The arrays of a file of :func:`cached_file` (no pickles: loading runs no code)."""
+    got = _load(Path(path))
+    if got is None:
+        raise OSError(f"{path}: missing or damaged cache file")
+    return got
