@@ -179,6 +179,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         files = result.save(out, plots=not args.no_plots, workers=workers, baseline=baseline)
     message = result.message(out, files)
     print(message, file=sys.stdout if result.completed else sys.stderr)
+    if args.profile:
+        print(result.profile_table())
     return EXIT_OK if result.completed else EXIT_FAILED
 
 
@@ -392,6 +394,10 @@ def _parser() -> argparse.ArgumentParser:
     _add_fmu_options(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--profile", action="store_true",
+                   help="print where the stepping loop's time went: per component its mean "
+                        "and longest step and share, the master's own share, the real-time "
+                        "factor (also in summary.json's telemetry)")
     p.add_argument("--no-baseline", action="store_true",
                    help="figures without the open-loop baseline (a closed-loop run's figures "
                         "draw the scene with the controller off behind it; run once, cached)")

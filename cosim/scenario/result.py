@@ -120,6 +120,10 @@ class Result:
         completed.
     csv_path : Path or None
         The ``results.csv`` streamed during the run, if any.
+    profile : dict
+        Where the stepping loop's time went (:meth:`cosim.master.master.Result.profile`): per
+        component the mean and longest step [s] and its share, the master's own share, the
+        real-time factor; ``summary.json``'s ``telemetry``, :meth:`profile_table`.
     """
 
     config: SceneConfig
@@ -132,6 +136,7 @@ class Result:
     real_time_factor: float
     failure: dict[str, Any] | None = None
     csv_path: Path | None = None
+    profile: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     @property
     def completed(self) -> bool:
@@ -183,7 +188,28 @@ class Result:
             summary["top_drive_controller"] = dataclasses.asdict(cfg.top_drive)
         summary["cosim"] = cfg.cosim.as_dict()
         summary["engine"] = self.engine
+        summary["telemetry"] = self.profile
         return summary
+
+    def profile_table(self) -> str:
+        """:attr:`profile` as a text table (``drillcosim run --profile``): per component its
+        steps, mean and longest step [us], exchange calls [s] and share of the stepping loop;
+        then the master's own share and the real-time factor."""
+        p = self.profile
+        if not p:
+            return "no telemetry (the run did not step)"
+        lines = [f"{'component':<22}{'steps':>9}{'mean step':>12}{'max step':>12}"
+                 f"{'exchange':>11}{'share':>8}",
+                 f"{'':<22}{'':>9}{'[us]':>12}{'[us]':>12}{'[s]':>11}{'[%]':>8}"]
+        for name, c in p["components"].items():
+            lines.append(f"{name:<22}{c['steps']:>9d}{1e6 * c['step_mean_s']:>12.2f}"
+                         f"{1e6 * c['step_max_s']:>12.1f}{c['exchange_s']:>11.3f}"
+                         f"{100 * c['share']:>8.1f}")
+        lines.append(f"{'master (exchange, recording, observers)':<66}"
+                     f"{100 * p['master_share']:>8.1f}")
+        lines.append(f"stepping loop {p['wall_time_s']:.3g} s for {self.end_time:g} s simulated: "
+                     f"real-time factor {p['real_time_factor']:.3g}")
+        return "\n".join(lines)
 
     @property
     def _switch_on_time(self) -> float | None:
