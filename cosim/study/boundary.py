@@ -121,13 +121,17 @@ class StepResponse:
     nu : numpy.ndarray, shape (N, m)
         Eigenvalues of ``P`` at ``exp(i theta)`` (unordered).
     open_loop_radius : float
-        Largest plant pole modulus (the loop's modes): the method needs it < 1.
+        Largest plant pole modulus (the loop's modes): the method needs it < 1 (else
+        ``theta`` and ``nu`` are empty).
     """
 
     def __init__(self, lm: LoopModel, step: float):
         self.modes = _modes(lm)
         self.mu, self.phi = _input_map(self.modes.lam, step, lm.method, lm.max_step)
         self.open_loop_radius = float(np.max(np.abs(self.mu), initial=0.0))
+        if not self.open_loop_radius < 1.0:        # a pole on or outside the circle: no grid
+            self.theta, self.nu = np.zeros(0), np.zeros((0, len(self.modes.cv)))
+            return
         arg = np.angle(self.mu)
         width = np.maximum(1.0 - np.abs(self.mu), 1e-12)
         up = arg >= 0

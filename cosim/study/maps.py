@@ -39,7 +39,7 @@ from .prediction import predicted_boundary, predicted_curves, prediction_progres
 from .table import read_table, reference_key
 from .verdict import GROWTH_MARGIN, benefit_note, rule_text
 
-__all__ = ["plot_maps", "predicted_boundary"]
+__all__ = ["map_figures", "plot_maps", "predicted_boundary"]
 
 #: Axis label of a sweep's gain, by gain key.
 GAIN_LABELS = {"controller.gain": "controller gain K [N per unit strain]",
@@ -166,10 +166,11 @@ def _boundary_line(ax, pred: dict[str, Any], lay: _Layout, panel: float) -> None
 
 
 def _figure(lay: _Layout, n: int, sharey: bool = True):
-    import matplotlib.pyplot as plt
+    """A figure of ``n`` panels in a row (a plain ``Figure``: no pyplot state)."""
+    from matplotlib.figure import Figure
 
-    return plt.subplots(1, n, figsize=(4.6 * n + 2.8, 5.2), squeeze=False, sharey=sharey,
-                        layout="constrained")
+    fig = Figure(figsize=(4.6 * n + 2.8, 5.2), layout="constrained")
+    return fig, fig.subplots(1, n, squeeze=False, sharey=sharey)
 
 
 def _gain_axes(ax, lay: _Layout, xlabel: str, title: str) -> None:
@@ -194,9 +195,7 @@ def _legend(fig, axes) -> None:
         fig.legend(handles, labels, loc="outside lower center", ncol=ncol, fontsize=8)
 
 
-def _stability_map(folder: Path, lay: _Layout, pred: dict[str, Any] | None) -> Path:
-    from drillcosim.cosim.scenario.plots import save_figure
-
+def _stability_map(lay: _Layout, pred: dict[str, Any] | None):
     rules = rule_text(lay.stop)
     styles = [(lambda r: r["verdict"] == "stable", "o", "tab:green", rules["stable"]),
               (lambda r: r["verdict"] == "unstable" and r["status"] == "ok", "^", "tab:orange",
@@ -227,13 +226,11 @@ def _stability_map(folder: Path, lay: _Layout, pred: dict[str, Any] | None) -> P
     _legend(fig, axes[0])
     fig.suptitle(f"Stability of the strain-feedback loop\n{lay.scene}, engine '{lay.engine}', "
                  f"{lay.stop:g} s runs", fontsize=11)
-    return save_figure(fig, folder / "stability_map.png", dpi=110)
+    return fig
 
 
-def _benefit_map(folder: Path, lay: _Layout, pred: dict[str, Any] | None) -> Path:
+def _benefit_map(lay: _Layout, pred: dict[str, Any] | None):
     from matplotlib.colors import TwoSlopeNorm
-
-    from drillcosim.cosim.scenario.plots import save_figure
 
     panels = lay.panels()
     fig, axes = _figure(lay, len(panels))
@@ -271,13 +268,11 @@ def _benefit_map(folder: Path, lay: _Layout, pred: dict[str, Any] | None) -> Pat
     line = "\n" + "\n".join(textwrap.wrap(sorted(notes)[0], 90)) if notes else ""
     fig.suptitle(f"Control benefit (long span radial deflection)\n{lay.scene}, engine "
                  f"'{lay.engine}', {lay.stop:g} s runs{line}", fontsize=10 if notes else 11)
-    return save_figure(fig, folder / "benefit_map.png", dpi=110)
+    return fig
 
 
-def _growth_figure(folder: Path, lay: _Layout, pred: dict[str, Any] | None) -> Path:
+def _growth_figure(lay: _Layout, pred: dict[str, Any] | None):
     from matplotlib.lines import Line2D
-
-    from drillcosim.cosim.scenario.plots import save_figure
 
     panels = lay.panels()
     fig, axes = _figure(lay, len(panels), sharey=False)
@@ -323,7 +318,7 @@ def _growth_figure(folder: Path, lay: _Layout, pred: dict[str, Any] | None) -> P
         ax.legend(handles=handles, fontsize=7, loc="upper left")
     fig.suptitle(f"Growth rate of the strain loop: measured and predicted\n{lay.scene}, engine "
                  f"'{lay.engine}', {lay.stop:g} s runs", fontsize=11)
-    return save_figure(fig, folder / "growth_rate.png", dpi=110)
+    return fig
 
 
 def _curve(pred: dict[str, Any], lay: _Layout, gain: float, panel: float
@@ -339,6 +334,20 @@ def _colors(n: int) -> list:
 
     cmap = matplotlib.colormaps["viridis"]
     return [cmap(0.85 * i / max(n - 1, 1)) for i in range(n)]
+
+
+def map_figures(folder: str | os.PathLike, predict: bool = True,
+                progress: bool | None = None) -> dict[str, Any]:
+    """The maps of a sweep of the strain gain as matplotlib figures: ``{"stability_map": Figure,
+    "benefit_map": ..., "growth_rate": ...}`` (arguments: :func:`plot_maps`)."""
+    folder = Path(folder)
+    meta: dict[str, Any] = {}
+    if (folder / "sweep.json").exists():
+        meta = json.loads((folder / "sweep.json").read_text()).get("spec", {})
+    lay = _layout(folder, meta)
+    pred = _prediction(folder, lay, progress) if predict else None
+    return {"stability_map": _stability_map(lay, pred), "benefit_map": _benefit_map(lay, pred),
+            "growth_rate": _growth_figure(lay, pred)}
 
 
 def plot_maps(folder: str | os.PathLike, predict: bool = True,
@@ -362,6 +371,7 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True,
     import matplotlib
 
     matplotlib.use("Agg")
+    from drillcosim.cosim.scenario.plots import save_figure
 
     folder = Path(folder)
     meta: dict[str, Any] = {}
@@ -373,10 +383,8 @@ def plot_maps(folder: str | os.PathLike, predict: bool = True,
         if not rows:
             raise ValueError(f"{folder}: no closed-loop points to map")
         return [_stick_slip_map(folder, rows, gain_key)]
-    lay = _layout(folder, meta)
-    pred = _prediction(folder, lay, progress) if predict else None
-    return [_stability_map(folder, lay, pred), _benefit_map(folder, lay, pred),
-            _growth_figure(folder, lay, pred)]
+    return [save_figure(fig, folder / f"{name}.png", dpi=110)
+            for name, fig in map_figures(folder, predict, progress).items()]
 
 
 def _stick_slip_map(folder: Path, rows: Sequence[dict[str, Any]], gain_key: str) -> Path:

@@ -58,7 +58,6 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
-from scipy.signal import butter, sosfilt
 
 from drillcosim.cosim.master.limits import OutputLimit
 from drillcosim.cosim.scenario.build import ENGINES, build_system
@@ -79,6 +78,7 @@ from drillcosim.plant.signals import (
 )
 
 from .grid import DEFAULT_GAIN_KEY, check_gain_key
+from .highpass import butter_highpass, sosfilt
 from .prediction import point_prediction
 from .verdict import scene_judging_window
 
@@ -185,7 +185,7 @@ def metrics(data: np.ndarray, spans: Mapping[int, str], n_sites: int, opts: Poin
         dt = float(np.median(np.diff(t)))
         nyq = math.pi / dt
         if opts.highpass < 0.9 * nyq:
-            sos = butter(4, opts.highpass / nyq, "highpass", output="sos")
+            sos = butter_highpass(4, opts.highpass / nyq)
             strains = [sosfilt(sos, s) for s in strains]
     out["growth_rate"] = out["growth_noise"] = math.nan  # no strains: no strain-loop growth
     if strains and len(t):
