@@ -152,7 +152,8 @@ def test_the_linearization_is_cached_by_content(tmp_path, monkeypatch) -> None:
 def test_the_high_pass_equals_scipys() -> None:
     """The sweep's compiled biquad cascade and cached Butterworth design equal scipy.signal's
     sosfilt and butter bit for bit."""
-    from scipy.signal import butter, sosfilt as scipy_sosfilt
+    from scipy.signal import butter
+    from scipy.signal import sosfilt as scipy_sosfilt
 
     from drillcosim.cosim.study.highpass import butter_highpass, sosfilt
 
