@@ -475,7 +475,7 @@ def test_small_sweep_on_a_dask_local_cluster(tmp_path):
     from drillcosim.cosim.study.maps import plot_maps
 
     paths = plot_maps(tmp_path, predict=False)
-    assert [p.name for p in paths] == ["stability_map.png", "benefit_map.png"]
+    assert [p.name for p in paths] == ["stability_map.png", "benefit_map.png", "growth_rate.png"]
     assert all(p.stat().st_size > 10_000 for p in paths)
 
 
