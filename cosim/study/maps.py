@@ -295,7 +295,7 @@ def _growth_figure(lay: _Layout, pred: dict[str, Any] | None):
                 top = max(top, float(np.nanmax(np.abs(ys), initial=0.0)))
             div = np.array([r["status"] == "diverged" for r in mine], dtype=bool)
             if div.any():
-                ax.scatter(x[div], np.full(div.sum(), 1.5 * top), marker="X", c=colors[k],
+                ax.scatter(x[div], np.full(div.sum(), 1.5 * top), marker="X", color=colors[k],
                            s=80, edgecolors="k", linewidths=0.5, zorder=4)
         ax.axhline(GROWTH_MARGIN, color="k", ls="--", lw=1.0)
         ax.axhline(0.0, color="0.5", lw=0.8)
