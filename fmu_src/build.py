@@ -86,6 +86,7 @@ import argparse
 import fnmatch
 import hashlib
 import json
+import math
 import os
 import pprint
 import re
@@ -97,9 +98,11 @@ import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 from xml.etree import ElementTree as ET
 
 from drillcosim._toolchain import user_cache
+from drillcosim.controller.registry import LAWS
 
 __all__ = [
     "DEFAULT_OUT",
@@ -338,44 +341,51 @@ class FmuRecipe:
         return "\n".join(lines) + "\n"
 
 
-#: The FMUs of the project.
-REGISTRY: tuple[FmuRecipe, ...] = (
-    FmuRecipe(
-        name="StrainController",
-        script="fmu_src/strain_controller_fmu.py",
-        vendored=(("controller", "_dcs_controller_0_1_0"),
-                  ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
-        requires=("numpy",),
-    ),
-    FmuRecipe(
-        name="DrillstringPlant",
-        script="fmu_src/drillstring_plant_fmu.py",
-        vendored=(("plant", "_dcs_plant_0_1_0"),
-                  ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
-        extra_files=("scenes",),
-        requires=("numpy", "scipy", "numba"),
-        # the numpy reference rhs (tests, benchmarks), the linear/modal analysis and the
-        # continuous-time closed loop (study layer): the FMU never imports them (tested)
-        exclude=("plant/numpy_rhs.py", "plant/linearize.py", "plant/modal.py",
-                 "plant/equilibrium.py", "plant/closed_loop.py",
-                 "scenes/*.json"),   # controller matrices (the plant reads only the TOML)
-    ),
-    FmuRecipe(
-        name="StateSpaceController",
-        script="fmu_src/state_space_controller_fmu.py",
-        vendored=(("controller", "_dcs_controller_0_1_0"),
-                  ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
-        resource_files=(("fmu_src/state_space_default.json", "state_space.json"),),
-        requires=("numpy",),
-    ),
-    FmuRecipe(
-        name="TopDriveController",
-        script="fmu_src/top_drive_controller_fmu.py",
-        vendored=(("controller", "_dcs_controller_0_1_0"),
-                  ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
-        requires=("numpy",),
-    ),
+#: The version part of the canonical names the adapters import the vendored packages under.
+PACKAGES_VERSION = "0_1_0"
+#: The adapter of every controller law (``controller/registry.py``): a variant per law and layout.
+LAW_ADAPTER = "fmu_src/law_fmu.py"
+
+
+def vendored(folder: str) -> tuple[str, str]:
+    """``(folder, canonical name)`` of a vendored package: ``_dcs_<folder's name>_0_1_0``."""
+    return folder, f"_dcs_{Path(folder).name}_{PACKAGES_VERSION}"
+
+
+def law_recipe(law: type, layout: Mapping[str, Any] | None = None, name: str = "",
+               resource: str | Path = "") -> FmuRecipe:
+    """The recipe of a registered law's FMU (``controller/registry.py``): the generic adapter
+    :data:`LAW_ADAPTER` as the variant ``name`` (default the law's ``FMU``) with the class
+    attributes ``KIND`` and ``LAYOUT`` (default the law's default layout); a law with a
+    resource file carries ``resource`` (default its ``DEFAULT_RESOURCE``)."""
+    layout = law.default_layout() if layout is None else dict(layout)
+    files: tuple[tuple[str, str], ...] = ()
+    if law.RESOURCE:
+        src = Path(resource) if resource else Path("controller") / law.DEFAULT_RESOURCE
+        files = ((str(src), law.RESOURCE),)
+    return FmuRecipe(
+        name=name or law.FMU, script=LAW_ADAPTER,
+        vendored=(vendored("controller"), vendored("fmu_src/slave_support")),
+        requires=("numpy",), base="LawController",
+        class_attributes=json.dumps({"KIND": law.KIND, "LAYOUT": layout}), resource_files=files)
+
+
+#: The plant's FMU.
+PLANT_RECIPE = FmuRecipe(
+    name="DrillstringPlant",
+    script="fmu_src/drillstring_plant_fmu.py",
+    vendored=(vendored("plant"), vendored("fmu_src/slave_support")),
+    extra_files=("scenes",),
+    requires=("numpy", "scipy", "numba"),
+    # the numpy reference rhs (tests, benchmarks), the linear/modal analysis and the
+    # continuous-time closed loop (study layer): the FMU never imports them (tested)
+    exclude=("plant/numpy_rhs.py", "plant/linearize.py", "plant/modal.py",
+             "plant/equilibrium.py", "plant/closed_loop.py",
+             "scenes/*.json"),   # controller matrices (the plant reads only the TOML)
 )
+
+#: The FMUs of the project: the plant, and the default FMU of every registered controller law.
+REGISTRY: tuple[FmuRecipe, ...] = (PLANT_RECIPE, *(law_recipe(law) for law in LAWS))
 
 
 # ------------------------------------------------------------------ modelDescription
@@ -384,6 +394,7 @@ def finalize_model_description(
     units: Mapping[str, str],
     direct_feedthrough: Mapping[str, Sequence[str]] | None = None,
     runtime_note: str = "",
+    ranges: Mapping[str, tuple[float, float]] | None = None,
 ) -> bytes:
     """Add units, unit definitions and output dependencies to a modelDescription.
 
@@ -398,6 +409,9 @@ def finalize_model_description(
         in the mapping (or all, if None) get no ``dependencies`` attribute.
     runtime_note : str
         Appended to the model's ``description`` (e.g. the Python versions it runs in).
+    ranges : mapping of str to (float, float), optional
+        Variable name -> declared ``(min, max)`` (Real or Integer; an infinite bound is not
+        written).
 
     Returns
     -------
@@ -432,6 +446,18 @@ def finalize_model_description(
         real.set("unit", unit)
         if unit not in used_units:
             used_units.append(unit)
+
+    for name, bounds in (ranges or {}).items():
+        if name not in by_name:
+            raise ValueError(f"VARIABLE_RANGES names unknown variable {name!r}")
+        node = by_name[name].find("Real")
+        if node is None:
+            node = by_name[name].find("Integer")
+        if node is None:
+            raise ValueError(f"variable {name!r} has a range but is not a Real or an Integer")
+        for attr, bound in zip(("min", "max"), bounds):
+            if math.isfinite(bound):
+                node.set(attr, repr(float(bound)) if node.tag == "Real" else str(int(bound)))
 
     for old in root.findall("UnitDefinitions"):
         root.remove(old)
@@ -727,6 +753,7 @@ def _build_in_this_process(recipe: FmuRecipe, workdir: Path) -> Path:
         xml = zf.read("modelDescription.xml")
     xml = finalize_model_description(
         xml, getattr(cls, "VARIABLE_UNITS", {}), getattr(cls, "DIRECT_FEEDTHROUGH", None),
+        ranges=getattr(cls, "VARIABLE_RANGES", None),
         runtime_note=f"[Runs in CPython 3.{low} to 3.{high}: one binary, see "
                      f"{BUILD_INFO} and drillcosim's docs/interop.md.]")
     _rewrite_zip_member(fmu, "modelDescription.xml", xml)
