@@ -95,11 +95,13 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
 def _cmd_build(args: argparse.Namespace) -> int:
     from drillcosim.api import build_fmus, load_scene
     from drillcosim.cosim.scenario.build import scene_recipes
+    from drillcosim.cosim.scenario.scene_fmus import built_for_scene
 
     if args.scene:
         recipes = scene_recipes(load_scene(args.scene))
         for instance, path in build_fmus(args.out, scene=args.scene).items():
-            kind = "built for the scene" if recipes[instance].base else "the default build"
+            kind = ("built for the scene" if built_for_scene(recipes[instance])
+                    else "the default build")
             print(f"built {path} ({instance}: {kind})")
         return EXIT_OK
     try:

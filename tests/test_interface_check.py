@@ -149,16 +149,23 @@ def test_a_target_connected_twice_is_refused(project_fmus, c_controller_fmu) -> 
         "plant.strain1_C, plant.strain1_E)"]
 
 
-def test_a_scene_key_the_controller_lacks_is_a_problem_a_default_is_not(
+def test_a_law_key_a_foreign_controller_lacks_is_not_required_an_override_of_it_is(
         project_fmus, c_controller_fmu, tmp_path) -> None:
+    """Issue 31: the scene file's law keys a foreign FMU does not declare are not required of
+    it (a warning names them); an override of one would change nothing: a problem."""
     no_lag = variant(c_controller_fmu, tmp_path / "NoLag.fmu",
-                     lambda r: _drop(r, {"lag_time_constant", "enabled"}))
+                     lambda r: _drop(r, {"lag_time_constant", "enabled", "mode"}))
     plant = project_fmus["DrillstringPlant"]
-    ss = _build("paper_closed_loop", plant_fmu=plant, controller_fmu=no_lag)
-    assert "lag_time_constant" not in ss.system.fmu("controller").parameters  # default: skipped
-    with pytest.raises(InterfaceError, match=r"controller \(NoLag.fmu\) has no parameter "
-                                             r"'lag_time_constant' for \[controller\] "
-                                             r"lag_time_constant of .*paper_closed_loop.toml"):
+    with pytest.warns(InterfaceWarning, match=r"controller \(NoLag.fmu\) has no parameter "
+                                              r"'mode': \[controller\] mode of "
+                                              r".*paper_closed_loop.toml not applied"):
+        ss = _build("paper_closed_loop", plant_fmu=plant, controller_fmu=no_lag)
+    params = ss.system.fmu("controller").parameters
+    assert "lag_time_constant" not in params and "mode" not in params
+    assert params["gain"] == 1e9  # what it has, it gets
+    with pytest.raises(InterfaceError, match=r"override controller.lag_time_constant = 0.01: "
+                                             r"controller \(NoLag.fmu\) has no parameter "
+                                             r"'lag_time_constant'"):
         _build("paper_closed_loop", {"controller.lag_time_constant": 0.01}, plant_fmu=plant,
                controller_fmu=no_lag)
 

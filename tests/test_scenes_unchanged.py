@@ -29,10 +29,10 @@ import pytest
 
 from drillcosim.cosim.scenario.build import build_system
 from drillcosim.cosim.scenario.config import SceneConfig, load_config
-from drillcosim.cosim.scenario.inprocess import PlantSlave, _LawSlave
+from drillcosim.cosim.scenario.inprocess import LawSlave, PlantSlave
 from drillcosim.cosim.scenario.scene_fmus import plant_layout
 from drillcosim.cosim.scenario.simulate import simulate
-from drillcosim.plant.signals import CONTROLLER, PLANT, TOP_DRIVE
+from drillcosim.plant.signals import PLANT
 from support.baseline import ROOT, Baseline, baseline_packages, have_commit, scenes_at
 
 #: The commit before issue 31 (main at 7845e95).
@@ -67,20 +67,31 @@ def _baseline(commit: str) -> Baseline:
     return _BASELINES[commit]
 
 
-class _OldLaw(_LawSlave):
-    """A reference commit's law as a slave, stepped in Python: ``advance(law, t, h, u)``
-    returns the outputs at ``t + h``; ``start(law)`` the outputs at the start."""
+class _OldLaw:
+    """A reference commit's law in today's law interface (``controller/law.py``), stepped in
+    Python: ``advance(law, t, h, u)`` returns the outputs at ``t + h``, ``start(law)`` the
+    outputs at the start."""
 
-    def __init__(self, name, law, inputs, outputs, advance, start):
-        super().__init__(name, inputs, outputs)
-        self.law, self._advance_law, self._start = law, advance, start
+    def __init__(self, law, advance, start):
+        self.law, self._advance, self._start = law, advance, start
 
-    def instantiate(self, start_time, stop_time):
+    def reset(self):
         self.law.reset()
-        self.y[:] = self._start(self.law)
 
-    def _advance(self, t, h):
-        self.y[:] = self._advance_law(self.law, t, h, self.u)
+    def initial_outputs(self):
+        return self._start(self.law)
+
+    def advance(self, t, h, u, y):
+        y[:] = self._advance(self.law, t, h, u)
+
+    def compiled_step(self, u, y):
+        return None
+
+    def get_state(self):
+        return self.law.get_state()
+
+    def set_state(self, state):
+        self.law.set_state(state)
 
 
 def _old_params(cls, new):
@@ -88,38 +99,38 @@ def _old_params(cls, new):
     return cls(**{f.name: getattr(new, f.name) for f in dataclasses.fields(cls)})
 
 
-def _old_slaves(config: SceneConfig, built, base: Baseline) -> dict:
-    """The reference commit's plant and laws behind the slaves of ``built`` (same names, same
-    inputs and outputs)."""
+def _old_law(setting, n_sites: int, base: Baseline) -> _OldLaw:
+    """The reference commit's law of today's controller setting (``n_sites`` sites)."""
+    ctrl = base.module("controller")
+    if setting.kind == "state_space":
+        ss = base.module("controller", "state_space")
+        return _OldLaw(ss.StateSpaceController(ss.load_state_space(setting.matrices)),
+                       lambda law, t, h, u: law.step(t, h, u),
+                       lambda law: law.workspace.outputs)
+    if setting.kind == "proportional":
+        return _OldLaw(ctrl.StrainController(_old_params(ctrl.ControllerParams, setting.params),
+                                             n_sites),
+                       lambda law, t, h, u: law.step(t, h, u), lambda law: law.forces)
+    assert setting.kind == "pi", setting.kind
+    return _OldLaw(ctrl.TopDriveController(_old_params(ctrl.TopDriveControllerParams,
+                                                       setting.params)),
+                   lambda law, t, h, u: [law.step(t, h, float(u[0]), float(u[1]))],
+                   lambda law: [law.torque])
+
+
+def _old_slaves(config: SceneConfig, base: Baseline) -> dict:
+    """The reference commit's plant and laws behind slaves of today's names and ports."""
     scene_mod, model_mod, sim_mod = (base.module("plant", m)
                                      for m in ("scene", "model", "simulator"))
-    ctrl = base.module("controller")
     old_scene = scene_mod.load_scene(config.name, base.scenes)
     kind = "full3d" if plant_layout(config.scene) is None else config.scene.model
     slaves = {PLANT: PlantSlave(PLANT, sim_mod.PlantSimulator(
         model_mod.DrillstringModel(old_scene.plant, kind)))}
-    new = built.slaves
-    if CONTROLLER in new:
-        io = (new[CONTROLLER].inputs, new[CONTROLLER].outputs)
-        if config.state_space is not None:
-            ss = base.module("controller", "state_space")
-            law = ss.StateSpaceController(ss.load_state_space(config.state_space.file))
-            slaves[CONTROLLER] = _OldLaw(CONTROLLER, law, *io,
-                                         lambda law, t, h, u: law.step(t, h, u),
-                                         lambda law: law.workspace.outputs)
-        else:
-            law = ctrl.StrainController(_old_params(ctrl.ControllerParams, config.controller),
-                                        config.n_sites)
-            slaves[CONTROLLER] = _OldLaw(CONTROLLER, law, *io,
-                                         lambda law, t, h, u: law.step(t, h, u),
-                                         lambda law: law.forces)
-    if TOP_DRIVE in new:
-        law = ctrl.TopDriveController(_old_params(ctrl.TopDriveControllerParams,
-                                                  config.top_drive))
-        slaves[TOP_DRIVE] = _OldLaw(
-            TOP_DRIVE, law, new[TOP_DRIVE].inputs, new[TOP_DRIVE].outputs,
-            lambda law, t, h, u: [law.step(t, h, float(u[0]), float(u[1]))],
-            lambda law: [law.torque])
+    for instance in config.instances[1:]:
+        setting = config.controllers[instance]
+        law = _old_law(setting, config.n_sites, base)
+        slaves[instance] = LawSlave(instance, law,
+                                    setting.law.ports(setting.layout(config.n_sites)))
     return slaves
 
 
@@ -137,7 +148,7 @@ def test_scene_is_bit_identical_to_its_reference(name: str, monkeypatch) -> None
     new = simulate(built, outputs=outputs)
     with monkeypatch.context() as m:  # the reference plant steps in Python: no cfunc to compile
         m.setenv("DRILLCOSIM_COMPILED_STEP", "0")
-        slaves = _old_slaves(config, built, base)
+        slaves = _old_slaves(config, base)
     old = simulate(dataclasses.replace(built, slaves=slaves), outputs=outputs)
     assert new.data.dtype.names == old.data.dtype.names
     assert len(new.data) == len(old.data) >= 2

@@ -14,7 +14,6 @@ writes (:meth:`Result.save`):
 from __future__ import annotations
 
 import base64
-import dataclasses
 import tempfile
 from dataclasses import dataclass
 from functools import cached_property
@@ -39,10 +38,9 @@ def seconds_text(seconds: float) -> str:
 def plot_settings(config: SceneConfig) -> dict[str, Any]:
     """The keyword arguments of :func:`.plots.plot_run` for a run of ``config`` besides its
     rows and folder: clearance [m], spans, sites, title, controller switch-on time [s]."""
-    ctrl = config.controller
     return {"clearance": config.scene.plant.contact.clearance,
             "spans": span_info(config.scene), "n_sites": config.n_sites, "title": config.name,
-            "switch_on_time": (ctrl.switch_on_time if ctrl.enabled else None) or None}
+            "switch_on_time": config.switch_on_time or None}
 
 
 class Figures(list):
@@ -128,28 +126,21 @@ class Result:
         """Peak and steady deflection, actuator effort, contact, stick-slip (the keys of
         :mod:`.summary`), and the run's controllers and co-simulation settings."""
         cfg = self.config
-        ctrl = cfg.controller
         summary = summarize(self.data, scene=cfg.name, scene_file=cfg.source, spans=self.spans,
                             n_sites=cfg.n_sites, stop_time=self.stop_time, step=cfg.cosim.step,
                             output_interval=cfg.cosim.output_interval, wall_time=self.wall_time,
                             real_time_factor=self.real_time_factor, end_time=self.end_time,
                             switch_on_time=self._switch_on_time, diverged=self.failure)
-        ss = cfg.state_space
-        summary["controller"] = dataclasses.asdict(ctrl) if ss is None else {
-            "enabled": True, "kind": "state_space", "matrices": str(ss.file),
-            "n_states": ss.params.n_states, "inputs": list(ss.params.input_names),
-            "outputs": list(ss.params.output_names),
-            "sample_period": ss.params.sample_period, "description": ss.params.description}
+        summary["controller"] = cfg.controller.record()
         if cfg.top_drive.enabled:
-            summary["top_drive_controller"] = dataclasses.asdict(cfg.top_drive)
+            summary["top_drive_controller"] = cfg.top_drive.record()
         summary["cosim"] = cfg.cosim.as_dict()
         summary["engine"] = self.engine
         return summary
 
     @property
     def _switch_on_time(self) -> float | None:
-        ctrl = self.config.controller
-        return ctrl.switch_on_time if ctrl.enabled else None
+        return self.config.switch_on_time
 
     def plot(self, folder: str | Path | None = None, workers=None) -> Figures:
         """Draw the run's figures as PNGs into ``folder`` (default: a new temporary folder).

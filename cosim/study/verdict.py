@@ -139,7 +139,8 @@ def _cached_window(scene: str, overrides: str, highpass: float, fit_fraction: fl
                    ) -> JudgingWindow:
     config = load_config(scene, json.loads(overrides) if overrides else None)
     # a closed-loop point switches the controller on whatever the scene file says
-    start_up = max(config.scene.plant.top_drive.ramp_time, config.controller.switch_on_time)
+    start_up = max(config.scene.plant.top_drive.ramp_time,
+                   getattr(config.controller.params, "switch_on_time", 0.0))
     A = coupled_plant(config.scene)[0]
     return judging_window(scipy.linalg.eigvals(A), start_up, highpass, fit_fraction)
 
