@@ -256,6 +256,10 @@ class Law:
                 continue
             value = values[f.name]
             choices = f.metadata["choices"]
+            low, high = f.metadata["range"] or (-math.inf, math.inf)
+            if isinstance(value, float) and abs(value) >= NO_LIMIT and (
+                    math.isinf(high) if value > 0 else math.isinf(low)):
+                value = math.copysign(math.inf, value)  # the FMU's stand-in (:func:`_fmu_real`)
             if choices is not None:
                 if isinstance(value, bool) or not isinstance(value, int) or not (
                         0 <= value < len(choices)):

@@ -8,19 +8,22 @@ the docs.
 
 from __future__ import annotations
 
+from importlib import import_module
+
 from .law import Law
-from .state_space import StateSpaceController
-from .strain_feedback import StrainController
-from .top_drive import TopDriveController
 
 __all__ = ["LAWS", "TABLES", "default_kind", "kinds", "law_named"]
 
-#: The laws, the default law of each scene table first.
-LAWS: tuple[type[Law], ...] = (
-    StrainController,
-    TopDriveController,
-    StateSpaceController,
+#: The laws as (module of this package, class), one line each; the default law of each scene
+#: table first.
+REGISTERED: tuple[tuple[str, str], ...] = (
+    ("strain_feedback", "StrainController"),
+    ("top_drive", "TopDriveController"),
+    ("state_space", "StateSpaceController"),
 )
+#: The law classes, in :data:`REGISTERED` order.
+LAWS: tuple[type[Law], ...] = tuple(getattr(import_module(f".{module}", __package__), name)
+                                    for module, name in REGISTERED)
 
 #: The scene tables (= system instances) the laws fill, in the system's order.
 TABLES: tuple[str, ...] = tuple(dict.fromkeys(law.TABLE for law in LAWS))

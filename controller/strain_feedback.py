@@ -120,15 +120,18 @@ class StrainController(Law):
 
     @classmethod
     def io_ports(cls, layout: Mapping[str, Any]) -> tuple[Port, ...]:
+        """The strains and forces of ``layout["n_sites"]`` sites (the paper's two sites named
+        by their spans, where the layout has no matrix)."""
         n = int(layout["n_sites"])
-        return strain_site_ports(n, cls.SITE_NAMES if layout["gain_matrix"] is None else None)
+        paper = n == 2 and layout.get("gain_matrix") is None
+        return strain_site_ports(n, cls.SITE_NAMES if paper else None)
 
     @classmethod
     def parameter_ports(cls, layout: Mapping[str, Any]) -> tuple[Port, ...]:
         """The P law's fields, then (a layout with a matrix) the relative gains
         ``gain_matrix_<i>_<j>`` [1], row by row, starting at the layout's matrix."""
         out = list(super().parameter_ports(layout))
-        for i, row in enumerate(layout["gain_matrix"] or (), start=1):
+        for i, row in enumerate(layout.get("gain_matrix") or (), start=1):
             for j, start in enumerate(row, start=1):
                 out.append(parameter(
                     gain_matrix_entry(i, j), "1",
@@ -142,7 +145,7 @@ class StrainController(Law):
         out = super().encode(params, layout)
         out.pop("gain_matrix", None)
         n = int(layout["n_sites"])
-        if layout["gain_matrix"] is not None:
+        if layout.get("gain_matrix") is not None:
             m = params.gain_matrix or tuple(tuple(float(i == j) for j in range(n))
                                             for i in range(n))
             out.update({gain_matrix_entry(i, j): float(m[i - 1][j - 1])
@@ -153,7 +156,7 @@ class StrainController(Law):
     def decode(cls, values: Mapping[str, Any], layout: Mapping[str, Any], base: Any = None
                ) -> ControllerParams:
         params = super().decode(values, layout)
-        if layout["gain_matrix"] is None:
+        if layout.get("gain_matrix") is None:
             return params
         n = int(layout["n_sites"])
         matrix = tuple(tuple(values[gain_matrix_entry(i, j)] for j in range(1, n + 1))
@@ -322,9 +325,12 @@ class StrainController(Law):
             If ``t`` or ``dt`` is not finite, ``dt < 0``, or ``strains`` has the
             wrong shape or a non-finite entry. The state is left unchanged.
         """
-        if not (math.isfinite(t) and math.isfinite(dt) and dt >= 0.0):
-            raise ValueError(f"need finite t and finite dt >= 0, got t = {t!r}, dt = {dt!r}")
-        u = self.command(t, strains)
+        _check_step(t, dt)
+        return self._actuate(self.command(t, strains), dt)
+
+    def _actuate(self, u: np.ndarray, dt: float) -> np.ndarray:
+        """The actuator forces after ``dt`` [s] of the saturated command ``u`` [N] (the lag),
+        a copy of the new state."""
         tau = self._params.lag_time_constant
         if tau == 0.0:
             self._force[:] = u
@@ -366,6 +372,12 @@ class StrainController(Law):
             bad = [self.channels[i] for i in np.flatnonzero(~np.isfinite(eps))]
             raise ValueError(f"non-finite strain in channel(s) {', '.join(bad)}: {eps.tolist()}")
         return eps
+
+
+def _check_step(t: float, dt: float) -> None:
+    """ValueError unless ``t`` and ``dt`` are finite and ``dt >= 0``."""
+    if not (math.isfinite(t) and math.isfinite(dt) and dt >= 0.0):
+        raise ValueError(f"need finite t and finite dt >= 0, got t = {t!r}, dt = {dt!r}")
 
 
 def _fields(params: ControllerParams) -> dict[str, Any]:

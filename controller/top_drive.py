@@ -54,7 +54,8 @@ from .acceleration import OK, REFUSED, compiled_law
 from .law import Law, Settings, setting
 from .ports import Port, real_input, real_output
 
-__all__ = ["TopDriveController", "TopDriveControllerParams", "drive_ports", "top_drive_core"]
+__all__ = ["TopDriveController", "TopDriveControllerParams", "drive_ports", "speed_reference",
+           "top_drive_core"]
 
 
 def drive_ports() -> tuple[Port, ...]:
@@ -106,9 +107,14 @@ class TopDriveControllerParams(Settings):
 
     def reference(self, t: float) -> float:
         """Speed reference Omega_ref(t) [rad/s]: the ramp to ``target_speed``."""
-        if self.ramp_time == 0.0 or t >= self.ramp_time:
-            return self.target_speed
-        return self.target_speed * max(t, 0.0) / self.ramp_time
+        return speed_reference(self.target_speed, self.ramp_time, t)
+
+
+def speed_reference(target: float, ramp_time: float, t: float) -> float:
+    """The speed reference [rad/s] at ``t`` [s]: from 0 to ``target`` over ``ramp_time`` [s]."""
+    if ramp_time == 0.0 or t >= ramp_time:
+        return target
+    return target * max(t, 0.0) / ramp_time
 
 
 class TopDriveController(Law):
@@ -139,36 +145,40 @@ class TopDriveController(Law):
     def io_ports(cls, layout: Mapping[str, Any]) -> tuple[Port, ...]:
         return drive_ports()
 
+    #: What the state holds, in order (:meth:`get_state`).
+    STATE: tuple[str, ...] = ("x", "T_m")
+
     def __init__(self, params: TopDriveControllerParams | None = None) -> None:
-        self._params = TopDriveControllerParams()
-        self.params = TopDriveControllerParams() if params is None else params
-        self._state = np.zeros(2)
+        self._params = self.PARAMS()
+        self.params = self.PARAMS() if params is None else params
+        self._state = np.zeros(len(self.STATE))
 
     @property
     def params(self) -> TopDriveControllerParams:
-        """TopDriveControllerParams: current parameters; assigning keeps the state."""
+        """The current parameters (:attr:`PARAMS`); assigning keeps the state."""
         return self._params
 
     @params.setter
     def params(self, params: TopDriveControllerParams) -> None:
-        if not isinstance(params, TopDriveControllerParams):
-            raise TypeError(f"params must be a TopDriveControllerParams, got "
+        if not isinstance(params, self.PARAMS):
+            raise TypeError(f"params must be a {self.PARAMS.__name__}, got "
                             f"{type(params).__name__}")
         self._params = params
 
     def reset(self) -> None:
-        """Integral and motor torque back to zero."""
+        """The state (integral, motor torque, ...) back to zero."""
         self._state[:] = 0.0
 
     def get_state(self) -> np.ndarray:
-        """numpy.ndarray, shape (2,): a copy of ``[x [rad], T_m [N m]]``."""
+        """numpy.ndarray: a copy of the state (:attr:`STATE`; here ``[x [rad], T_m [N m]]``)."""
         return self._state.copy()
 
     def set_state(self, state: np.ndarray) -> None:
-        """Restore a state of :meth:`get_state` (shape (2,), finite; else ValueError)."""
+        """Restore a state of :meth:`get_state` (its shape, finite; else ValueError)."""
         arr = np.asarray(state, dtype=float)
-        if arr.shape != (2,) or not np.all(np.isfinite(arr)):
-            raise ValueError(f"state must be 2 finite numbers [x, T_m], got {arr.tolist()}")
+        if arr.shape != self._state.shape or not np.all(np.isfinite(arr)):
+            raise ValueError(f"state must be {self._state.size} finite numbers "
+                             f"[{', '.join(self.STATE)}], got {arr.tolist()}")
         self._state[:] = arr
 
     @property

@@ -109,6 +109,7 @@ __all__ = [
     "REGISTRY",
     "ROOT",
     "UNIT_DEFINITIONS",
+    "base_units",
     "FmuRecipe",
     "build_all",
     "build_one",
@@ -168,7 +169,36 @@ BUILD_HASH_LENGTH = 12
 #: The record of a build's hash and module names inside the FMU.
 BUILD_INFO = "resources/dcs_build.json"
 
-#: SI base-unit exponents of the units the FMUs may declare (FMI 2.0 BaseUnit).
+#: SI base-unit exponents of the unit symbols an FMU unit is made of (FMI 2.0 BaseUnit).
+UNIT_SYMBOLS: dict[str, dict[str, int]] = {
+    "s": {"s": 1}, "m": {"m": 1}, "kg": {"kg": 1}, "rad": {"rad": 1},
+    "N": {"kg": 1, "m": 1, "s": -2}, "Pa": {"kg": 1, "m": -1, "s": -2},
+    "J": {"kg": 1, "m": 2, "s": -2}, "W": {"kg": 1, "m": 2, "s": -3},
+}
+
+
+def base_units(unit: str) -> dict[str, int]:
+    """SI base-unit exponents of an FMU unit name: factors of :data:`UNIT_SYMBOLS` joined by
+    ``.``, each with an optional integer power (``m2``, ``s2``), a denominator after one ``/``
+    (``"N.m.s/rad"``); ``"1"`` is dimensionless. ValueError for anything else."""
+    num, _, den = unit.partition("/")
+    out: dict[str, int] = {}
+    for part, sign in ((num, 1), (den, -1)):
+        if part in ("1", "") and (sign == 1 or not part and not den):
+            continue
+        for factor in part.split("."):
+            match = re.fullmatch(r"([A-Za-z]+)(\d*)", factor)
+            if match is None or match.group(1) not in UNIT_SYMBOLS:
+                raise ValueError(f"unit {unit!r}: {factor!r} is not one of "
+                                 f"{', '.join(UNIT_SYMBOLS)} with an optional power")
+            power = sign * int(match.group(2) or 1)
+            for base, exp in UNIT_SYMBOLS[match.group(1)].items():
+                out[base] = out.get(base, 0) + power * exp
+    return {k: v for k, v in out.items() if v}
+
+
+#: SI base-unit exponents of the units the project's FMUs declare, written out (a cross-check
+#: of :func:`base_units`, which the build uses for any unit).
 UNIT_DEFINITIONS: dict[str, dict[str, int]] = {
     "1": {},
     "s": {"s": 1},
@@ -403,7 +433,7 @@ def finalize_model_description(
     xml : bytes
         modelDescription.xml as written by pythonfmu.
     units : mapping of str to str
-        Variable name -> unit (keys of :data:`UNIT_DEFINITIONS`); Real variables only.
+        Variable name -> unit (:func:`base_units` knows it); Real variables only.
     direct_feedthrough : mapping of str to sequence of str, optional
         Output name -> names of the inputs it depends on directly. Outputs not
         in the mapping (or all, if None) get no ``dependencies`` attribute.
@@ -438,8 +468,7 @@ def finalize_model_description(
     for name, unit in units.items():
         if name not in by_name:
             raise ValueError(f"VARIABLE_UNITS names unknown variable {name!r}")
-        if unit not in UNIT_DEFINITIONS:
-            raise ValueError(f"unit {unit!r} of {name!r} is not in UNIT_DEFINITIONS; add it")
+        base_units(unit)  # ValueError naming it
         real = by_name[name].find("Real")
         if real is None:
             raise ValueError(f"variable {name!r} has a unit but is not a Real")
@@ -466,7 +495,7 @@ def finalize_model_description(
         for unit in sorted(used_units):
             node = ET.SubElement(unit_defs, "Unit", name=unit)
             ET.SubElement(node, "BaseUnit",
-                          {k: str(v) for k, v in UNIT_DEFINITIONS[unit].items()})
+                          {k: str(v) for k, v in base_units(unit).items()})
         position = 0
         for i, child in enumerate(list(root)):
             if child.tag in ("ModelExchange", "CoSimulation"):

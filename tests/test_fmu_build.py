@@ -22,6 +22,7 @@ from drillcosim.fmu_src.build import (
     REGISTRY,
     UNIT_DEFINITIONS,
     FmuRecipe,
+    base_units,
     build_all,
     build_one,
     finalize_model_description,
@@ -292,6 +293,11 @@ def test_unit_definitions_are_dimensionally_consistent() -> None:
     assert UNIT_DEFINITIONS["1"] == {}
     for name, exps in UNIT_DEFINITIONS.items():
         assert set(exps) <= {"kg", "m", "s", "A", "K", "mol", "cd", "rad"}, name
+        assert base_units(name) == exps, name  # the parser agrees with the written-out table
+    assert base_units("N.s") == {"kg": 1, "m": 1, "s": -1}
+    for bad in ("furlong", "N.m/s/rad", "m^2", "N..m"):
+        with pytest.raises(ValueError, match="unit"):
+            base_units(bad)
 
 
 def test_an_adapter_importing_generic_pythonfmu_is_refused(tmp_path: Path) -> None:
