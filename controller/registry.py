@@ -20,6 +20,7 @@ REGISTERED: tuple[tuple[str, str], ...] = (
     ("strain_feedback", "StrainController"),
     ("top_drive", "TopDriveController"),
     ("state_space", "StateSpaceController"),
+    ("pd_strain", "PDStrainController"),
 )
 #: The law classes, in :data:`REGISTERED` order.
 LAWS: tuple[type[Law], ...] = tuple(getattr(import_module(f".{module}", __package__), name)
