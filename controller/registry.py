@@ -21,6 +21,7 @@ REGISTERED: tuple[tuple[str, str], ...] = (
     ("top_drive", "TopDriveController"),
     ("state_space", "StateSpaceController"),
     ("pd_strain", "PDStrainController"),
+    ("ztorque", "ZTorqueController"),
 )
 #: The law classes, in :data:`REGISTERED` order.
 LAWS: tuple[type[Law], ...] = tuple(getattr(import_module(f".{module}", __package__), name)
