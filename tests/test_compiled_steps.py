@@ -291,3 +291,33 @@ def test_top_drive_controller(project_fmus, monkeypatch) -> None:
     script += [("restore",)] + _steps(names, 50, np.array([2.0, 1e3]), 17, t0=0.15, h=1e-3)
     fast = assert_same(fmu, script, monkeypatch, max_python=4)
     assert "non-finite input: top_rotary_speed = nan" in fast["messages"][0][1]
+
+
+def test_pd_strain_controller(project_fmus, monkeypatch) -> None:
+    fmu = project_fmus["PDStrainController"]
+    names = _inputs(fmu)
+    script = [("set", {"gain": 2e8, "derivative_gain": 3e5, "derivative_time_constant": 2e-3,
+                       "lag_time_constant": 1e-3, "symmetric_force_limit": 4e3}), ("init",)]
+    script += _steps(names, 200, 1e-5, 18, h=1e-3)
+    script += [("save",), ("set", {"derivative_gain": 1e5})]
+    script += _steps(names, 100, 1e-5, 19, t0=0.2, h=1e-3)
+    script += [("set", {names[1]: math.inf}), ("step", 0.3, 1e-3)]
+    script += [("restore",)] + _steps(names, 50, 1e-5, 20, t0=0.2, h=5e-4)
+    fast = assert_same(fmu, script, monkeypatch, max_python=6)
+    assert "non-finite strain in channel(s) strain1_E" in fast["messages"][0][1]
+
+
+def test_ztorque_controller(project_fmus, monkeypatch) -> None:
+    fmu = project_fmus["ZTorqueController"]
+    names = _inputs(fmu)
+    script = [("set", {"ramp_time": 0.1, "torque_factor": 0.5, "highpass_time_constant": 0.5}),
+              ("init",)]
+    script += _steps(names, 150, np.array([2.0, 1e3]), 21, h=1e-3)
+    script += [("save",), ("set", {"impedance": 600.0})]
+    script += _steps(names, 100, np.array([2.0, 1e3]), 22, t0=0.15, h=1e-3)
+    script += [("set", {names[1]: math.nan}), ("step", 0.25, 1e-3)]
+    script += [("restore",)] + _steps(names, 50, np.array([2.0, 1e3]), 23, t0=0.15, h=1e-3)
+    # in Python: the first step (a new high-pass decay), the step after the parameter change,
+    # the refused one and the first after the restore
+    fast = assert_same(fmu, script, monkeypatch, max_python=6)
+    assert "non-finite input: top_rotary_speed" in fast["messages"][0][1]
