@@ -36,7 +36,15 @@ import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from drillcosim.cosim.master.files import AtomicFile  # noqa: E402
-from drillcosim.plant.signals import CONTROLLER, PLANT, TOP_DRIVE  # noqa: E402
+from drillcosim.plant.signals import (  # noqa: E402
+    AXES,
+    CONTROLLER,
+    PLANT,
+    TOP_DRIVE,
+    actuator_force,
+    actuator_power,
+    body_signal,
+)
 
 from .summary import column, contact_bodies  # noqa: E402
 
@@ -283,7 +291,7 @@ class OrbitFigure(RunFigure):
               ) -> OrbitFigure | None:
         """The figure for ``data``'s columns (None: no orbit recorded)."""
         body = _long_body(data, spans)
-        if body is None or any(column(data, PLANT, f"body{body}_{a}") is None for a in "XY"):
+        if body is None or any(column(data, PLANT, body_signal(body, a)) is None for a in "XY"):
             return None
         return cls(body, clearance, spans, title, window)
 
@@ -306,8 +314,8 @@ class OrbitFigure(RunFigure):
         self.title = ax.set_title("", y=1.0)
 
     def update(self, data: np.ndarray, t_end: float | None = None) -> None:
-        x = column(data, PLANT, f"body{self.body}_X")
-        y = column(data, PLANT, f"body{self.body}_Y")
+        x = column(data, PLANT, body_signal(self.body, "X"))
+        y = column(data, PLANT, body_signal(self.body, "Y"))
         t = data["time"]
         t_from = self.window(t if t_end is None or len(t) < 2 else np.array([t[0], t_end]))
         sel = np.ones(len(x), bool) if t_from is None else data["time"] >= t_from
@@ -376,14 +384,14 @@ class DeflectionContactFigure(RunFigure):
         self = cls(fig)
         for j, b in enumerate(bodies):
             ax = axes[0, j]
-            self._series(ax, data, PLANT, f"body{b}_radial_deflection", MM, lw=0.7)
+            self._series(ax, data, PLANT, body_signal(b, "radial_deflection"), MM, lw=0.7)
             ax.axhline(clearance * MM, color="k", ls="--", lw=1.0, label="clearance")
             ax.set_ylabel("radial deflection [mm]")
             ax.set_title(_span_label(b, spans), y=1.0)   # y given: no title-overlap search
             ax.legend(loc="upper left", fontsize=8)
             ax.grid(alpha=0.3)
             ax = axes[1, j]
-            self._series(ax, data, PLANT, f"body{b}_contact_force", KN, lw=0.7,
+            self._series(ax, data, PLANT, body_signal(b, "contact_force"), KN, lw=0.7,
                          color="tab:red")
             _time_panel(ax, "contact force [kN]")
         return self._headed(axes, switch_on_time, title,
@@ -410,15 +418,15 @@ class ActuatorsFigure(RunFigure):
               spans_by_site: Sequence[str] | None = None, title: str = "",
               switch_on_time: float | None = None) -> ActuatorsFigure | None:
         """The figure for ``data``'s columns (None: no actuator power recorded)."""
-        if all(column(data, PLANT, f"actuator{s}_power") is None
+        if all(column(data, PLANT, actuator_power(s)) is None
                for s in range(1, n_sites + 1)):
             return None
         fig, axes = _figure(5 * n_sites, 6, 2, n_sites, sharex=True)
         self = cls(fig)
         for j, s in enumerate(range(1, n_sites + 1)):
             ax = axes[0, j]
-            for a, color in (("C", "tab:blue"), ("E", "tab:orange")):
-                self._series(ax, data, CONTROLLER, f"actuator{s}_force_{a}", KN, lw=0.7,
+            for a, color in zip(AXES, ("tab:blue", "tab:orange")):
+                self._series(ax, data, CONTROLLER, actuator_force(s, a), KN, lw=0.7,
                              color=color, label=f"force {a}")
             ax.set_ylabel("actuator force [kN]")
             where = (f" ({spans_by_site[j]} span)" if spans_by_site and j < len(spans_by_site)
@@ -430,7 +438,7 @@ class ActuatorsFigure(RunFigure):
                 ax.text(0.5, 0.5, "controller disabled", ha="center", transform=ax.transAxes)
             ax.grid(alpha=0.3)
             ax = axes[1, j]
-            self._series(ax, data, PLANT, f"actuator{s}_power", lw=0.7, color="tab:green")
+            self._series(ax, data, PLANT, actuator_power(s), lw=0.7, color="tab:green")
             _time_panel(ax, "actuator power [W]")
         return self._headed(axes, switch_on_time, title, "actuator force and power")
 
