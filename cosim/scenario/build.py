@@ -44,6 +44,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from fmpy import read_model_description
+
 from drillcosim.cosim.master.interface import FmuInterface, Port, read_interface
 from drillcosim.cosim.master.slave import Slave
 from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec
@@ -104,6 +106,33 @@ class BuiltSystem:
     slaves: dict[str, Slave]
     outputs: tuple[str, ...]
     units: dict[str, str]
+
+    def components(self) -> dict[str, dict[str, Any]]:
+        """What runs each instance (``summary.json``, a sweep's ``sweep.json``): engine
+        ``fmu``: the FMU file, its GUID, model name and generation tool, and the parameters
+        the system sets on it; ``inprocess``: the plant's scene and model kind, or the law's
+        kind and its parameters (as its FMU would get them). Both: the drillcosim version
+        that runs it."""
+        from drillcosim import __version__
+
+        out: dict[str, dict[str, Any]] = {}
+        for spec in self.system.fmus:
+            rec: dict[str, Any] = {"engine": self.engine}
+            if self.engine == "fmu":
+                md = read_model_description(str(spec.path), validate=False)
+                rec.update({"fmu": str(Path(spec.path).resolve()), "guid": md.guid,
+                            "model_name": md.modelName, "generation_tool": md.generationTool,
+                            "parameters": dict(spec.parameters)})
+            elif spec.name == PLANT:
+                rec.update({"scene": self.config.source, "model": self.slaves[PLANT].sim.model.kind})
+            else:
+                setting = self.config.controllers[spec.name]
+                layout = setting.layout(self.config.n_sites)
+                rec.update({"law": setting.kind,
+                            "parameters": setting.law.encode(setting.params, layout)})
+            rec["drillcosim"] = __version__
+            out[spec.name] = rec
+        return out
 
 
 def scene_reference(scene: Scene) -> str:

@@ -38,7 +38,7 @@ import difflib
 import math
 import sys
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from fractions import Fraction
 from pathlib import Path
 from typing import Any
@@ -64,7 +64,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 __all__ = ["COSIM_KEYS", "ConfigError", "ControllerSetting", "CosimSettings", "SceneConfig",
-           "key_paths", "load_config", "parse_set", "plant_parameter_paths"]
+           "derive_config", "key_paths", "load_config", "parse_set", "plant_parameter_paths"]
 
 #: ``[cosim]`` keys: (default, unit, meaning). ``None`` defaults are derived.
 COSIM_KEYS: dict[str, tuple[Any, str, str]] = {
@@ -298,6 +298,17 @@ def _finite_positive(x: Any) -> bool:
 
 
 @dataclass(frozen=True)
+class _Source:
+    """What a configuration was made of: the scene's tables (file and the files it extends,
+    merged; before overrides), its file, and the FMU files given as arguments."""
+
+    tables: dict[str, Any]
+    path: Path
+    plant_fmu: Path | None = None
+    controller_fmu: Path | None = None
+
+
+@dataclass(frozen=True)
 class SceneConfig:
     """A scene validated into typed settings: what :func:`.build.build_system` builds.
 
@@ -317,6 +328,9 @@ class SceneConfig:
         The key-path overrides applied on top of the scene file (:func:`key_paths`).
     plant_parameters : dict of str -> scalar
         A foreign plant FMU's own parameters (``[plant.parameters]``), by variable name.
+    origin : object
+        What it was made of (the scene's tables before overrides, its file, the FMU files
+        given as arguments): :func:`derive_config` makes another configuration from it.
     """
 
     scene: Scene
@@ -325,6 +339,7 @@ class SceneConfig:
     fmu_files: dict[str, Path] = field(default_factory=dict)
     overrides: dict[str, Any] = field(default_factory=dict)
     plant_parameters: dict[str, Any] = field(default_factory=dict)
+    origin: _Source | None = field(default=None, repr=False, compare=False)
 
     @property
     def name(self) -> str:
@@ -451,11 +466,40 @@ def load_config(scene: str | Path = "paper_closed_loop",
     ConfigError
         Any bad input, one line naming the file or override, the key and what is allowed.
     """
-    over = key_paths(overrides)
     try:
         data, path = read_scene_tables(scene, folder)
-        data = _apply(data, over)
-        sc = scene_from_dict(data, name=path.stem, source=str(path))
+    except SceneError as exc:
+        raise ConfigError(str(exc)) from None
+    return _from_tables(_Source(data, path, _fmu_arg(plant_fmu), _fmu_arg(controller_fmu)),
+                        key_paths(overrides))
+
+
+def derive_config(base: SceneConfig, overrides: Mapping[str, Any], *,
+                  controller_fmu: bool = True) -> SceneConfig:
+    """``base`` with more key-path overrides (they win over ``base.overrides``): the typed
+    configuration of a sweep point, made from the scene tables ``base`` was made of (no file
+    is read again), every value validated here, once. ``controller_fmu=False`` leaves out the
+    controller FMU given as an argument (an open-loop reference runs without it).
+
+    Raises
+    ------
+    ConfigError
+        An unknown key path or a bad value (one line).
+    """
+    origin = base.origin if controller_fmu else replace(base.origin, controller_fmu=None)
+    return _from_tables(origin, {**base.overrides, **key_paths(overrides)})
+
+
+def _fmu_arg(path: str | Path | None) -> Path | None:
+    return None if not path else Path(path)
+
+
+def _from_tables(origin: _Source, over: dict[str, Any]) -> SceneConfig:
+    """The configuration of the scene tables ``origin.tables`` with the overrides ``over``."""
+    plant_fmu, controller_fmu = origin.plant_fmu, origin.controller_fmu
+    try:
+        data = _apply(origin.tables, over)
+        sc = scene_from_dict(data, name=origin.path.stem, source=str(origin.path))
     except SceneError as exc:
         raise ConfigError(str(exc)) from None
     source = sc.source
@@ -512,4 +556,4 @@ def load_config(scene: str | Path = "paper_closed_loop",
             raise ConfigError(f"{source}: [{instance}.parameters] sets a foreign FMU's own "
                               f"parameters, but [{instance}] names no fmu: give one ([{instance}] "
                               f"fmu or --{'plant' if instance == PLANT else 'controller'}-fmu)")
-    return SceneConfig(sc, controllers, cosim, files, over, plant_parameters)
+    return SceneConfig(sc, controllers, cosim, files, over, plant_parameters, origin)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import base64
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -79,6 +79,9 @@ class Result:
         completed.
     csv_path : Path or None
         The ``results.csv`` streamed during the run, if any.
+    components : dict
+        What ran each instance (:meth:`.build.BuiltSystem.components`: the FMU file, GUID,
+        model name, generation tool, drillcosim version and the parameters set).
     """
 
     config: SceneConfig
@@ -91,6 +94,7 @@ class Result:
     real_time_factor: float
     failure: dict[str, Any] | None = None
     csv_path: Path | None = None
+    components: dict[str, Any] = field(default_factory=dict)
 
     @property
     def completed(self) -> bool:
@@ -136,6 +140,7 @@ class Result:
             summary["top_drive_controller"] = cfg.top_drive.record()
         summary["cosim"] = cfg.cosim.as_dict()
         summary["engine"] = self.engine
+        summary["components"] = self.components
         return summary
 
     @property

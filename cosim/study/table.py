@@ -40,9 +40,10 @@ from .verdict import VERDICTS, judge
 __all__ = ["COLUMNS", "DERIVED", "ResultTable", "derive", "read_table", "rows_csv", "verdict_counts"]
 
 #: Column order of the table (units: gain that of the sweep's gain key (N/strain for the strain
-#: gain), times s, deflections m, force N, power W, growth rates 1/s, stick-slip measures 1).
+#: gain), times s, deflections m, force N, power W, growth rates 1/s, stick-slip measures 1;
+#: ``varied``: the point's values of the sweep's other axes, JSON by key path).
 COLUMNS: tuple[str, ...] = (
-    "key", "scene", "engine", "kind", "gain", "delay", "step", "stop_time", "status",
+    "key", "scene", "engine", "kind", "gain", "delay", "step", "stop_time", "varied", "status",
     "verdict", "stable", "growth_rate", "growth_noise", "growth_excess", "divergence_time",
     "end_time", "min_stop_time", "rms_long", "rms_short", "benefit_long", "benefit_short",
     "peak_deflection_long", "peak_deflection_short", "peak_force", "peak_power",
@@ -51,7 +52,7 @@ COLUMNS: tuple[str, ...] = (
 #: Columns computed from the rows by :func:`derive` (``reason`` too, for completed runs).
 DERIVED: tuple[str, ...] = ("verdict", "stable", "growth_excess", "benefit_long",
                             "benefit_short")
-_TEXT = {"key", "scene", "engine", "kind", "status", "verdict", "reason"}
+_TEXT = {"key", "scene", "engine", "kind", "varied", "status", "verdict", "reason"}
 SPANS = ("long", "short")
 _STABLE = {"stable": 1.0, "unstable": 0.0}
 
