@@ -202,15 +202,13 @@ def _cmd_ssp(args: argparse.Namespace) -> int:
 def _vary(items: Sequence[str]) -> dict[str, list[float]]:
     """``--vary KEY=LIST`` items -> ``{key path: values}`` (LIST as for --gain)."""
     from drillcosim.cosim.master.errors import UserError
+    from drillcosim.cosim.scenario.config import split_assignment
     from drillcosim.cosim.study.grid import parse_list
 
     out: dict[str, list[float]] = {}
     for item in items:
-        key, sep, text = item.partition("=")
-        key = key.strip()
-        if not sep or not key:
-            raise UserError(f"--vary {item!r}: expected KEY=LIST, e.g. "
-                            "controller.parameters.kd=0,1e4,1e5")
+        key, text = split_assignment(item, "--vary", "KEY=LIST",
+                                     "controller.parameters.kd=0,1e4,1e5")
         if key in out:
             raise UserError(f"--vary {key}: given twice")
         out[key] = parse_list(text, f"--vary {key}")

@@ -53,16 +53,20 @@ survives exceptions, finds a Python in hosts without one and moves Real inputs/o
 Python calls; pythonfmu's other binaries (win64) are dropped: they could report no error.
 Without a C compiler the build stops with a one-line message.
 
-Registering the plant FMU
--------------------------
-Add (or edit) one entry in :data:`REGISTRY`, e.g.::
+The registry
+------------
+:data:`REGISTRY` is the plant's recipe (:data:`PLANT_RECIPE`) and one recipe per registered
+controller law (``controller/registry.py``; :func:`law_recipe`: the generic adapter
+``fmu_src/law_fmu.py`` as the variant ``<law.FMU>`` for the law's default layout): a new law
+needs no edit here. A recipe of another FMU, e.g.::
 
     FmuRecipe(name="DrillstringPlant", script="fmu_src/drillstring_plant_fmu.py",
-              vendored=(("plant", "_dcs_plant_0_1_0"),), extra_files=("scenes/x.toml",),
+              vendored=(vendored("plant"),), extra_files=("scenes/x.toml",),
               requires=("numpy", "scipy", "numba"))
 
 ``name`` must equal the adapter class name (= modelIdentifier = file stem of
-the ``.fmu``); the adapter imports ``_dcs_plant_0_1_0``; ``extra_files`` (paths
+the ``.fmu``); the adapter imports the vendored package by its canonical name
+(:func:`vendored`: ``_dcs_<folder>_0_1_0``); ``extra_files`` (paths
 relative to the repository root, files or folders) land in ``resources/`` under
 their own base name.
 

@@ -97,6 +97,14 @@ def test_the_cli_plans_once_and_runs_the_plan(tmp_path, monkeypatch, capsys) -> 
     rows = read_table(tmp_path)
     assert sorted(r["varied"] for r in rows if r["kind"] == "closed_loop") == [
         '{"cosim.controller_sample_period": 0.00025}', '{"cosim.controller_sample_period": 0.0005}']
+    # the map of a --vary sweep: one cell per closed-loop point
+    from drillcosim.cosim.study.vary_maps import axis_value, plot_vary_map
+
+    png = plot_vary_map([tmp_path], "cosim.controller_sample_period", "delay",
+                        tmp_path / "map.png", metric="growth_rate")
+    assert png.stat().st_size > 1000
+    assert sorted(axis_value(r, "cosim.controller_sample_period") for r in rows
+                  if r["kind"] == "closed_loop") == [2.5e-4, 5e-4]
 
 
 def test_a_point_the_user_must_fix_stops_the_sweep_before_any_runs(tmp_path, capsys) -> None:
@@ -136,3 +144,18 @@ def test_failed_points_exit_1_with_the_first_reason(tmp_path, capsys) -> None:
     rows = read_table(tmp_path)
     assert {r["status"] for r in rows if r["kind"] == "closed_loop"} == {"error"}
     assert all(math.isnan(r["growth_rate"]) for r in rows if r["status"] == "error")
+
+
+def test_a_top_drive_sweep_over_timing_keys_enables_the_top_drive() -> None:
+    """No gain axis, no controller axis: the closed-loop points enable the scene's controller
+    (here the top drive's); a top-drive sweep has no open-loop references (the drive is the
+    only source of torque)."""
+    spec = sweep_spec("stick_slip_soft_torque", delays=[0.0, 0.05], stop_time=0.5,
+                      engine="inprocess", vary={"cosim.controller_sample_period": [1e-3, 1e-2]})
+    assert spec.table == "top_drive_controller" and not spec.open_loop
+    points = spec.points()
+    assert len(points) == 4 and {p.kind for p in points} == {"closed_loop"}
+    for p in points:
+        assert p.config.instances == ("plant", "top_drive_controller")
+        assert p.config.cosim.controller_sample_period == dict(p.vary)[
+            "cosim.controller_sample_period"]

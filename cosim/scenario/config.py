@@ -64,7 +64,8 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 __all__ = ["COSIM_KEYS", "ConfigError", "ControllerSetting", "CosimSettings", "SceneConfig",
-           "derive_config", "key_paths", "load_config", "parse_set", "plant_parameter_paths"]
+           "derive_config", "key_paths", "load_config", "parse_set", "plant_parameter_paths",
+           "split_assignment"]
 
 #: ``[cosim]`` keys: (default, unit, meaning). ``None`` defaults are derived.
 COSIM_KEYS: dict[str, tuple[Any, str, str]] = {
@@ -182,14 +183,21 @@ def parse_set(items: Sequence[str]) -> dict[str, Any]:
     """
     out: dict[str, Any] = {}
     for item in items:
-        key, sep, text = item.partition("=")
-        key = key.strip()
-        if not sep or not key:
-            raise ConfigError(f"--set {item!r}: expected KEY=VALUE, e.g. "
-                              "cosim.actuator_delay=0.002 (value in TOML syntax)")
-        check_key_path(key, "--set")
-        out[key] = _toml_value(text.strip())
+        key, text = split_assignment(item, "--set", "KEY=VALUE",
+                                     "cosim.actuator_delay=0.002 (value in TOML syntax)")
+        out[key] = _toml_value(text)
     return out
+
+
+def split_assignment(item: str, flag: str, form: str, example: str) -> tuple[str, str]:
+    """``"key.path=text"`` of a command-line option -> (checked key path, text), else
+    :class:`ConfigError` naming the option, the form and an example."""
+    key, sep, text = item.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise ConfigError(f"{flag} {item!r}: expected {form}, e.g. {example}")
+    check_key_path(key, flag)
+    return key, text.strip()
 
 
 def plant_parameter_paths(overrides: Mapping[str, Any]) -> dict[str, Any]:

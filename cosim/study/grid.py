@@ -268,14 +268,13 @@ class SweepSpec:
     @property
     def table(self) -> str:
         """The scene table of the controller the closed-loop points enable (and the open-loop
-        references disable): the gain key's, else the first controller axis', else
-        ``controller``."""
-        if self.gains:
-            return self.gain_key.partition(".")[0]
-        for key, _values in self.vary:
-            if key.split(".", 1)[0] in GAIN_TABLES:
-                return key.split(".", 1)[0]
-        return GAIN_TABLES[0]
+        references disable): the gain key's where the gains vary or no other axis is a
+        controller's, else the first controller axis'."""
+        if not self.gains:
+            for key, _values in self.vary:
+                if key.split(".", 1)[0] in GAIN_TABLES:
+                    return key.split(".", 1)[0]
+        return self.gain_key.partition(".")[0]
 
     def points(self) -> list[Point]:
         """Open-loop references first, then gain x delay x step x the other axes."""
