@@ -137,7 +137,6 @@ from typing import Any, ClassVar, NamedTuple
 
 import _dcs_slave_support_0_1_0 as support
 import numpy as np
-from _dcs_slave_support_0_1_0.state import number_problem, numbers_problem
 
 #: Scene loaded unless the ``scene`` parameter names another one.
 DEFAULT_SCENE = "paper_open_loop"
@@ -511,7 +510,7 @@ class DrillstringPlant(support.DcsSlave):
         if set(internal) != {"sim", "halted", "start_time"} or not (
                 halted is None or isinstance(halted, str)):
             return f"not a state of this FMU (internal part {sorted(internal)})"
-        problem = number_problem("start_time", start_time)
+        problem = support.state.number_problem("start_time", start_time)
         if problem is None and sim is None and self._mode == "step":
             problem = "a state of a running plant without its simulator state"
         if problem is None and sim is not None:
@@ -561,9 +560,9 @@ def _sim_problem(sim: Any, finite: bool) -> str | None:
     if not (isinstance(sim, list) and len(sim) == 3 and isinstance(sim[1], list)
             and isinstance(sim[2], list)):
         return "its simulator state is not [time, state vector, inputs]"
-    return (numbers_problem("its state vector", sim[1], finite)
-            or numbers_problem("its held inputs", sim[2], finite)
-            or number_problem("its time", sim[0]))
+    return (support.state.numbers_problem("its state vector", sim[1], finite)
+            or support.state.numbers_problem("its held inputs", sim[2], finite)
+            or support.state.number_problem("its time", sim[0]))
 
 
 DrillstringPlant._tables(_INPUT_ROWS, _OUTPUT_ROWS)

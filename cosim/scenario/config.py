@@ -10,7 +10,7 @@ and validates everything, once, into a :class:`SceneConfig`:
   has none);
 * ``cosim`` - the co-simulation settings (:class:`CosimSettings`): the base step [s], and the
   stop time, the controllers' period and the recording interval as integer numbers of base
-  steps (decided here, by one rule: :func:`cosim.master.system.integer_multiple`);
+  steps (decided here, by one rule: :func:`cosim.master.timegrid.grid_ticks`);
 * ``fmu_files`` - FMU files a user chose for an instance (``[plant] fmu``, ...), and
   ``plant_parameters`` - a foreign plant FMU's own parameters (``[plant.parameters]``).
 
@@ -41,13 +41,13 @@ import sys
 import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
-from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
 from drillcosim.controller import TABLES
 from drillcosim.cosim.master.errors import UserError
-from drillcosim.cosim.master.system import ALGORITHMS, COUPLINGS, integer_multiple
+from drillcosim.cosim.master.system import ALGORITHMS, COUPLINGS
+from drillcosim.cosim.master.timegrid import grid_ticks, integer_multiple, seconds
 from drillcosim.plant.scene import (
     PLANT_KEYS,
     SECTIONS,
@@ -280,10 +280,7 @@ class CosimSettings:
     def seconds(self, ticks: int) -> float:
         """``ticks`` base steps in seconds, as the master counts time (an exact rational
         product, rounded once: 120000 steps of 0.25 ms are 30.0 s)."""
-        frac = Fraction(self.step).limit_denominator(10**12)
-        if float(frac) != self.step:
-            frac = Fraction(self.step)
-        return float(frac * ticks)
+        return seconds(ticks, self.step)
 
     @property
     def stop_time(self) -> float:
@@ -445,7 +442,8 @@ def _cosim(table: Mapping[str, Any], instances: Sequence[str], source: str) -> C
         interval = _number(f"{where} output_interval", table["output_interval"], positive=True)
         output_ticks = partial.ticks(interval, f"{where} output_interval")
     else:
-        output_ticks = max(1, math.ceil(1e-3 / step - 1e-9))
+        # the fewest steps that span 1 ms (exactly 1 ms where it is on the grid)
+        output_ticks = max(1, grid_ticks(1e-3, step) or math.ceil(1e-3 / step))
     return CosimSettings(step, stop_ticks, partial.algorithm, partial.order, partial.coupling,
                          partial.actuator_delay, partial.sensor_delay, controller_ticks,
                          output_ticks)

@@ -48,12 +48,14 @@ from _dcs_pythonfmu_0_7_0 import (
     Integer,
     Real,
     String,
+    enums,
 )
-from _dcs_pythonfmu_0_7_0.enums import Fmi2Status
 
 from . import state as fmu_state
 from . import vendored
 from .native import provide
+
+Fmi2Status = enums.Fmi2Status
 
 __all__ = ["DcsSlave", "DefaultExperiment", "Fmi2Status", "LawSlave", "XmlReal", "ranges_of",
            "units_of", "vendored"]
