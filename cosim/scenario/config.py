@@ -526,8 +526,12 @@ def derive_config(base: SceneConfig, overrides: Mapping[str, Any], *,
                   controller_fmu: bool = True) -> SceneConfig:
     """``base`` with more key-path overrides (they win over ``base.overrides``): the typed
     configuration of a sweep point, made from the scene tables ``base`` was made of (no file
-    is read again), every value validated here, once. ``controller_fmu=False`` leaves out the
-    controller FMU given as an argument (an open-loop reference runs without it).
+    is read again), every new value validated here, once. Where the overrides touch only the
+    co-simulation and the law tables (and leave the strain controller on or off as in
+    ``base``, which the plant model's choice reads), the point keeps ``base.scene``, the plant
+    validated once for the whole sweep; the loop settings and laws are made anew and checked
+    against it. ``controller_fmu=False`` leaves out the controller FMU given as an argument
+    (an open-loop reference runs without it).
 
     Raises
     ------
@@ -535,21 +539,30 @@ def derive_config(base: SceneConfig, overrides: Mapping[str, Any], *,
         An unknown key path or a bad value (one line).
     """
     origin = base.origin if controller_fmu else replace(base.origin, controller_fmu=None)
-    return _from_tables(origin, {**base.overrides, **key_paths(overrides)})
+    new = key_paths(overrides)
+    over = {**base.overrides, **new}
+    loop_only = all(p.split(".", 1)[0] in ("cosim", *TABLES) for p in new)
+    enabled = new.get(f"{CONTROLLER}.enabled", base.controller.enabled)
+    if loop_only and enabled is base.controller.enabled:
+        return _from_tables(origin, over, scene=base.scene)
+    return _from_tables(origin, over)
 
 
 def _fmu_arg(path: str | Path | None) -> Path | None:
     return None if not path else Path(path)
 
 
-def _from_tables(origin: _Source, over: dict[str, Any]) -> SceneConfig:
-    """The configuration of the scene tables ``origin.tables`` with the overrides ``over``."""
+def _from_tables(origin: _Source, over: dict[str, Any], scene: Scene | None = None
+                 ) -> SceneConfig:
+    """The configuration of the scene tables ``origin.tables`` with the overrides ``over``
+    (``scene``: the plant of these tables, made already)."""
     source = str(origin.path)
     given = {**{p: "override" for p in over}, **origin.given}
     try:
         data = _apply(origin.tables, over)
-        return _validate(data, scene_from_dict(data, name=origin.path.stem, source=source),
-                         over, origin, given)
+        if scene is None:
+            scene = scene_from_dict(data, name=origin.path.stem, source=source)
+        return _validate(data, scene, over, origin, given)
     except ConfigError as exc:
         if exc.given_as:  # named already
             raise
