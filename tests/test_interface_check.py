@@ -152,7 +152,7 @@ def test_a_target_connected_twice_is_refused(project_fmus, c_controller_fmu) -> 
 
 def test_a_law_key_a_foreign_controller_lacks_is_not_required_an_override_of_it_is(
         project_fmus, c_controller_fmu, tmp_path) -> None:
-    """Issue 31: the scene file's law keys a foreign FMU does not declare are not required of
+    """The scene file's law keys a foreign FMU does not declare are not required of
     it (a warning names them); an override of one would change nothing: a problem."""
     no_lag = variant(c_controller_fmu, tmp_path / "NoLag.fmu",
                      lambda r: _drop(r, {"lag_time_constant", "enabled", "mode"}))

@@ -1,5 +1,4 @@
-"""One port table per component: no code outside the tables formats or parses a variable name
-(issue 31, item 1).
+"""One port table per component: no code outside the tables formats or parses a variable name.
 
 The tables are ``plant/signals.py`` (with ``plant/scene.py``'s parameter table, whose names it
 forms there) and ``controller/ports.py``; everything else asks them. This test reads every
@@ -61,7 +60,7 @@ def test_no_code_outside_the_tables_formats_or_parses_a_variable_name() -> None:
 
 
 def test_the_patterns_catch_what_they_are_for() -> None:
-    """The searches find the forms issue 31 listed (so a pass above means something)."""
+    """The searches find the forms the plug-in rework removed (so a pass above means something)."""
     for bad in ('column(data, PLANT, f"body{b}_X")', 'f"strain{s}_{a}"',
                 'f"actuator{s}_force_{a}"', 'f"gain_matrix_{i}_{j}"',
                 'f"{side}_limit_{o}"'):

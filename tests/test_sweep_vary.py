@@ -1,5 +1,4 @@
-"""Sweeps over any scene key (``--vary``), planned once into typed point configurations
-(issue 31, items 3 and 5).
+"""Sweeps over any scene key (``--vary``), planned once into typed point configurations.
 
 * ``sweep_spec`` validates the scene once and derives every point's configuration from it
   (``derive_config``); the points carry them, and running them reads no scene file again;

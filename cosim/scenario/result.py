@@ -52,7 +52,7 @@ def run_title(config: SceneConfig) -> str:
         law = f"{ctrl.kind} law"
     else:
         k = f"{gain:.3g}".replace("e+0", "e").replace("e+", "e").replace("e-0", "e-")
-        law = (f"{'' if ctrl.kind == 'p' else ctrl.kind.upper() + ' '}K = {k} N/strain"
+        law = (f"{'' if ctrl.kind == 'proportional' else ctrl.kind.upper() + ' '}K = {k} N/strain"
                + (f" from {config.switch_on_time:g} s" if config.switch_on_time else ""))
     return (f"{config.name}: {law}, actuator delay {st.actuator_delay * 1e3:g} ms, "
             f"step H = {st.step * 1e3:g} ms")

@@ -39,7 +39,7 @@ def unavailable(config: SceneConfig) -> str:
     ctrl = config.controller
     if CONTROLLER in config.fmu_files:
         return "a controller FMU of the user's (the prediction models the project's P law)"
-    if ctrl.kind != "p":
+    if ctrl.kind != "proportional":
         return f"the {ctrl.kind!r} law (the prediction models the P law)"
     if ctrl.params.mode != "unrestricted":
         return f"actuator mode {ctrl.params.mode!r} is not linear"
