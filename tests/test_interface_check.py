@@ -248,15 +248,15 @@ def test_a_plant_without_a_scene_parameter_is_warned_about(project_fmus, tmp_pat
     ("mode", 3, "'mode' = 3 is outside its declared range [0, 1]"),
 ])
 def test_a_foreign_fmus_own_parameters_are_checked_from_every_door(
-        project_fmus, c_controller_fmu, tmp_path, capsys, name, value, words) -> None:
+        project_fmus, tmp_path, capsys, name, value, words) -> None:
     """A foreign controller FMU's own parameter, from the API's ``overrides``, from ``--set``
     and from a scene's ``[controller.parameters]``: checked against its modelDescription before
-    the first step (the C controller declares ``mode`` Integer in [0, 1]); the CLI exits 2 with
-    no traceback."""
+    the first step (the project's strain controller given as a file is a foreign FMU; it
+    declares ``mode`` Integer in [0, 1]); the CLI exits 2 with no traceback."""
     import drillcosim
     from drillcosim.cosim.master.errors import UserError
 
-    plant = project_fmus["DrillstringPlant"]
+    plant, c_controller_fmu = project_fmus["DrillstringPlant"], project_fmus["StrainController"]
     key = f"controller.parameters.{name}"
     with pytest.raises(UserError, match=re.escape(words)):
         drillcosim.simulate("paper_closed_loop", stop_time=0.01, overrides={key: value},
