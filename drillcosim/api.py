@@ -99,7 +99,8 @@ def simulate(scene: str | Path = "paper_closed_loop", *, stop_time: float | None
              outputs: Sequence[str] | None = None, progress: bool | None = False,
              fmu_dir: str | Path | None = None, plant_fmu: str | Path | None = None,
              controller_fmu: str | Path | None = None,
-             csv_path: str | Path | None = None) -> Result:
+             csv_path: str | Path | None = None, save_state: str | Path | None = None,
+             from_state: str | Path | None = None) -> Result:
     """Co-simulate a scene: plant and controllers through the master.
 
     Parameters
@@ -131,6 +132,13 @@ def simulate(scene: str | Path = "paper_closed_loop", *, stop_time: float | None
         FMU files (any maker) instead of the project's; checked against the others by name.
     csv_path : path-like, optional
         Also stream the recorded rows to this CSV while running (``drillcosim run`` does).
+    save_state : path-like, optional
+        Write a checkpoint of the whole system (every component's state and the master's) at
+        the stop time to this file.
+    from_state : path-like, optional
+        Continue from this checkpoint to ``stop_time`` instead of starting at 0 s: the same
+        outputs, bit for bit, as the run that was never interrupted. A checkpoint of another
+        scene, settings, build, FMU or version, or a damaged one, is refused (one line).
 
     Returns
     -------
@@ -149,7 +157,8 @@ def simulate(scene: str | Path = "paper_closed_loop", *, stop_time: float | None
     config = load_scene(scene, stop_time=stop_time, step=step, delay=delay, gain=gain,
                         overrides=overrides, plant_fmu=plant_fmu, controller_fmu=controller_fmu)
     built = build_system(config, engine, fmu_dir=fmu_dir)
-    return simulate_built(built, outputs=outputs, progress=progress, csv_path=csv_path)
+    return simulate_built(built, outputs=outputs, progress=progress, csv_path=csv_path,
+                          save_state=save_state, from_state=from_state)
 
 
 def sweep(scene: str | Path = "paper_closed_loop", *, gains: Sequence[float] = (1e9,),
