@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from drillcosim.cosim.master.checkpoint import write_checkpoint
+from drillcosim.cosim.master.checkpoint import Checkpoint, write_checkpoint
 from drillcosim.cosim.master.errors import CosimError
 from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.master.master import Result as MasterResult
@@ -81,8 +81,8 @@ def simulate_system(system: SystemSpec, slaves, outputs: Sequence[str], output_t
 def simulate(built: BuiltSystem, stop_time: float | None = None, *,
              outputs: Sequence[str] | None = None, progress: bool | None = False,
              csv_path: str | Path | None = None, observers: Sequence[Any] = (),
-             save_state: str | Path | None = None, from_state: str | Path | None = None
-             ) -> Result:
+             save_state: str | Path | None = None,
+             from_state: str | Path | Checkpoint | None = None) -> Result:
     """Simulate a built system and return its :class:`~.result.Result`.
 
     Parameters
@@ -104,7 +104,9 @@ def simulate(built: BuiltSystem, stop_time: float | None = None, *,
         (:mod:`.checkpoints`; only if the run completed).
     from_state : path-like, optional
         Continue from this checkpoint file (of the same scene, settings, engine, builds and
-        drillcosim version) instead of the start time: the rows begin at its time.
+        drillcosim version) instead of the start time: the rows begin at its time. A
+        :class:`~cosim.master.checkpoint.Checkpoint` object (a study's branch) is restored
+        without the run-identity check (the components' builds are checked).
 
     Raises
     ------
@@ -125,8 +127,8 @@ def simulate(built: BuiltSystem, stop_time: float | None = None, *,
                           f"allowed: {', '.join(built.units)}")
     if csv_path is not None:
         Path(csv_path).parent.mkdir(parents=True, exist_ok=True)
-    start = None if from_state is None else load_for(from_state, built.config, built.engine,
-                                                     stop)
+    start = (from_state if from_state is None or isinstance(from_state, Checkpoint)
+             else load_for(from_state, built.config, built.engine, stop))
     identity = None if save_state is None else run_identity(built.config, built.engine)
     result, failure = simulate_system(built.system, built.slaves, names, cosim.output_ticks, stop,
                                  progress=progress, csv_path=csv_path, observers=observers,
