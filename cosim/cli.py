@@ -267,7 +267,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     frame = sweep(args.scene, **lists, stop_time=spec.stop_time, gain_key=spec.gain_key,
                   overrides=over, engine=args.engine, out=out, workers=args.workers,
                   scheduler=args.scheduler, progress=_progress(args),
-                  retry_errors=args.retry_errors)
+                  retry_errors=args.retry_errors, branch=not args.no_branch)
     res = frame.attrs["outcome"]
     print(f"ran {res.n_run} of {res.n_points} points ({res.n_skipped} already done) in "
           f"{res.wall_time:.1f} s")
@@ -493,6 +493,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", help="results folder (default out/sweep_<scene>); "
                    "re-running into it skips finished points")
     p.add_argument("--retry-errors", action="store_true", help="re-run points recorded as errors")
+    p.add_argument("--no-branch", action="store_true",
+                   help="run every closed-loop point from 0 s instead of continuing the points "
+                        "identical up to the controller's switch-on from one checkpoint of "
+                        "that prefix (the same table)")
     p.add_argument("--maps", action="store_true", help="also write the stability/benefit maps")
     p.add_argument("--no-prediction", action="store_true",
                    help="maps without the linear prediction overlay")

@@ -166,7 +166,8 @@ def sweep(scene: str | Path = "paper_closed_loop", *, gains: Sequence[float] = (
           stop_time: float | None = None, gain_key: str | None = None,
           overrides: Mapping[str, Any] | None = None, engine: str = "fmu",
           out: str | Path | None = None, workers: int | None = 0, scheduler: Any = None,
-          progress: bool | None = False, retry_errors: bool = False, **options: float):
+          progress: bool | None = False, retry_errors: bool = False, branch: bool = True,
+          **options: float):
     """Stability and benefit sweep over gain x delay x step, one co-simulation per point.
 
     Parameters
@@ -196,6 +197,10 @@ def sweep(scene: str | Path = "paper_closed_loop", *, gains: Sequence[float] = (
     progress : bool or None
     retry_errors : bool
         Re-run points recorded as errors.
+    branch : bool
+        Closed-loop points identical up to the controller's switch-on (e.g.
+        ``paper_switch_on_25s``) continue from one checkpoint of that prefix instead of each
+        running it (the same table; ``branch_time`` says where a point branched).
     **options
         Point metric options (:class:`cosim.study.point.PointOptions`: ``fit_fraction``,
         ``envelope_window`` [s], ``rms_fraction``, ``force_cap`` [N], ``highpass`` [rad/s]).
@@ -219,7 +224,7 @@ def sweep(scene: str | Path = "paper_closed_loop", *, gains: Sequence[float] = (
     with tempfile.TemporaryDirectory(prefix="drillcosim_sweep_") as tmp:
         folder = Path(out) if out is not None else Path(tmp)
         outcome = execute_sweep(spec, folder, workers=workers, scheduler=scheduler,
-                                progress=progress, retry_errors=retry_errors)
+                                progress=progress, retry_errors=retry_errors, branch=branch)
         keys = {p.key for p in spec.points()}
         rows = [r for r in read_table(folder) if r["key"] in keys]
     frame = pd.DataFrame(rows)
