@@ -27,9 +27,14 @@ STEP, STOP = 2.5e-4, 0.45
 OPTIONS = {"force_cap": 100.0}
 
 
-def _spec(engine: str) -> SweepSpec:
-    return SweepSpec(SCENE, [1e8, 1e9], [0.0, 1.1e-3], [STEP], STOP, engine, SHORT,
-                     options=OPTIONS)
+#: the other exchange: Jacobi (inputs due at the branch tick taken again from the lines) with
+#: linear coupling (the lines extrapolate from their last two samples)
+JACOBI = {"cosim.algorithm": "jacobi", "cosim.coupling": "linear"}
+
+
+def _spec(engine: str, extra: dict | None = None) -> SweepSpec:
+    return SweepSpec(SCENE, [1e8, 1e9], [0.0, 1.1e-3], [STEP], STOP, engine,
+                     {**SHORT, **(extra or {})}, options=OPTIONS)
 
 
 def test_branch_tick_is_one_controller_period_before_the_switch_on() -> None:
@@ -41,16 +46,20 @@ def test_branch_tick_is_one_controller_period_before_the_switch_on() -> None:
     assert branch_tick(off) == 0
 
 
-@pytest.mark.parametrize("engine", ["inprocess", "fmu"])
-def test_branched_record_equals_straight_run_bit_for_bit(engine) -> None:
-    branched = [p for p in branch_points(_spec(engine).points()) if isinstance(p, BranchedPoint)]
+@pytest.mark.parametrize(("engine", "extra"), [("inprocess", None), ("fmu", None),
+                                               ("inprocess", JACOBI)],
+                         ids=["inprocess", "fmu", "inprocess-jacobi-linear"])
+def test_branched_record_equals_straight_run_bit_for_bit(engine, extra) -> None:
+    branched = [p for p in branch_points(_spec(engine, extra).points())
+                if isinstance(p, BranchedPoint)]
     assert len(branched) == 4
     assert len({id(p.prefix) for p in branched}) == 1      # one prefix for the group
     opts = PointOptions.from_kwargs(OPTIONS)
     acted = 0
     for bp in branched:
         p = bp.point
-        config = point_config(SCENE, p.gain, p.delay, STEP, STOP, False, SHORT)
+        config = point_config(SCENE, p.gain, p.delay, STEP, STOP, False,
+                              {**SHORT, **(extra or {})})
         straight, _ = run_point(config, opts, engine)
         rest, _ = run_point(config, opts, engine,
                             from_checkpoint=Checkpoint.from_bytes(bp.prefix.checkpoint))
