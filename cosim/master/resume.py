@@ -63,7 +63,8 @@ def capture(execution: Execution, identity: Mapping[str, Any]) -> Checkpoint:
         tuple(alg.y_names), tuple(alg.y[:len(alg.y_names)]), tuple(alg.newest),
         tuple((p.name, tuple(p.in_names), tuple(p.u[:len(p.in_names)])) for p in alg.plans),
         lines, tuple((c.source, c.target) for c in system.connections))
-    return Checkpoint(execution.tick, t, (execution._num, execution._den), system.start_time,
+    base = execution.base_fraction
+    return Checkpoint(execution.tick, t, (base.numerator, base.denominator), system.start_time,
                       alg.name, tuple(system.stepping_order), slaves, exchange, dict(identity))
 
 
@@ -79,7 +80,8 @@ def restore(execution: Execution, checkpoint: Checkpoint) -> None:
     """
     alg, system = execution.algorithm, execution.system
     identities = {n: execution.slaves[n].state_identity() for n in system.stepping_order}
-    problems = restore_problems(checkpoint, system, execution._num, execution._den, identities)
+    problems = restore_problems(checkpoint, system, execution.base_fraction.numerator,
+                                execution.base_fraction.denominator, identities)
     if problems:
         raise CheckpointError(f"does not fit this run: {problems[0]}"
                               + (f" (and {len(problems) - 1} more)" if len(problems) > 1

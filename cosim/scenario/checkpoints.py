@@ -41,8 +41,8 @@ def settings_digest(config: SceneConfig, leave_out: tuple[str, ...] = ("stop_tim
     cosim = {k: v for k, v in config.cosim.as_dict().items() if k not in leave_out
              and not any(k.startswith(f"{o}_") or k == o for o in leave_out)}
     with np.printoptions(threshold=sys.maxsize, floatmode="unique"):
-        text = repr((config.scene, config.controller, config.top_drive, config.state_space,
-                     sorted(cosim.items())))
+        text = repr((config.scene, sorted(config.controllers.items()),
+                     sorted(config.plant_parameters.items()), sorted(cosim.items())))
     return hashlib.sha256(text.encode()).hexdigest()
 
 

@@ -21,7 +21,6 @@ so a point branches the same way in this process, in a process pool or on a Dask
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -29,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from drillcosim.cosim.master.checkpoint import Checkpoint
+from drillcosim.cosim.master.timegrid import split_ticks
 from drillcosim.cosim.scenario.build import build_system
 from drillcosim.cosim.scenario.config import SceneConfig
 from drillcosim.cosim.scenario.simulate import simulate_system
@@ -86,12 +86,13 @@ def branch_tick(config: SceneConfig) -> int:
     sees a nonzero command whether the controller evaluates it at the start or the end of its
     step."""
     c, cosim = config.controller, config.cosim
-    if not c.enabled or c.switch_on_time <= 0 or config.state_space is not None:
+    # the P law only: its state before the switch-on does not depend on the gain
+    if c.kind != "proportional" or not c.switch_on_time:
         return 0
     period = cosim.controller_ticks
-    first = math.ceil((c.switch_on_time / cosim.step - 1e-6) / period) * period
-    stop = round(cosim.stop_time / cosim.step)
-    return max(0, min(first - period, stop - period))
+    whole, fraction = split_ticks(c.switch_on_time, cosim.step)  # the one on-grid rule
+    first = -(-(whole + (fraction > 0)) // period) * period  # first sample at or after it
+    return max(0, min(first - period, cosim.stop_ticks - period))
 
 
 def _group_key(point: Point) -> tuple:
