@@ -1,7 +1,8 @@
-"""The README's FMU variable tables, generated from the built FMUs' modelDescription.xml.
+"""The FMU variable tables of the docs, generated from the built FMUs' modelDescription.xml.
 
-``python -m drillcosim.fmu_src.interface_doc [FMU_DIR]`` prints the markdown; a test checks that the README
-holds exactly this text between its ``fmu-interface`` markers.
+``python -m drillcosim.fmu_src.interface_doc [FMU_DIR]`` prints the markdown;
+``... --write docs/fmu_interface.md [FMU_DIR]`` replaces the text between the page's
+``fmu-interface`` markers with it. A test checks that the page holds exactly this text.
 """
 
 from __future__ import annotations
@@ -42,5 +43,16 @@ def interface_markdown(fmu_dir: str | Path = "build/fmus") -> str:
     return "\n".join(lines)
 
 
+def write_into(page: str | Path, fmu_dir: str | Path = "build/fmus") -> None:
+    """Replace the generated block of ``page`` (between :data:`START` and :data:`END`)."""
+    text = Path(page).read_text()
+    start, end = text.index(START), text.index(END) + len(END)
+    Path(page).write_text(text[:start] + interface_markdown(fmu_dir) + text[end:])
+
+
 if __name__ == "__main__":  # pragma: no cover
-    print(interface_markdown(sys.argv[1] if len(sys.argv) > 1 else "build/fmus"))
+    args = sys.argv[1:]
+    if args[:1] == ["--write"]:
+        write_into(args[1], *args[2:3])
+    else:
+        print(interface_markdown(args[0] if args else "build/fmus"))
