@@ -188,7 +188,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
                                 delay=args.delay, gain=args.gain, overrides=_parse_set(args.set),
                                 plant_fmu=args.plant_fmu, controller_fmu=args.controller_fmu)
             built = build_system(config, args.engine, fmu_dir=args.fmu_dir)
-            feed = workers.feed(plot_settings(config), config.cosim.stop_time)
+            # the open-loop baseline of the figures: known now if cached, else run after
+            want_baseline = not (args.no_plots or args.no_baseline)
+            baseline = _baseline(config, cached_only=True) if want_baseline else None
+            feed = workers.feed(plot_settings(config, baseline), config.cosim.stop_time)
             result = simulate(built, progress=_progress(args), csv_path=out / "results.csv",
                               observers=[feed] if feed is not None else ())
         except CosimError as exc:  # failed before the first step: earlier files are kept
@@ -198,10 +201,29 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 return EXIT_USAGE
             print(f"drillcosim run: failed: {exc}", file=sys.stderr)
             return EXIT_FAILED
-        files = result.save(out, plots=not args.no_plots, workers=workers)
+        if want_baseline and baseline is None and len(result.data) >= 2:
+            baseline = _baseline(config, cached_only=False, progress=_progress(args))
+        files = result.save(out, plots=not args.no_plots, workers=workers, baseline=baseline)
     message = result.message(out, files)
     print(message, file=sys.stdout if result.completed else sys.stderr)
+    if args.profile:
+        print(result.profile_table())
     return EXIT_OK if result.completed else EXIT_FAILED
+
+
+def _baseline(config, cached_only: bool, progress: bool | None = None):
+    """The file of a closed-loop run's open-loop baseline: from the cache, or (not
+    ``cached_only``) run now, once; None without one."""
+    from drillcosim.cosim.scenario.baseline import baseline_cached, baseline_config, baseline_path
+
+    if baseline_config(config) is None:
+        return None
+    if not baseline_cached(config):
+        if cached_only:
+            return None
+        print("drillcosim run: running the open-loop baseline of the figures (once for this "
+              "scene and these settings, then cached; --no-baseline skips it)", file=sys.stderr)
+    return baseline_path(config, progress)
 
 
 def _cmd_ssp(args: argparse.Namespace) -> int:
@@ -245,10 +267,13 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     print(f"ran {res.n_run} of {res.n_points} points ({res.n_skipped} already done) in "
           f"{res.wall_time:.1f} s")
     print(res.summary())
+    for line in res.notes:
+        print(f"note: {line}")
     if args.maps:
         from drillcosim.cosim.study.maps import plot_maps
 
-        for path in plot_maps(res.folder, predict=not args.no_prediction):
+        for path in plot_maps(res.folder, predict=not args.no_prediction,
+                              progress=_progress(args)):
             print(path)
     return EXIT_OK
 
@@ -410,6 +435,13 @@ def _parser() -> argparse.ArgumentParser:
     _add_fmu_options(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--profile", action="store_true",
+                   help="print where the stepping loop's time went: per component its mean "
+                        "and longest step and share, the master's own share, the real-time "
+                        "factor (also in summary.json's telemetry)")
+    p.add_argument("--no-baseline", action="store_true",
+                   help="figures without the open-loop baseline (a closed-loop run's figures "
+                        "draw the scene with the controller off behind it; run once, cached)")
     p.set_defaults(func=_cmd_run)
     p = sub.add_parser("ssp", help="write a scene's system (FMUs included) as an SSP 1.0 file")
     p.add_argument("scene", help="scene name from scenes/ or a path")

@@ -40,9 +40,9 @@ import numpy as np
 __all__ = ["FIGURES", "GROUPS", "PlotFeed", "PlotWorkers"]
 
 #: The figures of a run in :func:`.plots.plot_run`'s order (file names without ``.png``).
-FIGURES = ("orbit", "orbit_steady", "deflection_contact", "actuators", "axial_torsional")
+FIGURES = ("orbit", "deflection_contact", "actuators", "axial_torsional")
 #: The figures each worker draws (about equal drawing times at the end of a run).
-GROUPS = (("deflection_contact", "orbit_steady", "axial_torsional"), ("actuators", "orbit"))
+GROUPS = (("deflection_contact", "axial_torsional"), ("actuators", "orbit"))
 #: Thread-count variables of the BLAS libraries numpy may load, set to 1 for the workers
 #: (unless the user set them).
 _ONE_THREAD = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
@@ -132,11 +132,13 @@ class PlotWorkers:
 
     def plot_run(self, data: np.ndarray, out_dir: str | Path, clearance: float,
                  spans: Mapping[int, Mapping] | None = None, n_sites: int = 2, title: str = "",
-                 switch_on_time: float | None = None) -> list[Path]:
+                 switch_on_time: float | None = None, baseline: str | None = None,
+                 revolution: float | None = None) -> list[Path]:
         """:func:`.plots.plot_run`, its figures drawn by the workers (see the module
         docstring); the paths in that function's order."""
         settings = {"clearance": clearance, "spans": dict(spans) if spans else None,
-                    "n_sites": n_sites, "title": title, "switch_on_time": switch_on_time}
+                    "n_sites": n_sites, "title": title, "switch_on_time": switch_on_time,
+                    "baseline": baseline, "revolution": revolution}
         sent = []
         if self.groups:
             if self._settings != settings:
