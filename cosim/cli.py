@@ -585,7 +585,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--strain-noise", type=float, default=1e-7, metavar="E",
                    help="lqg: std of the strain noise [1] (default 1e-7)")
     p.add_argument("--force-limit", type=float, default=math.inf, metavar="N",
-                   help="saturation |force| <= N [N] (default: none)")
+                   help="saturation: force magnitude <= N [N] (default: none)")
     p.add_argument("--max-frequency", type=float, default=1000.0, metavar="W",
                    help="design model: the plant's modes up to W [rad/s] (default 1000: the "
                    "lateral bending modes; inf: all); judged with all of them")
