@@ -10,8 +10,8 @@ markers with it, and a test checks that the page holds exactly this text.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
