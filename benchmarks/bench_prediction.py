@@ -1,7 +1,9 @@
 """The linear prediction of a sweep's maps and a sweep worker's start-up, before / after, side by
-side in one run (issue 32's targets).
+side in one run (the 12-point map's prediction; a sweep worker's start-up).
 
-    python benchmarks/bench_prediction.py --before /tmp/wt-before --after . [--repeat 3]
+    python benchmarks/bench_prediction.py --before BEFORE --after . [--repeat 3]
+
+BEFORE is a git worktree of the commit before the change, with its own ``make``-built ``.venv``.
 
 Each task runs in a fresh process of the tree's own interpreter (``<tree>/.venv/bin/python``),
 the trees interleaved, best of ``--repeat`` after a warm-up round (not timed);

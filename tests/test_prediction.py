@@ -111,7 +111,7 @@ def _fresh_rates(points: list[tuple[float, float]], step: float) -> dict:
 
 
 def test_point_predictions_equal_a_fresh_linearization() -> None:
-    """The issue's 12 points: the sweep's predicted growth rates (cached linearization, the loop
+    """The 12 points of gains 1e6, 1e8, 1e9 x delays 0-200 us: the sweep's predicted growth rates (cached linearization, the loop
     model kept per process) equal the uncached computation to 1e-9 1/s."""
     from drillcosim.cosim.study.point import point_config
     from drillcosim.cosim.study.prediction import point_prediction
@@ -122,7 +122,7 @@ def test_point_predictions_equal_a_fresh_linearization() -> None:
         rate, note = point_prediction(point_config(SCENE, gain, delay, 2.5e-4, 6.0, False, None))
         assert note == ""
         assert rate == pytest.approx(fresh[(gain, delay)], abs=1e-9), (gain, delay)
-    # the issue's point: gain 1e9, delay 100 us grows slowly
+    # the slow-growth point: gain 1e9, delay 100 us grows slowly
     assert 0.0 < fresh[(1e9, 1e-4)] < 0.5
 
 
@@ -208,7 +208,7 @@ def test_benefit_needs_a_built_up_reference() -> None:
 
 
 def test_the_maps_state_the_rule_and_mark_what_differs(tmp_path) -> None:
-    """A table like the issue's sweep: the legend says the rule in words; the point the
+    """A table like that 12-point sweep's: the legend says the rule in words; the point the
     prediction calls slowly unstable but the run stable gets a ring; a benefit of a reference
     still building up is grey; the growth figure draws the predicted curves."""
     from drillcosim.cosim.study.maps import DIFFERS, map_figures
