@@ -23,6 +23,7 @@ from .execution import Execution
 from .recorder import Recorder
 from .slave import Slave
 from .system import SystemSpec
+from .timegrid import integer_multiple
 
 
 @dataclass(frozen=True)
@@ -160,8 +161,8 @@ class Master:
         if output_interval is not None and output_ticks is not None:
             raise ValueError("output_interval and output_ticks: give one of them")
         if output_interval is not None:
-            interval = round(output_interval / H)
-            if interval < 1 or abs(interval * H - output_interval) > 1e-9 * output_interval:
+            interval = integer_multiple(output_interval, H)
+            if interval is None:
                 raise ValueError(f"output_interval: a positive integer multiple of "
                                  f"base_step = {H} s, got {output_interval} s")
         recorder = Recorder(outputs, interval, csv_path, flush_every)

@@ -259,7 +259,9 @@ def point_config(scene: str, gain: float, delay: float, step: float, stop_time: 
     if open_loop:
         over[f"{table}.enabled"] = False
     else:
-        over.update({f"{table}.enabled": True, gain_key: gain})
+        over[f"{table}.enabled"] = True
+        if not math.isnan(gain):  # NaN: the scene's gain
+            over[gain_key] = gain
     return load_config(scene, over)
 
 
@@ -342,7 +344,8 @@ def error_row(exc: BaseException, wall_time: float = math.nan) -> dict[str, Any]
 def measure_point(scene: str, gain: float, delay: float, step: float, stop_time: float,
                   engine: str = "fmu", *, open_loop: bool = False,
                   overrides: Mapping[str, Any] | None = None, fmu_dir: str | None = None,
-                  gain_key: str = DEFAULT_GAIN_KEY, **options: float) -> dict[str, Any]:
+                  gain_key: str = DEFAULT_GAIN_KEY, config: SceneConfig | None = None,
+                  **options: float) -> dict[str, Any]:
     """Run one sweep point and measure it.
 
     Parameters
@@ -367,6 +370,10 @@ def measure_point(scene: str, gain: float, delay: float, step: float, stop_time:
         FMU folder for the ``fmu`` engine (default ``build/fmus``).
     gain_key : str
         The scene key ``gain`` sets (default ``controller.gain``).
+    config : SceneConfig, optional
+        The point's typed configuration (a sweep derives it once from its base,
+        :attr:`cosim.study.grid.SweepSpec.planned`); default: :func:`point_config` of the
+        arguments above.
     **options
         :class:`PointOptions` fields.
 
@@ -386,7 +393,9 @@ def measure_point(scene: str, gain: float, delay: float, step: float, stop_time:
     """
     wall0 = time.perf_counter()
     opts = PointOptions.from_kwargs(options)
-    config = point_config(scene, gain, delay, step, stop_time, open_loop, overrides, gain_key)
+    if config is None:
+        config = point_config(scene, gain, delay, step, stop_time, open_loop, overrides,
+                              gain_key)
     res, reason = run_point(config, opts, engine, fmu_dir)
     run_time = time.perf_counter() - wall0
     data = res.data

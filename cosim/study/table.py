@@ -47,9 +47,10 @@ __all__ = ["COLUMNS", "DERIVED", "ResultTable", "derive", "notes", "read_table",
            "verdict_counts"]
 
 #: Column order of the table (units: gain that of the sweep's gain key (N/strain for the strain
-#: gain), times s, deflections m, force N, power W, growth rates 1/s, stick-slip measures 1).
+#: gain), times s, deflections m, force N, power W, growth rates 1/s, stick-slip measures 1;
+#: ``varied``: the point's values of the sweep's other axes, JSON by key path).
 COLUMNS: tuple[str, ...] = (
-    "key", "scene", "engine", "kind", "gain", "delay", "step", "stop_time", "status",
+    "key", "scene", "engine", "kind", "gain", "delay", "step", "stop_time", "varied", "status",
     "verdict", "stable", "growth_rate", "growth_noise", "growth_excess",
     "predicted_growth_rate", "agrees_with_prediction", "prediction_note", "divergence_time",
     "end_time", "min_stop_time", "contact_time", "rms_long", "rms_short", "benefit_long",
@@ -62,7 +63,7 @@ COLUMNS: tuple[str, ...] = (
 #: ``prediction_note`` where the point has a prediction).
 DERIVED: tuple[str, ...] = ("verdict", "stable", "growth_excess", "agrees_with_prediction",
                             "benefit_long", "benefit_short", "benefit_note")
-_TEXT = {"key", "scene", "engine", "kind", "status", "verdict", "prediction_note",
+_TEXT = {"key", "scene", "engine", "kind", "varied", "status", "verdict", "prediction_note",
          "benefit_note", "reason"}
 SPANS = ("long", "short")
 _STABLE = {"stable": 1.0, "unstable": 0.0}
