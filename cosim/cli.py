@@ -195,7 +195,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
             baseline = _baseline(config, cached_only=True) if want_baseline else None
             feed = workers.feed(plot_settings(config, baseline), config.cosim.stop_time)
             result = simulate(built, progress=_progress(args), csv_path=out / "results.csv",
-                              observers=[feed] if feed is not None else ())
+                              observers=[feed] if feed is not None else (),
+                              save_state=args.save_state, from_state=args.from_state)
         except CosimError as exc:  # failed before the first step: earlier files are kept
             if exc.call == "fmi2ExitInitializationMode" and exc.status == FMI2_ERROR:
                 # the FMU rejected its parameters (its message names them): bad input
@@ -208,6 +209,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
         files = result.save(out, plots=not args.no_plots, workers=workers, baseline=baseline)
     message = result.message(out, files)
     print(message, file=sys.stdout if result.completed else sys.stderr)
+    if args.save_state is not None:
+        print(f"checkpoint at {result.end_time:g} s: {args.save_state}" if result.completed
+              else "no checkpoint written: the run did not reach its stop time",
+              file=sys.stdout if result.completed else sys.stderr)
     if args.profile:
         print(result.profile_table())
     return EXIT_OK if result.completed else EXIT_FAILED
@@ -280,7 +285,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         print(f"drillcosim sweep: note: {note}", file=sys.stderr)
     out = args.out or f"out/sweep_{Path(args.scene).stem}"
     frame = sweep(spec, out=out, workers=args.workers, scheduler=args.scheduler,
-                  progress=_progress(args), retry_errors=args.retry_errors)
+                  progress=_progress(args), retry_errors=args.retry_errors,
+                  branch=not args.no_branch)
     res = frame.attrs["outcome"]
     print(f"ran {res.n_run} of {res.n_points} points ({res.n_skipped} already done) in "
           f"{res.wall_time:.1f} s")
@@ -464,6 +470,13 @@ def _parser() -> argparse.ArgumentParser:
                    help="print where the stepping loop's time went: per component its mean "
                         "and longest step and share, the master's own share, the real-time "
                         "factor (also in summary.json's telemetry)")
+    p.add_argument("--save-state", metavar="FILE",
+                   help="write a checkpoint of the whole system at the stop time (every FMU's "
+                        "state and the master's: ticks, delay lines, held values)")
+    p.add_argument("--from-state", metavar="FILE",
+                   help="continue from a checkpoint (--save-state of the same scene, settings, "
+                        "engine and build) to --stop-time; the same outputs, bit for bit, as "
+                        "the run that was never interrupted")
     p.add_argument("--no-baseline", action="store_true",
                    help="figures without the open-loop baseline (a closed-loop run's figures "
                         "draw the scene with the controller off behind it; run once, cached)")
@@ -516,6 +529,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", help="results folder (default out/sweep_<scene>); "
                    "re-running into it skips finished points")
     p.add_argument("--retry-errors", action="store_true", help="re-run points recorded as errors")
+    p.add_argument("--no-branch", action="store_true",
+                   help="run every closed-loop point from 0 s instead of continuing the points "
+                        "identical up to the controller's switch-on from one checkpoint of "
+                        "that prefix (the same table)")
     p.add_argument("--maps", action="store_true", help="also write the stability/benefit maps")
     p.add_argument("--no-prediction", action="store_true",
                    help="maps without the linear prediction overlay")
@@ -568,7 +585,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--strain-noise", type=float, default=1e-7, metavar="E",
                    help="lqg: std of the strain noise [1] (default 1e-7)")
     p.add_argument("--force-limit", type=float, default=math.inf, metavar="N",
-                   help="saturation |force| <= N [N] (default: none)")
+                   help="saturation: force magnitude <= N [N] (default: none)")
     p.add_argument("--max-frequency", type=float, default=1000.0, metavar="W",
                    help="design model: the plant's modes up to W [rad/s] (default 1000: the "
                    "lateral bending modes; inf: all); judged with all of them")
