@@ -116,11 +116,12 @@ HERE = Path(__file__).resolve().parent
 #: carry stray files (setuptools reuses a checkout's ``build/lib``, where a file deleted from
 #: the sources stays), and a stray ``.c`` would be linked in.
 SOURCES: tuple[Path, ...] = tuple(HERE / n for n in (
-    "dcs_discover.c", "dcs_instance.c", "dcs_python.c", "dcs_registry.c", "dcs_slave.c",
-    "dcs_state.c", "fmi2_functions.c"))
+    "dcs_discover.c", "dcs_instance.c", "dcs_python.c", "dcs_registry.c", "dcs_runtime.c",
+    "dcs_sha256.c", "dcs_slave.c", "dcs_state.c", "fmi2_functions.c"))
 #: The official FMI 2.0.5 headers and our internal ones.
 HEADERS: tuple[Path, ...] = tuple(HERE / n for n in (
-    "dcs_discover.h", "dcs_python.h", "dcs_registry.h", "dcs_wrapper.h", "fmi2/fmi2FunctionTypes.h",
+    "dcs_discover.h", "dcs_python.h", "dcs_registry.h", "dcs_runtime.h", "dcs_sha256.h",
+    "dcs_wrapper.h", "fmi2/fmi2FunctionTypes.h",
     "fmi2/fmi2Functions.h", "fmi2/fmi2TypesPlatform.h"))
 
 

@@ -36,9 +36,12 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <wchar.h>
 
 #include "dcs_discover.h"
+#include "dcs_runtime.h"
+#include "dcs_sha256.h"
 
 #ifndef DCS_BUILD_PYTHON
 #define DCS_BUILD_PYTHON ""
@@ -55,6 +58,7 @@ DCS_PYAPI(DCS_DEFINE)
 __typeof__(Py_UTF8Mode) *p_Py_UTF8Mode;
 #pragma GCC diagnostic pop
 int *p_Py_IgnoreEnvironmentFlag;
+int *p_Py_NoSiteFlag;
 int (*p_PyObject_GetBuffer)(PyObject *, DcsBuffer *, int);
 void (*p_PyBuffer_Release)(DcsBuffer *);
 
@@ -64,6 +68,9 @@ static pthread_mutex_t g_lock = PTHREAD_MUTEX_INITIALIZER;
 static int g_ready = 0;           /* API resolved, interpreter running, names interned */
 static int g_loaded = 0;          /* a libpython is in the process (ours or the host's) */
 static char *g_final_error = NULL; /* a failure once g_loaded: final for the process */
+static DcsRuntime *g_runtime = NULL; /* the self-contained FMU's runtime running, if one is */
+static char **g_joined = NULL;       /* runtime folders checked in full and on sys.path */
+static size_t g_n_joined = 0;
 
 int dcs_python_started(void)
 {
@@ -90,6 +97,7 @@ static int resolve_api(void *handle, char *why, size_t nwhy)
     DCS_PYAPI(DCS_RESOLVE)
     DCS_RESOLVE(Py_UTF8Mode)
     DCS_RESOLVE(Py_IgnoreEnvironmentFlag)
+    DCS_RESOLVE(Py_NoSiteFlag)
     DCS_RESOLVE(PyObject_GetBuffer)
     DCS_RESOLVE(PyBuffer_Release)
 #undef DCS_RESOLVE
@@ -165,19 +173,29 @@ static int utf8_to_wide(const char *s, wchar_t *out, size_t n)
     return *p == '\0' ? 0 : -1;
 }
 
-static int start_interpreter(const char *executable, char *why, size_t nwhy)
+/* Start the interpreter whose program name is executable. own_runtime: a self-contained FMU's
+ * runtime, started without the site module (sys.path is the runtime's: its home, or on win64
+ * its ._pth, and the MANIFEST's path lines); home: its Py_SetPythonHome (NULL: none). */
+static int start_interpreter(const char *executable, int own_runtime, const char *home,
+                             char *why, size_t nwhy)
 {
     static wchar_t program[DCS_PATH_MAX]; /* Py_SetProgramName keeps the pointer */
+    static wchar_t home_w[DCS_PATH_MAX];  /* so does Py_SetPythonHome */
     char *saved = NULL;
     const char *current = setlocale(LC_CTYPE, NULL);
     int rc = 0;
-    if (utf8_to_wide(executable, program, sizeof program / sizeof program[0]) != 0) {
+    if (utf8_to_wide(executable, program, sizeof program / sizeof program[0]) != 0 ||
+        (home != NULL && utf8_to_wide(home, home_w, sizeof home_w / sizeof home_w[0]) != 0)) {
         snprintf(why, nwhy, "its path is too long: %.200s...", executable);
         rc = -1;
     } else {
         saved = current != NULL ? dcs_strdup(current) : NULL;
         *p_Py_IgnoreEnvironmentFlag = 1;
         *p_Py_UTF8Mode = 1;
+        if (own_runtime)
+            *p_Py_NoSiteFlag = 1;
+        if (home != NULL)
+            p_Py_SetPythonHome(home_w);
         p_Py_SetProgramName(program);
         p_Py_InitializeEx(0);
         if (saved != NULL) /* Python set LC_CTYPE from the environment: the host's again */
@@ -213,7 +231,7 @@ static int load_candidate(const DcsPython *py, void *ctx, char *why, size_t nwhy
     } else {
         *stop = 1; /* from here on this libpython stays in the process */
         g_loaded = 1;
-        rc = start_interpreter(py->executable, why, nwhy);
+        rc = start_interpreter(py->executable, 0, NULL, why, nwhy);
     }
     return rc;
 }
@@ -341,6 +359,151 @@ static int discover(const char *unzip_dir, DcsLoad load, const char *used, char 
     return rc;
 }
 
+/* Append the runtime's "path" entries that sys.path lacks (GIL taken here). */
+static int add_runtime_paths(const DcsRuntime *rt, char *why, size_t nwhy)
+{
+    PyGILState_STATE g = p_PyGILState_Ensure();
+    PyObject *path = p_PySys_GetObject("path"); /* borrowed */
+    size_t k, n = dcs_runtime_count(rt, "path");
+    int rc = path != NULL ? 0 : -1;
+    for (k = 0; k < n && rc == 0; k++) {
+        const char *entry = dcs_runtime_item(rt, "path", k);
+        Py_ssize_t i, size = p_PyList_Size(path);
+        int present = 0;
+        PyObject *item;
+        for (i = 0; i < size && !present; i++) {
+            Py_ssize_t len = 0;
+            const char *s = p_PyUnicode_AsUTF8AndSize(p_PyList_GetItem(path, i), &len);
+            present = s != NULL && strcmp(s, entry) == 0;
+        }
+        p_PyErr_Clear();
+        if (present)
+            continue;
+        item = p_PyUnicode_DecodeFSDefault(entry);
+        rc = item != NULL && p_PyList_Insert(path, size, item) == 0 ? 0 : -1;
+        dcs_decref(item);
+    }
+    if (rc != 0) {
+        snprintf(why, nwhy, "cannot put the FMU's own runtime on sys.path");
+        p_PyErr_Clear();
+    }
+    p_PyGILState_Release(g);
+    return rc;
+}
+
+static int remember_joined(const char *root)
+{
+    char **grown = (char **)realloc(g_joined, (g_n_joined + 1) * sizeof *g_joined);
+    if (grown == NULL)
+        return -1;
+    g_joined = grown;
+    g_joined[g_n_joined] = dcs_strdup(root);
+    if (g_joined[g_n_joined] == NULL)
+        return -1;
+    g_n_joined++;
+    return 0;
+}
+
+static int joined_before(const char *root)
+{
+    size_t i;
+    for (i = 0; i < g_n_joined; i++)
+        if (strcmp(g_joined[i], root) == 0)
+            return 1;
+    return 0;
+}
+
+/* Start a self-contained FMU's own runtime in a host without Python: every file checked
+ * (size and SHA-256) before anything of it is loaded, its libraries loaded, the interpreter
+ * started with its home, sys.path completed. On success rt becomes g_runtime. */
+static int start_runtime(DcsInstance *in, DcsRuntime *rt, char *why, size_t nwhy)
+{
+    clock_t t0 = clock(), t1;
+    size_t k;
+    void *lib;
+    char head[160];
+    snprintf(head, sizeof head, "the FMU's own Python runtime (Python %s) ",
+             dcs_runtime_python(rt));
+    if (dcs_runtime_verify(rt, 1, why, nwhy) != 0)
+        return -1;
+    t1 = clock();
+    for (k = 0; k < dcs_runtime_count(rt, "preload"); k++) {
+        const char *file = dcs_runtime_item(rt, "preload", k);
+        if (dlopen(file, RTLD_NOW | RTLD_GLOBAL) == NULL) {
+            const char *e = dlerror();
+            snprintf(why, nwhy, "%scannot load %s: %s", head, file, e != NULL ? e : "?");
+            return -1;
+        }
+    }
+    lib = dlopen(dcs_runtime_library(rt), RTLD_NOW | RTLD_GLOBAL);
+    if (lib == NULL) {
+        const char *e = dlerror();
+        snprintf(why, nwhy, "%scannot load %s: %s", head, dcs_runtime_library(rt),
+                 e != NULL ? e : "?");
+        return -1;
+    }
+    if (!version_fits(version_of(lib))) {
+        snprintf(why, nwhy, "%sis Python %.20s, not 3.%d to 3.%d", head, version_of(lib),
+                 DCS_PY_MINOR_MIN, DCS_PY_MINOR_MAX);
+        dlclose(lib);
+        return -1;
+    }
+    if (resolve_api(lib, why, nwhy) != 0) {
+        dlclose(lib);
+        return -1;
+    }
+    g_loaded = 1; /* from here on this libpython stays in the process */
+    if (start_interpreter(dcs_runtime_program(rt), 1, dcs_runtime_home(rt), why, nwhy) != 0 ||
+        add_runtime_paths(rt, why, nwhy) != 0 || remember_joined(dcs_runtime_root(rt)) != 0)
+        return -1;
+    g_runtime = rt;
+    dcs_log(in, fmi2OK, "logAll", "%s: fmi2Instantiate: the host has no Python; %sin %s "
+            "started (CPU time: %.3f s to check its files' sizes and SHA-256%s, %.3f s to "
+            "start the interpreter)", in->name, head, dcs_runtime_root(rt),
+            (double)(t1 - t0) / CLOCKS_PER_SEC,
+            dcs_sha256_accelerated() ? " with the CPU's SHA extensions" : "",
+            (double)(clock() - t1) / CLOCKS_PER_SEC);
+    return 0;
+}
+
+/* An FMU instantiated once an interpreter runs: if it carries a runtime and that
+ * interpreter is another self-contained FMU's, its runtime must be compatible
+ * (dcs_runtime_compatible): then its path entries are added. Its files are checked in full
+ * the first time, their sizes at every later instantiation. In a Python host, or one whose
+ * Python was found by the discovery, the FMU's runtime is not used. */
+static int join_runtime(DcsInstance *in, char *why, size_t nwhy)
+{
+    DcsRuntime *rt = NULL;
+    char reason[512];
+    int rc = dcs_runtime_open(in->resources, &rt, why, nwhy);
+    if (rc <= 0 || g_runtime == NULL) {
+        if (rc > 0)
+            dcs_log(in, fmi2OK, "logAll", "%s: fmi2Instantiate: this process runs a Python "
+                    "already: the FMU's own runtime is not used", in->name);
+        dcs_runtime_free(rt);
+        return rc < 0 && g_runtime != NULL ? -1 : 0;
+    }
+    if (joined_before(dcs_runtime_root(rt))) {
+        rc = dcs_runtime_verify(rt, 0, why, nwhy);
+    } else if ((rc = dcs_runtime_verify(rt, 1, why, nwhy)) != 0) {
+        /* why set */
+    } else if (!dcs_runtime_compatible(g_runtime, rt, reason, sizeof reason)) {
+        snprintf(why, nwhy, "this process runs the Python runtime of another self-contained "
+                 "FMU (%.1000s) and this FMU's own runtime (%.1000s) cannot join it: %s. One process "
+                 "runs one Python: load this FMU in a process of its own, or build the FMUs "
+                 "with one drillcosim (drillcosim build --standalone gives every FMU the same "
+                 "packages)", dcs_runtime_root(g_runtime), dcs_runtime_root(rt), reason);
+        rc = -1;
+    } else if ((rc = add_runtime_paths(rt, why, nwhy)) == 0 &&
+               (rc = remember_joined(dcs_runtime_root(rt))) == 0) {
+        dcs_log(in, fmi2OK, "logAll", "%s: fmi2Instantiate: the FMU's own runtime %s joins "
+                "the one running (%s): same interpreter, same packages", in->name,
+                dcs_runtime_root(rt), dcs_runtime_root(g_runtime));
+    }
+    dcs_runtime_free(rt);
+    return rc;
+}
+
 /* Find and start a Python for a host without one. On failure *message (malloc'd) is the ONE
  * message listing every candidate tried, what it lacked and how to fix it. */
 static int start_in_plain_host(DcsInstance *in, char **message)
@@ -369,11 +532,17 @@ static int start_in_plain_host(DcsInstance *in, char **message)
 int dcs_python_ready(DcsInstance *in)
 {
     int rc = 0;
-    char why[1024] = "";
+    char why[4096] = "";
     char *message = NULL;
+    DcsRuntime *rt = NULL;
     pthread_mutex_lock(&g_lock);
     if (g_ready) {
-        rc = 0;
+        rc = join_runtime(in, why, sizeof why);
+        if (rc != 0) { /* this FMU only: the interpreter runs on */
+            dcs_log(in, fmi2Error, "logStatusError", "%s: fmi2Instantiate: %s", in->name, why);
+            pthread_mutex_unlock(&g_lock);
+            return rc;
+        }
     } else if (g_final_error != NULL) {
         rc = -1;
     } else if (dlsym(RTLD_DEFAULT, "Py_IsInitialized") != NULL) {
@@ -391,6 +560,10 @@ int dcs_python_ready(DcsInstance *in)
             /* a host that links libpython without starting it: start it as a plain host */
             rc = start_in_plain_host(in, &message);
         }
+    } else if ((rc = dcs_runtime_open(in->resources, &rt, why, sizeof why)) != 0) {
+        rc = rc > 0 ? start_runtime(in, rt, why, sizeof why) : -1;
+        if (g_runtime != rt)
+            dcs_runtime_free(rt);
     } else {
         rc = start_in_plain_host(in, &message);
     }

@@ -1,0 +1,415 @@
+/*
+ * The Python runtime a self-contained FMU carries (drillcosim build --standalone; see
+ * fmu_src/standalone/__init__.py for how it is made).
+ *
+ * resources/dcs_runtime/<platform>/MANIFEST is a text file, one item a line:
+ *     dcs-runtime 1
+ *     platform linux64                       the FMI platform it runs on
+ *     python 3.11.7                          the version of its interpreter
+ *     library lib/libpython3.11.so.1.0       the interpreter's shared library
+ *     program bin/python3                    Py_SetProgramName (need not exist)
+ *     home .                                 Py_SetPythonHome (none: win64, whose ._pth decides)
+ *     preload lib/libffi.so.8                libraries loaded before the interpreter, in order
+ *     path lib/python3.11/site-packages      sys.path entries it adds after the start
+ *     site lib/python3.11/site-packages      where its packages lie (for dcs_runtime_compatible)
+ *     glibc 2.34                             linux64: the newest GLIBC_ version its files need
+ *     file <sha256> <size> <path>            every file of the runtime, paths relative, '/'
+ *     end <sha256 of every byte before this line>
+ * Paths are relative to the runtime folder. A runtime is used only in a host without Python
+ * (dcs_python.c); before anything of it is loaded the wrapper checks the MANIFEST itself (its
+ * end line), that every file is there with its size, and (once per process and runtime) every
+ * file's SHA-256: a damaged file is one message and fmi2Error, never a crash in the loader or
+ * an abort in Py_InitializeEx.
+ *
+ * Packages: a "group" is the first path component below `site` (numpy, numpy.libs, scipy,
+ * numba-0.68.1.dist-info, ...); everything outside `site` is the "base" (the interpreter, its
+ * standard library, its extension modules and libraries). Two runtimes are compatible when
+ * their bases are identical and every group both carry is identical (dcs_runtime_compatible).
+ */
+#define _FILE_OFFSET_BITS 64
+#include "dcs_runtime.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/types.h>
+
+#include "dcs_sha256.h"
+
+#ifdef _WIN32
+#define DCS_RUNTIME_PLATFORM "win64"
+#else
+#define DCS_RUNTIME_PLATFORM "linux64"
+#endif
+
+#define MANIFEST_MAX (64L << 20)
+
+typedef struct {
+    char *path;      /* relative, as in the MANIFEST */
+    char hex[65];
+    long long size;
+    size_t group;    /* index into groups; 0 = base */
+} Entry;
+
+typedef struct {
+    char *key, *value; /* value: absolute for the path-like keys */
+} Item;
+
+struct DcsRuntime {
+    char *root;
+    Item *items;
+    size_t n_items;
+    Entry *files;
+    size_t n_files;
+    char **groups;        /* groups[0] = "" (the base) */
+    char (*group_hex)[65];
+    size_t n_groups;
+};
+
+static char *dup_n(const char *s, size_t n)
+{
+    char *d = (char *)malloc(n + 1);
+    if (d != NULL) {
+        memcpy(d, s, n);
+        d[n] = '\0';
+    }
+    return d;
+}
+
+static char *join(const char *root, const char *rel)
+{
+    size_t a = strlen(root), b = strlen(rel);
+    char *d = (char *)malloc(a + b + 2);
+    if (d != NULL) {
+        memcpy(d, root, a);
+        d[a] = '/';
+        memcpy(d + a + 1, rel, b + 1);
+        if (strcmp(rel, ".") == 0)
+            d[a] = '\0';
+    }
+    return d;
+}
+
+/* Size of a regular file, -1 if it is missing or not a regular file. */
+static long long file_size(const char *path)
+{
+    struct stat st;
+    if (stat(path, &st) != 0 || !S_ISREG(st.st_mode))
+        return -1;
+    return (long long)st.st_size;
+}
+
+/* The whole file into a malloc'd buffer (NUL-terminated), NULL if it cannot be read. */
+static char *read_all(const char *path, size_t *len)
+{
+    long long size = file_size(path);
+    char *buf = NULL;
+    FILE *f;
+    if (size < 0 || size > MANIFEST_MAX || (f = fopen(path, "rb")) == NULL)
+        return NULL;
+    buf = (char *)malloc((size_t)size + 1);
+    if (buf != NULL && fread(buf, 1, (size_t)size, f) != (size_t)size) {
+        free(buf);
+        buf = NULL;
+    }
+    fclose(f);
+    if (buf != NULL) {
+        buf[size] = '\0';
+        *len = (size_t)size;
+    }
+    return buf;
+}
+
+void dcs_runtime_free(DcsRuntime *rt)
+{
+    size_t i;
+    if (rt == NULL)
+        return;
+    for (i = 0; i < rt->n_items; i++) {
+        free(rt->items[i].key);
+        free(rt->items[i].value);
+    }
+    for (i = 0; i < rt->n_files; i++)
+        free(rt->files[i].path);
+    for (i = 0; i < rt->n_groups; i++)
+        free(rt->groups[i]);
+    free(rt->items);
+    free(rt->files);
+    free(rt->groups);
+    free(rt->group_hex);
+    free(rt->root);
+    free(rt);
+}
+
+static const char *item(const DcsRuntime *rt, const char *key)
+{
+    size_t i;
+    for (i = 0; i < rt->n_items; i++)
+        if (strcmp(rt->items[i].key, key) == 0)
+            return rt->items[i].value;
+    return NULL;
+}
+
+static int is_path_key(const char *key)
+{
+    static const char *const keys[] = {"library", "program", "home", "preload", "path", NULL};
+    int i;
+    for (i = 0; keys[i] != NULL; i++)
+        if (strcmp(key, keys[i]) == 0)
+            return 1;
+    return 0;
+}
+
+/* The group of a relative path: its first component below `site` ("" if not below it). */
+static size_t group_of(DcsRuntime *rt, const char *site, const char *path)
+{
+    size_t n = site != NULL ? strlen(site) : 0, len, i;
+    const char *top, *slash;
+    if (site == NULL || strncmp(path, site, n) != 0 || path[n] != '/')
+        return 0;
+    top = path + n + 1;
+    slash = strchr(top, '/');
+    len = slash != NULL ? (size_t)(slash - top) : strlen(top);
+    for (i = 1; i < rt->n_groups; i++)
+        if (strlen(rt->groups[i]) == len && strncmp(rt->groups[i], top, len) == 0)
+            return i;
+    rt->groups[rt->n_groups] = dup_n(top, len);
+    return rt->groups[rt->n_groups] != NULL ? rt->n_groups++ : 0;
+}
+
+/* Parse the MANIFEST text (checked against its end line). 0, or -1 with why. */
+static int parse(DcsRuntime *rt, char *text, size_t len, const char *file, char *why,
+                 size_t nwhy)
+{
+    char *line = text, *end_line = NULL, *p;
+    size_t n_lines = 0, i;
+    DcsSha256 *group_sha = NULL;
+    const char *site = NULL;
+    char hex[65];
+    DcsSha256 whole;
+    for (p = text; p < text + len; p++)
+        n_lines += *p == '\n';
+    /* the end line: the digest of every byte before it */
+    for (p = text; p < text + len; p = strchr(p, '\n') + 1) {
+        if (strncmp(p, "end ", 4) == 0)
+            end_line = p;
+        if (strchr(p, '\n') == NULL)
+            break;
+    }
+    if (strncmp(text, "dcs-runtime 1\n", 14) != 0 || end_line == NULL) {
+        snprintf(why, nwhy, "%s is not a runtime MANIFEST of this wrapper (damaged?)", file);
+        return -1;
+    }
+    dcs_sha256_init(&whole);
+    dcs_sha256_update(&whole, text, (size_t)(end_line - text));
+    dcs_sha256_hex(&whole, hex);
+    if (strncmp(end_line + 4, hex, 64) != 0) {
+        snprintf(why, nwhy, "%s is damaged (its end line does not match its content)", file);
+        return -1;
+    }
+    *end_line = '\0';
+    rt->items = (Item *)calloc(n_lines + 1, sizeof *rt->items);
+    rt->files = (Entry *)calloc(n_lines + 1, sizeof *rt->files);
+    rt->groups = (char **)calloc(n_lines + 2, sizeof *rt->groups);
+    if (rt->items == NULL || rt->files == NULL || rt->groups == NULL) {
+        snprintf(why, nwhy, "out of memory reading %s", file);
+        return -1;
+    }
+    rt->groups[rt->n_groups++] = dup_n("", 0);
+    for (line = strchr(text, '\n') + 1; *line; line = p + 1) {
+        char *sp;
+        p = strchr(line, '\n');
+        if (p == NULL)
+            break;
+        *p = '\0';
+        sp = strchr(line, ' ');
+        if (sp == NULL)
+            continue;
+        *sp = '\0';
+        if (strcmp(line, "file") == 0) {
+            Entry *e = &rt->files[rt->n_files];
+            char *q = sp + 1, *size_end;
+            if (strlen(q) < 67 || q[64] != ' ') {
+                snprintf(why, nwhy, "%s: a bad file line", file);
+                return -1;
+            }
+            memcpy(e->hex, q, 64);
+            e->hex[64] = '\0';
+            e->size = strtoll(q + 65, &size_end, 10);
+            if (*size_end != ' ' || e->size < 0) {
+                snprintf(why, nwhy, "%s: a bad file line", file);
+                return -1;
+            }
+            e->path = dup_n(size_end + 1, strlen(size_end + 1));
+            if (e->path == NULL)
+                return -1;
+            rt->n_files++;
+        } else {
+            Item *it = &rt->items[rt->n_items];
+            it->key = dup_n(line, strlen(line));
+            it->value = is_path_key(line) ? join(rt->root, sp + 1)
+                                           : dup_n(sp + 1, strlen(sp + 1));
+            if (it->key == NULL || it->value == NULL)
+                return -1;
+            rt->n_items++;
+        }
+    }
+    site = item(rt, "site"); /* relative: not a path key */
+    /* groups and their digests (over their file lines, in MANIFEST order) */
+    group_sha = (DcsSha256 *)calloc(rt->n_files + 1, sizeof *group_sha);
+    rt->group_hex = (char (*)[65])calloc(rt->n_files + 1, sizeof *rt->group_hex);
+    if (group_sha == NULL || rt->group_hex == NULL) {
+        free(group_sha);
+        return -1;
+    }
+    for (i = 0; i <= rt->n_files; i++)
+        dcs_sha256_init(&group_sha[i]);
+    for (i = 0; i < rt->n_files; i++) {
+        Entry *e = &rt->files[i];
+        char sz[32];
+        e->group = group_of(rt, site, e->path);
+        snprintf(sz, sizeof sz, " %lld ", e->size);
+        dcs_sha256_update(&group_sha[e->group], e->hex, 64);
+        dcs_sha256_update(&group_sha[e->group], sz, strlen(sz));
+        dcs_sha256_update(&group_sha[e->group], e->path, strlen(e->path) + 1);
+    }
+    for (i = 0; i < rt->n_groups; i++)
+        dcs_sha256_hex(&group_sha[i], rt->group_hex[i]);
+    free(group_sha);
+    if (item(rt, "platform") == NULL || strcmp(item(rt, "platform"), DCS_RUNTIME_PLATFORM) ||
+        item(rt, "library") == NULL || item(rt, "python") == NULL) {
+        snprintf(why, nwhy, "%s is for %s, not %s (or lacks its library or python line)", file,
+                 item(rt, "platform") ? item(rt, "platform") : "no platform",
+                 DCS_RUNTIME_PLATFORM);
+        return -1;
+    }
+    return 0;
+}
+
+int dcs_runtime_open(const char *resources, DcsRuntime **out, char *why, size_t nwhy)
+{
+    char folder[4096], file[4200];
+    char *text;
+    size_t len = 0;
+    struct stat st;
+    DcsRuntime *rt;
+    *out = NULL;
+    snprintf(folder, sizeof folder, "%s/%s/%s", resources, DCS_RUNTIME_DIR,
+             DCS_RUNTIME_PLATFORM);
+    if (stat(folder, &st) != 0 || !S_ISDIR(st.st_mode))
+        return 0;
+    snprintf(file, sizeof file, "%s/%s", folder, DCS_RUNTIME_MANIFEST);
+    text = read_all(file, &len);
+    if (text == NULL) {
+        snprintf(why, nwhy, "the FMU's own Python runtime is damaged: %s is missing or "
+                 "unreadable (unzip the FMU again)", file);
+        return -1;
+    }
+    rt = (DcsRuntime *)calloc(1, sizeof *rt);
+    if (rt == NULL || (rt->root = dup_n(folder, strlen(folder))) == NULL ||
+        parse(rt, text, len, file, why, nwhy) != 0) {
+        if (rt == NULL || rt->root == NULL || why[0] == '\0')
+            snprintf(why, nwhy, "out of memory reading %s", file);
+        dcs_runtime_free(rt);
+        free(text);
+        return -1;
+    }
+    free(text);
+    *out = rt;
+    return 1;
+}
+
+/* SHA-256 and length of a file; 0, or -1 if it cannot be read. */
+static int hash_file(const char *path, char hex[65], long long *size)
+{
+    static unsigned char buf[1 << 20];
+    DcsSha256 s;
+    size_t k;
+    FILE *f = fopen(path, "rb");
+    if (f == NULL)
+        return -1;
+    dcs_sha256_init(&s);
+    *size = 0;
+    while ((k = fread(buf, 1, sizeof buf, f)) > 0) {
+        dcs_sha256_update(&s, buf, k);
+        *size += (long long)k;
+    }
+    k = (size_t)ferror(f);
+    fclose(f);
+    dcs_sha256_hex(&s, hex);
+    return k ? -1 : 0;
+}
+
+int dcs_runtime_verify(const DcsRuntime *rt, int hashes, char *why, size_t nwhy)
+{
+    size_t i;
+    for (i = 0; i < rt->n_files; i++) {
+        const Entry *e = &rt->files[i];
+        char path[4200], hex[65];
+        long long size;
+        snprintf(path, sizeof path, "%s/%s", rt->root, e->path);
+        size = file_size(path);
+        if (size < 0) {
+            snprintf(why, nwhy, "the FMU's own Python runtime is incomplete: %s is missing "
+                     "(unzip the FMU again; %zu files are listed in %s/%s)", path, rt->n_files,
+                     rt->root, DCS_RUNTIME_MANIFEST);
+            return -1;
+        }
+        if (size != e->size ||
+            (hashes && (hash_file(path, hex, &size) != 0 || strcmp(hex, e->hex) != 0))) {
+            snprintf(why, nwhy, "the FMU's own Python runtime is damaged: %s differs from the "
+                     "file it was built with (%s; unzip the FMU again)", path,
+                     size != e->size ? "another size" : "another SHA-256");
+            return -1;
+        }
+    }
+    return 0;
+}
+
+const char *dcs_runtime_root(const DcsRuntime *rt) { return rt->root; }
+const char *dcs_runtime_library(const DcsRuntime *rt) { return item(rt, "library"); }
+const char *dcs_runtime_program(const DcsRuntime *rt) { return item(rt, "program"); }
+const char *dcs_runtime_home(const DcsRuntime *rt) { return item(rt, "home"); }
+const char *dcs_runtime_python(const DcsRuntime *rt) { return item(rt, "python"); }
+
+size_t dcs_runtime_count(const DcsRuntime *rt, const char *key)
+{
+    size_t i, n = 0;
+    for (i = 0; i < rt->n_items; i++)
+        n += strcmp(rt->items[i].key, key) == 0;
+    return n;
+}
+
+const char *dcs_runtime_item(const DcsRuntime *rt, const char *key, size_t k)
+{
+    size_t i;
+    for (i = 0; i < rt->n_items; i++)
+        if (strcmp(rt->items[i].key, key) == 0 && k-- == 0)
+            return rt->items[i].value;
+    return NULL;
+}
+
+int dcs_runtime_compatible(const DcsRuntime *running, const DcsRuntime *other, char *why,
+                           size_t nwhy)
+{
+    size_t i, j;
+    char differ[1024] = "";
+    if (strcmp(running->group_hex[0], other->group_hex[0]) != 0) {
+        snprintf(why, nwhy, "its interpreter or standard library (Python %s) is not the one "
+                 "running (Python %s)", dcs_runtime_python(other), dcs_runtime_python(running));
+        return 0;
+    }
+    for (i = 1; i < other->n_groups; i++)
+        for (j = 1; j < running->n_groups; j++)
+            if (strcmp(other->groups[i], running->groups[j]) == 0 &&
+                strcmp(other->group_hex[i], running->group_hex[j]) != 0 &&
+                strlen(differ) + strlen(other->groups[i]) + 3 < sizeof differ)
+                snprintf(differ + strlen(differ), sizeof differ - strlen(differ), "%s%s",
+                         differ[0] ? ", " : "", other->groups[i]);
+    if (differ[0]) {
+        snprintf(why, nwhy, "its packages %s differ from those running", differ);
+        return 0;
+    }
+    return 1;
+}
