@@ -252,8 +252,8 @@ def modes(scene: str | Path = "table1_lateral_step", *, model: str | None = None
             "spin_rad_s": sc.plant.top_drive.rotary_speed, "modes": table}
 
 
-def build_fmus(out: str | Path | None = None, *, scene: str | Path | None = None
-               ) -> dict[str, Path]:
+def build_fmus(out: str | Path | None = None, *, scene: str | Path | None = None,
+               standalone: bool = False) -> dict[str, Path]:
     """Build the FMUs (``drillcosim build``).
 
     Parameters
@@ -263,6 +263,9 @@ def build_fmus(out: str | Path | None = None, *, scene: str | Path | None = None
     scene : str or path, optional
         Build the FMUs that run this scene (plant and controllers for its layout, or the
         default ones where they fit) instead of the default set.
+    standalone : bool
+        Also write self-contained copies that carry their own Python runtime
+        (:mod:`drillcosim.fmu_src.standalone`) into ``<out>/standalone/``; those are returned.
 
     Returns
     -------
@@ -272,12 +275,19 @@ def build_fmus(out: str | Path | None = None, *, scene: str | Path | None = None
     Raises
     ------
     RuntimeError
-        No C compiler for ``StrainControllerC.fmu`` (the others are built).
+        No C compiler for ``StrainControllerC.fmu`` (the others are built), or no runtime can
+        be made from the building Python (``standalone``).
     """
     folder = Path(out) if out is not None else default_out()
     if scene is not None:
-        return {instance: build_one(recipe, folder)
-                for instance, recipe in scene_recipes(load_config(scene)).items()}
-    built = {Path(p).stem: Path(p) for p in build_all(folder)}
-    built["StrainControllerC"] = build_c_controller(folder)
+        built = {instance: build_one(recipe, folder)
+                 for instance, recipe in scene_recipes(load_config(scene)).items()}
+    else:
+        built = {Path(p).stem: Path(p) for p in build_all(folder)}
+        built["StrainControllerC"] = build_c_controller(folder)
+    if standalone:
+        from drillcosim.fmu_src.standalone import make_standalone
+
+        built = {key: make_standalone(path, folder / "standalone" / path.name)
+                 for key, path in built.items()}
     return built

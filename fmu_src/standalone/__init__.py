@@ -106,7 +106,8 @@ def make_standalone(fmu: Path | str, out: Path | str,
                     platforms: Sequence[str] = PLATFORMS) -> Path:
     """Write ``out``: the FMU ``fmu`` with a Python runtime for each of ``platforms``.
 
-    The modules the runtime must provide are the FMU's ``resources/python_requires.txt``.
+    The modules the runtime must provide are the FMU's ``resources/python_requires.txt``; an
+    FMU without one runs no Python (the C controller) and is copied as it is.
 
     Returns
     -------
@@ -114,10 +115,13 @@ def make_standalone(fmu: Path | str, out: Path | str,
         ``out`` (written through a temporary file and renamed: atomic).
     """
     fmu, out = Path(fmu), Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
     with zipfile.ZipFile(fmu) as src:
+        if "resources/python_requires.txt" not in src.namelist():
+            shutil.copyfile(fmu, out)
+            return out
         requires = tuple(src.read("resources/python_requires.txt").decode().split())
         folders = {p: runtime_folder(p, requires) for p in platforms}
-        out.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{out.name}-", dir=out.parent)
         os.close(fd)
         mask = os.umask(0o022)

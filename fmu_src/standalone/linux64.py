@@ -28,6 +28,10 @@ a glibc at least as new as the building machine's (the copied files link against
 from __future__ import annotations
 
 import compileall
+import hashlib
+import importlib.metadata as metadata
+import json
+import os
 import py_compile
 import re
 import shutil
@@ -37,6 +41,8 @@ import sysconfig
 import tempfile
 import zipfile
 from pathlib import Path
+
+from drillcosim._toolchain import user_cache
 
 from .manifest import write_manifest
 from .selection import distributions, imported_packages, select
@@ -106,7 +112,9 @@ def _compile_stdlib(stdlib: Path, target: Path) -> None:
                                    invalidation_mode=py_compile.PycInvalidationMode.UNCHECKED_HASH)
             except py_compile.PyCompileError:
                 continue  # e.g. lib2to3's test data: not importable code
-            zf.write(out, rel.with_suffix(".pyc").as_posix())
+            info = zipfile.ZipInfo(rel.with_suffix(".pyc").as_posix(), (1980, 1, 1, 0, 0, 0))
+            info.external_attr = 0o644 << 16
+            zf.writestr(info, out.read_bytes())
 
 
 def _copy(src: Path, dst: Path) -> None:
@@ -115,9 +123,81 @@ def _copy(src: Path, dst: Path) -> None:
     shutil.copymode(src, dst)
 
 
+def _part(name: str, key_text: str, build) -> Path:
+    """A cached part of runtimes (``<user cache>/runtimes/parts/<name>-<key>``): built once by
+    ``build(folder)`` and copied into every runtime that needs it, so that equal parts are
+    equal bytes in every FMU (what lets two self-contained FMUs share one interpreter)."""
+    digest = hashlib.sha256(key_text.encode())
+    for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
+        digest.update(path.read_bytes())
+    final = user_cache() / "runtimes" / "parts" / f"{name}-{digest.hexdigest()[:16]}"
+    if (final / ".complete").is_file():
+        return final
+    final.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}-", dir=final.parent))
+    try:
+        build(tmp)
+        (tmp / ".complete").write_text(key_text + "\n")
+        try:
+            os.replace(tmp, final)
+        except OSError:
+            if not (final / ".complete").is_file():
+                raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return final
+
+
+def _libpython() -> tuple[Path, str]:
+    libdir = Path(sysconfig.get_config_var("LIBDIR") or "")
+    soname = sysconfig.get_config_var("INSTSONAME") or ""
+    libpython = libdir / soname
+    if ".so" not in soname or not libpython.is_file():
+        raise RuntimeError(f"the building Python ({sys.executable}) has no shared libpython "
+                           f"(looked for {libpython}): build the self-contained FMUs with a "
+                           f"Python built with --enable-shared (Debian's python3, pyenv with "
+                           f"PYTHON_CONFIGURE_OPTS=--enable-shared)")
+    return libpython, soname
+
+
+def _build_base(root: Path) -> None:
+    """The interpreter: libpython, the standard library zip, its licence, lib-dynload."""
+    version = f"{sys.version_info[0]}.{sys.version_info[1]}"
+    libpython, soname = _libpython()
+    stdlib_dir = root / "lib" / f"python{version}"
+    _copy(libpython, root / "lib" / soname)
+    stdlib = Path(sysconfig.get_paths()["stdlib"])
+    _compile_stdlib(stdlib, root / "lib" / f"python{version.replace('.', '')}.zip")
+    if (stdlib / "LICENSE.txt").is_file():
+        _copy(stdlib / "LICENSE.txt", stdlib_dir / "LICENSE.txt")
+    dynload = Path(sysconfig.get_config_var("DESTSHARED") or stdlib / "lib-dynload")
+    for ext in sorted(dynload.glob("*.so")):
+        name = ext.name.split(".")[0]
+        if name not in EXTENSIONS_DROPPED and not _TEST_EXTENSIONS.match(name):
+            _copy(ext, stdlib_dir / "lib-dynload" / ext.name)
+
+
+def _build_distribution(root: Path, dist: metadata.Distribution) -> None:
+    """The selected files of one distribution under ``root/<site-packages>``, compiled."""
+    site = root / _site_packages()
+    base = Path(dist.locate_file(""))
+    for rel in select((str(f) for f in dist.files or []), imported_packages()):
+        if not rel.startswith(tuple(PACKAGE_FILES_DROPPED)):
+            _copy(base / rel, site / rel)
+    compileall.compile_dir(str(site), quiet=2, workers=1, ddir="",
+                           invalidation_mode=py_compile.PycInvalidationMode.UNCHECKED_HASH)
+
+
+def _site_packages() -> str:
+    return f"lib/python{sys.version_info[0]}.{sys.version_info[1]}/site-packages"
+
+
 def assemble(root: Path, requires: tuple[str, ...]) -> dict[str, object]:
     """Write the linux64 runtime for the modules ``requires`` into the empty folder ``root``
-    and its MANIFEST; return a summary (sizes per part, bundled libraries).
+    and its MANIFEST; return a summary (Python, packages, bundled libraries).
+
+    The runtime is made of cached parts (:func:`_part`): the interpreter, and each shipped
+    distribution.
 
     Raises
     ------
@@ -125,50 +205,28 @@ def assemble(root: Path, requires: tuple[str, ...]) -> dict[str, object]:
         The building interpreter has no shared libpython, or a shipped extension module needs
         a library that cannot be found.
     """
-    version = f"{sys.version_info[0]}.{sys.version_info[1]}"
-    libdir = Path(sysconfig.get_config_var("LIBDIR") or "")
-    soname = sysconfig.get_config_var("INSTSONAME") or ""
-    libpython = libdir / soname
-    if not soname.endswith((".so", ".so.1.0")) and ".so" not in soname or \
-            not libpython.is_file():
-        raise RuntimeError(f"the building Python ({sys.executable}) has no shared libpython "
-                           f"(looked for {libpython}): build the self-contained FMUs with a "
-                           f"Python built with --enable-shared (Debian's python3, pyenv with "
-                           f"PYTHON_CONFIGURE_OPTS=--enable-shared)")
-    lib = root / "lib"
-    stdlib_dir = lib / f"python{version}"
-    site = stdlib_dir / "site-packages"
-    _copy(libpython, lib / soname)
-    stdlib = Path(sysconfig.get_paths()["stdlib"])
-    _compile_stdlib(stdlib, lib / f"python{version.replace('.', '')}.zip")
-    if (stdlib / "LICENSE.txt").is_file():
-        _copy(stdlib / "LICENSE.txt", stdlib_dir / "LICENSE.txt")
-    dynload = Path(sysconfig.get_config_var("DESTSHARED") or stdlib / "lib-dynload")
-    elf_files = [lib / soname]
-    for ext in sorted(dynload.glob("*.so")):
-        name = ext.name.split(".")[0]
-        if name in EXTENSIONS_DROPPED or _TEST_EXTENSIONS.match(name):
-            continue
-        _copy(ext, stdlib_dir / "lib-dynload" / ext.name)
-        elf_files.append(stdlib_dir / "lib-dynload" / ext.name)
-    packages = imported_packages()
+    libpython, soname = _libpython()
+    st = libpython.stat()
+    parts = [_part("python", json.dumps([sys.version, sys.executable, str(libpython),
+                                         st.st_size, st.st_mtime_ns]), _build_base)]
     shipped = {}
     for dist in distributions(requires):
-        base = Path(dist.locate_file(""))
-        chosen = select((str(f) for f in dist.files or []), packages)
-        for rel in chosen:
-            if rel.startswith(tuple(PACKAGE_FILES_DROPPED)):
-                continue
-            _copy(base / rel, site / rel)
-            if rel.endswith(".so"):
-                elf_files.append(site / rel)
-        shipped[dist.metadata["Name"]] = dist.version
-    compileall.compile_dir(str(site), quiet=2, workers=1, ddir="",
-                           invalidation_mode=py_compile.PycInvalidationMode.UNCHECKED_HASH)
+        name = dist.metadata["Name"]
+        shipped[name] = dist.version
+        record = hashlib.sha256((dist.read_text("RECORD") or "").encode()).hexdigest()
+        parts.append(_part(f"{name}-{dist.version}", json.dumps(
+            [sys.version, name, dist.version, record, sorted(imported_packages())]),
+            lambda folder, d=dist: _build_distribution(folder, d)))
+    for part in parts:
+        shutil.copytree(part, root, dirs_exist_ok=True,
+                        ignore=shutil.ignore_patterns(".complete"))
     # the libraries the shipped ELF files need beyond the baseline and the runtime itself
+    lib, site = root / "lib", root / _site_packages()
     preload: dict[str, Path] = {}
     site_real = str(site.resolve())
-    for elf in elf_files:
+    # (a library of a <name>.libs folder is reached through the extension modules' RPATH)
+    for elf in sorted(p for p in root.rglob("*.so*")
+                      if p.is_file() and not p.parent.name.endswith(".libs")):
         for name, where in _ldd(elf).items():
             if name in BASELINE or name in preload or (lib / name).exists():
                 continue
@@ -182,8 +240,7 @@ def assemble(root: Path, requires: tuple[str, ...]) -> dict[str, object]:
     items = [("platform", "linux64"), ("python", sys.version.split()[0]),
              ("library", f"lib/{soname}"), ("program", "bin/python3"), ("home", ".")]
     items += [("preload", f"lib/{name}") for name in preload]
-    items += [("path", site.relative_to(root).as_posix()),
-              ("site", site.relative_to(root).as_posix())]
+    items += [("path", _site_packages()), ("site", _site_packages())]
     write_manifest(root, items)
     return {"python": sys.version.split()[0], "packages": shipped,
             "bundled_libraries": sorted(preload)}

@@ -68,9 +68,7 @@ static pthread_mutex_t g_lock = PTHREAD_MUTEX_INITIALIZER;
 static int g_ready = 0;           /* API resolved, interpreter running, names interned */
 static int g_loaded = 0;          /* a libpython is in the process (ours or the host's) */
 static char *g_final_error = NULL; /* a failure once g_loaded: final for the process */
-static DcsRuntime *g_runtime = NULL; /* the self-contained FMU's runtime running, if one is */
-static char **g_joined = NULL;       /* runtime folders checked in full and on sys.path */
-static size_t g_n_joined = 0;
+
 
 int dcs_python_started(void)
 {
@@ -359,11 +357,44 @@ static int discover(const char *unzip_dir, DcsLoad load, const char *used, char 
     return rc;
 }
 
-/* Append the runtime's "path" entries that sys.path lacks (GIL taken here). */
-static int add_runtime_paths(const DcsRuntime *rt, char *why, size_t nwhy)
+/* The runtimes on sys.path, kept in the interpreter (sys._drillcosim_runtimes: their folders,
+ * the one that started it first): every FMU's wrapper is a library of its own, loaded with its
+ * own copy of this file's variables, and the interpreter is what they share. */
+#define RUNTIMES_ATTR "_drillcosim_runtimes"
+
+/* The folders on the list (a malloc'd array of malloc'd strings, *n of them); NULL with *n 0
+ * if the interpreter was not started from a runtime (a Python host, a discovered Python).
+ * GIL held. */
+static char **runtime_list(size_t *n)
 {
-    PyGILState_STATE g = p_PyGILState_Ensure();
+    PyObject *list = p_PySys_GetObject(RUNTIMES_ATTR); /* borrowed */
+    Py_ssize_t i, size = list != NULL ? p_PyList_Size(list) : -1;
+    char **out = size > 0 ? (char **)calloc((size_t)size, sizeof *out) : NULL;
+    *n = 0;
+    for (i = 0; out != NULL && i < size; i++) {
+        Py_ssize_t len = 0;
+        const char *s = p_PyUnicode_AsUTF8AndSize(p_PyList_GetItem(list, i), &len);
+        if (s != NULL)
+            out[(*n)++] = dcs_strdup(s);
+    }
+    p_PyErr_Clear();
+    return out;
+}
+
+static void free_list(char **list, size_t n)
+{
+    size_t i;
+    for (i = 0; i < n; i++)
+        free(list[i]);
+    free(list);
+}
+
+/* Append the runtime's "path" entries that sys.path lacks and its folder to the list of
+ * runtimes (GIL held). */
+static int add_runtime(const DcsRuntime *rt, char *why, size_t nwhy)
+{
     PyObject *path = p_PySys_GetObject("path"); /* borrowed */
+    PyObject *list = p_PySys_GetObject(RUNTIMES_ATTR), *root;
     size_t k, n = dcs_runtime_count(rt, "path");
     int rc = path != NULL ? 0 : -1;
     for (k = 0; k < n && rc == 0; k++) {
@@ -383,45 +414,43 @@ static int add_runtime_paths(const DcsRuntime *rt, char *why, size_t nwhy)
         rc = item != NULL && p_PyList_Insert(path, size, item) == 0 ? 0 : -1;
         dcs_decref(item);
     }
+    if (rc == 0 && list == NULL) {
+        PyObject *fresh = p_PyList_New(0);
+        rc = fresh != NULL && p_PySys_SetObject(RUNTIMES_ATTR, fresh) == 0 ? 0 : -1;
+        dcs_decref(fresh);
+        list = p_PySys_GetObject(RUNTIMES_ATTR);
+    }
+    root = rc == 0 && list != NULL ? p_PyUnicode_FromString(dcs_runtime_root(rt)) : NULL;
+    if (root == NULL || p_PyList_Insert(list, p_PyList_Size(list), root) != 0)
+        rc = -1;
+    dcs_decref(root);
     if (rc != 0) {
         snprintf(why, nwhy, "cannot put the FMU's own runtime on sys.path");
         p_PyErr_Clear();
     }
-    p_PyGILState_Release(g);
     return rc;
 }
 
-static int remember_joined(const char *root)
+/* The resources folder of a runtime folder (<resources>/dcs_runtime/<platform>). */
+static void resources_of(const char *root, char *out, size_t n)
 {
-    char **grown = (char **)realloc(g_joined, (g_n_joined + 1) * sizeof *g_joined);
-    if (grown == NULL)
-        return -1;
-    g_joined = grown;
-    g_joined[g_n_joined] = dcs_strdup(root);
-    if (g_joined[g_n_joined] == NULL)
-        return -1;
-    g_n_joined++;
-    return 0;
-}
-
-static int joined_before(const char *root)
-{
-    size_t i;
-    for (i = 0; i < g_n_joined; i++)
-        if (strcmp(g_joined[i], root) == 0)
-            return 1;
-    return 0;
+    char *slash;
+    int k;
+    snprintf(out, n, "%s", root);
+    for (k = 0; k < 2 && (slash = strrchr(out, '/')) != NULL; k++)
+        *slash = '\0';
 }
 
 /* Start a self-contained FMU's own runtime in a host without Python: every file checked
  * (size and SHA-256) before anything of it is loaded, its libraries loaded, the interpreter
- * started with its home, sys.path completed. On success rt becomes g_runtime. */
+ * started with its home, sys.path completed. */
 static int start_runtime(DcsInstance *in, DcsRuntime *rt, char *why, size_t nwhy)
 {
     clock_t t0 = clock(), t1;
     size_t k;
     void *lib;
     char head[160];
+    PyGILState_STATE g;
     snprintf(head, sizeof head, "the FMU's own Python runtime (Python %s) ",
              dcs_runtime_python(rt));
     if (dcs_runtime_verify(rt, 1, why, nwhy) != 0)
@@ -453,10 +482,13 @@ static int start_runtime(DcsInstance *in, DcsRuntime *rt, char *why, size_t nwhy
         return -1;
     }
     g_loaded = 1; /* from here on this libpython stays in the process */
-    if (start_interpreter(dcs_runtime_program(rt), 1, dcs_runtime_home(rt), why, nwhy) != 0 ||
-        add_runtime_paths(rt, why, nwhy) != 0 || remember_joined(dcs_runtime_root(rt)) != 0)
+    if (start_interpreter(dcs_runtime_program(rt), 1, dcs_runtime_home(rt), why, nwhy) != 0)
         return -1;
-    g_runtime = rt;
+    g = p_PyGILState_Ensure();
+    k = (size_t)add_runtime(rt, why, nwhy);
+    p_PyGILState_Release(g);
+    if (k != 0)
+        return -1;
     dcs_log(in, fmi2OK, "logAll", "%s: fmi2Instantiate: the host has no Python; %sin %s "
             "started (CPU time: %.3f s to check its files' sizes and SHA-256%s, %.3f s to "
             "start the interpreter)", in->name, head, dcs_runtime_root(rt),
@@ -466,42 +498,59 @@ static int start_runtime(DcsInstance *in, DcsRuntime *rt, char *why, size_t nwhy
     return 0;
 }
 
-/* An FMU instantiated once an interpreter runs: if it carries a runtime and that
- * interpreter is another self-contained FMU's, its runtime must be compatible
- * (dcs_runtime_compatible): then its path entries are added. Its files are checked in full
- * the first time, their sizes at every later instantiation. In a Python host, or one whose
- * Python was found by the discovery, the FMU's runtime is not used. */
+/* An FMU instantiated once an interpreter runs in the process (started by this wrapper or
+ * another FMU's, or the host's own). If the FMU carries a runtime and the interpreter was
+ * started from one, the FMU's must be compatible with it (dcs_runtime_compatible): then its
+ * path entries are added. Its files are checked in full the first time, their sizes at every
+ * later instantiation. In a Python host, or one whose Python was found by the discovery, the
+ * FMU's runtime is not used. */
 static int join_runtime(DcsInstance *in, char *why, size_t nwhy)
 {
-    DcsRuntime *rt = NULL;
-    char reason[512];
-    int rc = dcs_runtime_open(in->resources, &rt, why, nwhy);
-    if (rc <= 0 || g_runtime == NULL) {
-        if (rc > 0)
-            dcs_log(in, fmi2OK, "logAll", "%s: fmi2Instantiate: this process runs a Python "
-                    "already: the FMU's own runtime is not used", in->name);
-        dcs_runtime_free(rt);
-        return rc < 0 && g_runtime != NULL ? -1 : 0;
-    }
-    if (joined_before(dcs_runtime_root(rt))) {
+    DcsRuntime *rt = NULL, *running = NULL;
+    char reason[512], resources[DCS_PATH_MAX];
+    char **roots = NULL;
+    size_t n_roots = 0, i;
+    int rc = dcs_runtime_open(in->resources, &rt, why, nwhy), known = 0;
+    PyGILState_STATE g;
+    if (rc == 0)
+        return 0;
+    g = p_PyGILState_Ensure();
+    roots = runtime_list(&n_roots);
+    for (i = 0; i < n_roots && rc > 0; i++)
+        known = known || strcmp(roots[i], dcs_runtime_root(rt)) == 0;
+    if (n_roots == 0) { /* the host's Python or a discovered one: the runtime is not used */
+        dcs_log(in, fmi2OK, "logAll", "%s: fmi2Instantiate: this process runs a Python "
+                "already: the FMU's own runtime is not used", in->name);
+        rc = 0;
+    } else if (rc < 0) {
+        /* why set */
+    } else if (known) {
         rc = dcs_runtime_verify(rt, 0, why, nwhy);
     } else if ((rc = dcs_runtime_verify(rt, 1, why, nwhy)) != 0) {
         /* why set */
-    } else if (!dcs_runtime_compatible(g_runtime, rt, reason, sizeof reason)) {
+    } else if (resources_of(roots[0], resources, sizeof resources),
+               dcs_runtime_open(resources, &running, reason, sizeof reason) <= 0) {
         snprintf(why, nwhy, "this process runs the Python runtime of another self-contained "
-                 "FMU (%.1000s) and this FMU's own runtime (%.1000s) cannot join it: %s. One process "
-                 "runs one Python: load this FMU in a process of its own, or build the FMUs "
-                 "with one drillcosim (drillcosim build --standalone gives every FMU the same "
-                 "packages)", dcs_runtime_root(g_runtime), dcs_runtime_root(rt), reason);
+                 "FMU (%.1000s), whose MANIFEST cannot be read any more (%s)", roots[0],
+                 reason);
         rc = -1;
-    } else if ((rc = add_runtime_paths(rt, why, nwhy)) == 0 &&
-               (rc = remember_joined(dcs_runtime_root(rt))) == 0) {
+    } else if (!dcs_runtime_compatible(running, rt, reason, sizeof reason)) {
+        snprintf(why, nwhy, "this process runs the Python runtime of another self-contained "
+                 "FMU (%.1000s) and this FMU's own runtime (%.1000s) cannot join it: %s. One "
+                 "process runs one Python: load this FMU in a process of its own, or build "
+                 "the FMUs with one drillcosim (drillcosim build --standalone gives every FMU "
+                 "the same packages)", roots[0], dcs_runtime_root(rt), reason);
+        rc = -1;
+    } else if ((rc = add_runtime(rt, why, nwhy)) == 0) {
         dcs_log(in, fmi2OK, "logAll", "%s: fmi2Instantiate: the FMU's own runtime %s joins "
                 "the one running (%s): same interpreter, same packages", in->name,
-                dcs_runtime_root(rt), dcs_runtime_root(g_runtime));
+                dcs_runtime_root(rt), roots[0]);
     }
+    p_PyGILState_Release(g);
+    free_list(roots, n_roots);
+    dcs_runtime_free(running);
     dcs_runtime_free(rt);
-    return rc;
+    return rc < 0 ? -1 : 0;
 }
 
 /* Find and start a Python for a host without one. On failure *message (malloc'd) is the ONE
@@ -535,14 +584,10 @@ int dcs_python_ready(DcsInstance *in)
     char why[4096] = "";
     char *message = NULL;
     DcsRuntime *rt = NULL;
+    int started_own = 0;
     pthread_mutex_lock(&g_lock);
     if (g_ready) {
-        rc = join_runtime(in, why, sizeof why);
-        if (rc != 0) { /* this FMU only: the interpreter runs on */
-            dcs_log(in, fmi2Error, "logStatusError", "%s: fmi2Instantiate: %s", in->name, why);
-            pthread_mutex_unlock(&g_lock);
-            return rc;
-        }
+        rc = 0;
     } else if (g_final_error != NULL) {
         rc = -1;
     } else if (dlsym(RTLD_DEFAULT, "Py_IsInitialized") != NULL) {
@@ -562,13 +607,20 @@ int dcs_python_ready(DcsInstance *in)
         }
     } else if ((rc = dcs_runtime_open(in->resources, &rt, why, sizeof why)) != 0) {
         rc = rc > 0 ? start_runtime(in, rt, why, sizeof why) : -1;
-        if (g_runtime != rt)
-            dcs_runtime_free(rt);
+        started_own = rc == 0;
+        dcs_runtime_free(rt);
     } else {
         rc = start_in_plain_host(in, &message);
     }
     if (rc == 0 && !g_ready)
         rc = make_names(why, sizeof why);
+    if (rc == 0 && !started_own && join_runtime(in, why, sizeof why) != 0) {
+        /* this FMU only: the interpreter runs on for the others */
+        dcs_log(in, fmi2Error, "logStatusError", "%s: fmi2Instantiate: %s", in->name, why);
+        g_ready = 1;
+        pthread_mutex_unlock(&g_lock);
+        return -1;
+    }
     if (rc == 0) {
         g_ready = 1;
     } else if (g_final_error == NULL) {
@@ -598,11 +650,28 @@ int dcs_python_ready(DcsInstance *in)
  * arguments. Safe in any process (a Python host included): it only runs child processes. */
 FMI2_Export int drillcosim_doctor(const char *unzip_dir, char *out, size_t size)
 {
-    char *text = NULL;
-    int rc = -1;
+    char *text = NULL, resources[DCS_PATH_MAX], why[4096] = "";
+    DcsRuntime *rt = NULL;
+    int rc = -1, own;
     if (unzip_dir != NULL && out != NULL && size > 0) {
         pthread_mutex_lock(&g_lock); /* the discovery's buffers are shared */
-        rc = discover(unzip_dir, pretend_load, "would be used", &text) == 0 ? 1 : 0;
+        snprintf(resources, sizeof resources, "%s/resources", unzip_dir);
+        own = dcs_runtime_open(resources, &rt, why, sizeof why);
+        if (own > 0 && dcs_runtime_verify(rt, 1, why, sizeof why) != 0)
+            own = -1;
+        if (own > 0) /* fmi2Instantiate starts it before any other candidate */
+            text = dcs_format("this FMU carries its own Python runtime, used in a host process "
+                              "without a Python of its own:\n  0. its own runtime %s: Python "
+                              "%s, every file checked (size and SHA-256), would be used\n",
+                              dcs_runtime_root(rt), dcs_runtime_python(rt));
+        else if (own < 0) /* fmi2Instantiate fails: no other candidate is tried */
+            text = dcs_format("this FMU carries its own Python runtime, and it cannot be "
+                              "used:\n  0. its own runtime: %s\n", why);
+        else
+            rc = discover(unzip_dir, pretend_load, "would be used", &text) == 0 ? 1 : 0;
+        if (own != 0)
+            rc = own > 0 ? 1 : 0;
+        dcs_runtime_free(rt);
         pthread_mutex_unlock(&g_lock);
         snprintf(out, size, "%s", text != NULL ? text : "(out of memory)\n");
         free(text);

@@ -70,6 +70,7 @@ typedef struct {
     X(Py_BuildValue) \
     X(PyImport_ImportModule) \
     X(PySys_GetObject) \
+    X(PySys_SetObject) \
     X(PyObject_GetAttr) \
     X(PyObject_GetAttrString) \
     X(PyObject_SetAttr) \

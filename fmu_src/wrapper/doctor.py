@@ -21,7 +21,7 @@ import json
 import sys
 import tempfile
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
@@ -52,6 +52,9 @@ class Diagnosis:
         Modules a Python must import to run the FMU.
     this_python : str
         Whether the Python running the doctor could host the FMU (one line).
+    runtimes : dict of str -> dict of str -> str
+        The Python runtimes a self-contained FMU carries, by platform (its MANIFEST's items:
+        ``python``, ``files``, ``bytes``, ...); empty for a regular FMU.
     """
 
     usable: bool
@@ -59,6 +62,21 @@ class Diagnosis:
     cpython: str
     requires: tuple[str, ...]
     this_python: str
+    runtimes: dict[str, dict[str, str]] = field(default_factory=dict)
+
+    def self_contained_lines(self) -> list[str]:
+        """Whether the FMU carries its own Python, and which one per platform."""
+        if not self.runtimes:
+            return ["Self-contained: no (it runs in a Python of the machine: see below; "
+                    "`drillcosim build --standalone` writes self-contained FMUs)."]
+        lines = ["Self-contained: yes: in a host without Python it runs in its own Python, "
+                 "per platform:"]
+        for platform, info in sorted(self.runtimes.items()):
+            lines.append(f"  {platform}: CPython {info.get('python', '?')}, "
+                         f"{info.get('files', '?')} files, "
+                         f"{int(info.get('bytes', 0)) / 1e6:.0f} MB unpacked "
+                         f"(resources/dcs_runtime/{platform})")
+        return lines
 
     def text(self, fmu: Path) -> str:
         """The report printed by ``drillcosim doctor``."""
@@ -68,11 +86,14 @@ class Diagnosis:
         return "\n".join([
             f"FMU {fmu}",
             f"Verdict: {verdict}.",
+            *self.self_contained_lines(),
             "",
             "In a host without Python of its own (a C/C++ FMI tool, fmusim, ...):",
             self.c_host_report.rstrip(),
             "",
-            "In a Python host (fmpy, libcosimpy, ...): the FMU runs in the host's own interpreter,",
+            "In a Python host (fmpy, libcosimpy, ...): the FMU runs in the host's own interpreter"
+            + (" (its own runtime is not loaded there: one process runs one Python)"
+               if self.runtimes else "") + ",",
             f"which must be CPython {self.cpython} with these modules importable: {needs};",
             "a host of another version gets one message at fmi2Instantiate.",
             self.this_python,
@@ -154,8 +175,10 @@ def diagnose(fmu: Path | str) -> Diagnosis:
         raise RuntimeError(f"drillcosim_doctor refused its arguments (returned {rc})")
     # the FMU's own unzip folder is a temporary one here: name it as a host would have it
     report = buf.value.decode("utf-8", "replace").replace(tmp, "<the FMU's unzip folder>")
+    from drillcosim.fmu_src.standalone import runtimes
+
     return Diagnosis(usable=rc == 1, c_host_report=report, cpython=cpython, requires=requires,
-                     this_python=_this_python(cpython, requires))
+                     this_python=_this_python(cpython, requires), runtimes=runtimes(fmu))
 
 
 def doctor_command(fmu: Path | str | None) -> int:
