@@ -1,13 +1,13 @@
 """Which files of the third-party distributions a self-contained FMU ships.
 
 The rule (:func:`select`): of a distribution whose top-level packages appear in
-``imported_packages.txt`` (the packages the slaves import, traced by :mod:`.trace`), the files of
-the listed packages' own folders, its ``<name>.libs`` folder (the shared libraries its
-extension modules link) and its ``.dist-info`` (licences); a distribution none of whose
-packages is listed is shipped whole. Compiled caches (``__pycache__``) are never shipped: the
-runtime compiles its own. A folder is shipped whole, not module by module, so a module the
-traced runs did not import but a sibling imports on another path (an error path, another
-integrator) is there.
+``imported_packages.txt`` (the packages the slaves import, traced by
+``tests/support/trace_imports.py``), the files of the listed packages' own folders, its
+``<name>.libs`` folder (the shared libraries its extension modules link) and its
+``.dist-info`` (licences); a distribution none of whose packages is listed is shipped whole.
+Compiled caches (``__pycache__``) are never shipped: the runtime compiles its own. A folder is
+shipped whole, not module by module, so a module the traced runs did not import but a sibling
+imports on another path (an error path, another integrator) is there.
 """
 
 from __future__ import annotations
