@@ -3,8 +3,9 @@
     python benchmarks/bench_standalone.py [--repeat 5]
 
 1. Size of the self-contained plant and controller FMUs (``drillcosim build --standalone``)
-   per platform: the ``.fmu`` (compressed) and the runtime unpacked, and what dominates the
-   plant's runtime (zip members grouped by component: compressed and unpacked).
+   per platform (linux64; the plant's win64 runtime too, from the embeddable CPython and the
+   wheels pip downloads, unless ``--no-win64``): the ``.fmu`` (compressed) and the runtime
+   unpacked, and what dominates the plant's runtime (zip members grouped by component).
 2. The first ``fmi2Instantiate`` in a fresh process of a plain C host (no Python in it) of the
    regular plant FMU (its Python found by the discovery: ``$DRILLCOSIM_PYTHON`` = this
    interpreter, checked in a child process, then started) and of the self-contained one (its
@@ -73,9 +74,9 @@ COMPONENTS = (("llvmlite (numba's LLVM)", r"site-packages/llvmlite"),
               ("numpy + numpy.libs (OpenBLAS)", r"site-packages/numpy"),
               ("scipy + scipy.libs (OpenBLAS)", r"site-packages/scipy"),
               ("numba", r"site-packages/numba"),
-              ("libpython", r"lib/libpython"),
-              ("standard library (.pyc zip)", r"lib/python3\d+\.zip"),
-              ("extension modules (lib-dynload)", r"lib-dynload/"))
+              ("libpython / python3XX.dll", r"(lib/libpython|/python3\d+\.dll)"),
+              ("standard library (.pyc zip)", r"python3\d+\.zip"),
+              ("extension modules (lib-dynload, .pyd)", r"(lib-dynload/|\.pyd$)"))
 
 
 def sizes(fmu: Path) -> tuple[dict[str, list[int]], int, int]:
@@ -98,6 +99,8 @@ def sizes(fmu: Path) -> tuple[dict[str, list[int]], int, int]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--no-win64", action="store_true", help="leave out the win64 runtime "
+                        "(its embeddable CPython and wheels are downloaded with pip)")
     args = parser.parse_args(argv)
     started = _dt.datetime.now()
     tmp = Path(tempfile.mkdtemp(prefix="bench_standalone_"))
@@ -118,12 +121,26 @@ def main(argv: list[str] | None = None) -> int:
             n = sum(1 for i in zf.infolist() if i.filename.startswith(RUNTIME_DIR + "/"))
         out.append(f"| {name} | linux64 | {regular.stat().st_size / 1e6:.2f} MB | "
                    f"{standalone.stat().st_size / 1e6:.1f} MB | {unpacked / 1e6:.0f} MB | {n} |")
-    groups, packed, unpacked = sizes(fmus["DrillstringPlant"][1])
-    out += ["", "What the plant's linux64 runtime is made of:", "",
-            "| component | compressed | unpacked | share of compressed |", "|---|---:|---:|---:|"]
-    for name, (c, u) in sorted(groups.items(), key=lambda kv: -kv[1][0]):
-        out.append(f"| {name} | {c / 1e6:.1f} MB | {u / 1e6:.1f} MB | {100 * c / packed:.0f} % |")
-    out.append(f"| total | {packed / 1e6:.1f} MB | {unpacked / 1e6:.1f} MB | 100 % |")
+    plant = fmus["DrillstringPlant"][0]
+    if not args.no_win64:  # the win64 runtime alone (the FMU's win64 binary is the wrapper's)
+        win = make_standalone(plant, tmp / "win64" / plant.name, ("win64",))
+        _groups, _packed, unpacked = sizes(win)
+        with zipfile.ZipFile(win) as zf:
+            n = sum(1 for i in zf.infolist() if i.filename.startswith(RUNTIME_DIR + "/"))
+        out.append(f"| DrillstringPlant | win64 | {plant.stat().st_size / 1e6:.2f} MB | "
+                   f"{win.stat().st_size / 1e6:.1f} MB | {unpacked / 1e6:.0f} MB | {n} |")
+    breakdown = [("linux64", fmus["DrillstringPlant"][1])]
+    if not args.no_win64:
+        breakdown.append(("win64", win))
+    for name_platform, fmu in breakdown:
+        groups, packed, unpacked = sizes(fmu)
+        out += ["", f"What the plant's {name_platform} runtime is made of:", "",
+                "| component | compressed | unpacked | share of compressed |",
+                "|---|---:|---:|---:|"]
+        for name, (c, u) in sorted(groups.items(), key=lambda kv: -kv[1][0]):
+            out.append(f"| {name} | {c / 1e6:.1f} MB | {u / 1e6:.1f} MB | "
+                       f"{100 * c / packed:.0f} % |")
+        out.append(f"| total | {packed / 1e6:.1f} MB | {unpacked / 1e6:.1f} MB | 100 % |")
 
     # first fmi2Instantiate, fresh processes, interleaved
     (tmp / "timer.c").write_text(TIMER)

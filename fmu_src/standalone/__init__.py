@@ -52,15 +52,19 @@ from .selection import IMPORTED, distributions
 __all__ = ["PLATFORMS", "RUNTIME_DIR", "make_standalone", "runtime_folder", "runtimes"]
 
 RUNTIME_DIR = "resources/dcs_runtime"  #: where an FMU carries its runtimes
-PLATFORMS = ("linux64",)               #: platforms a runtime can be made for here
+PLATFORMS = ("linux64", "win64")       #: platforms a runtime can be made for
 _HERE = Path(__file__).resolve().parent
 
 
 def _runtime_key(platform: str, requires: Sequence[str]) -> str:
     """Content key of a runtime: what it is made of and how."""
+    from .win64 import EMBEDDED, WHEELS
+
     digest = hashlib.sha256()
     digest.update(json.dumps([platform, sorted(requires), sys.version, sys.executable]).encode())
-    for dist in distributions(requires):
+    if platform == "win64":
+        digest.update(json.dumps([EMBEDDED, WHEELS]).encode())
+    for dist in distributions(requires) if platform == "linux64" else ():
         record = dist.read_text("RECORD") or ""
         digest.update(f"{dist.metadata['Name']} {dist.version}\n".encode() + record.encode())
     for path in sorted(_HERE.glob("*.py")) + [IMPORTED]:
@@ -82,7 +86,7 @@ def runtime_folder(platform: str, requires: Sequence[str]) -> Path:
     if platform not in PLATFORMS:
         raise ValueError(f"no self-contained runtime for platform {platform!r}: "
                          f"available {', '.join(PLATFORMS)}")
-    from . import linux64
+    from . import linux64, win64
 
     final = user_cache() / "runtimes" / f"{platform}-{_runtime_key(platform, requires)}"
     if (final / MANIFEST).is_file():
@@ -90,7 +94,10 @@ def runtime_folder(platform: str, requires: Sequence[str]) -> Path:
     final.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}-", dir=final.parent))
     try:
-        summary = linux64.assemble(tmp, tuple(requires))
+        if platform == "win64":
+            summary = win64.assemble(tmp, tuple(requires), *win64.fetch())
+        else:
+            summary = linux64.assemble(tmp, tuple(requires))
         (tmp.parent / f"{final.name}.json").write_text(json.dumps(summary, indent=1) + "\n")
         try:
             os.replace(tmp, final)
@@ -103,8 +110,9 @@ def runtime_folder(platform: str, requires: Sequence[str]) -> Path:
 
 
 def make_standalone(fmu: Path | str, out: Path | str,
-                    platforms: Sequence[str] = PLATFORMS) -> Path:
-    """Write ``out``: the FMU ``fmu`` with a Python runtime for each of ``platforms``.
+                    platforms: Sequence[str] | None = None) -> Path:
+    """Write ``out``: the FMU ``fmu`` with a Python runtime for each of ``platforms`` (default:
+    every platform the FMU carries a binary for, ``binaries/<platform>/``).
 
     The modules the runtime must provide are the FMU's ``resources/python_requires.txt``; an
     FMU without one runs no Python (the C controller) and is copied as it is.
@@ -121,6 +129,9 @@ def make_standalone(fmu: Path | str, out: Path | str,
             shutil.copyfile(fmu, out)
             return out
         requires = tuple(src.read("resources/python_requires.txt").decode().split())
+        if platforms is None:
+            platforms = [p for p in PLATFORMS
+                         if any(n.startswith(f"binaries/{p}/") for n in src.namelist())]
         folders = {p: runtime_folder(p, requires) for p in platforms}
         fd, tmp = tempfile.mkstemp(prefix=f".{out.name}-", dir=out.parent)
         os.close(fd)

@@ -15,7 +15,7 @@ import zipfile
 from pathlib import Path
 
 from drillcosim._toolchain import user_cache
-from drillcosim.fmu_src.standalone import PLATFORMS, make_standalone, runtime_folder
+from drillcosim.fmu_src.standalone import make_standalone, runtime_folder
 
 __all__ = ["bare_env", "content_key", "linked_copy", "standalone_copy"]
 
@@ -29,14 +29,15 @@ def content_key(fmu: Path) -> str:
     return digest.hexdigest()[:20]
 
 
-def standalone_copy(fmu: Path) -> Path:
-    """The self-contained copy of ``fmu`` (cached by content)."""
+def standalone_copy(fmu: Path, platforms: tuple[str, ...] = ("linux64",)) -> Path:
+    """The self-contained copy of ``fmu`` with runtimes for ``platforms`` (cached by
+    content)."""
     with zipfile.ZipFile(fmu) as zf:
         requires = tuple(zf.read("resources/python_requires.txt").decode().split())
-    runtime = "-".join(runtime_folder(p, requires).name for p in PLATFORMS)
+    runtime = "-".join(runtime_folder(p, requires).name for p in platforms)
     out = user_cache() / "test-standalone" / f"{content_key(fmu)}-{runtime}" / fmu.name
     if not out.is_file():
-        make_standalone(fmu, out)
+        make_standalone(fmu, out, platforms)
     return out
 
 

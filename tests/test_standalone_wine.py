@@ -1,0 +1,63 @@
+"""Self-contained FMUs on Windows: the plant + controller pair with their win64 runtimes (the
+embeddable CPython and the wheels) in a plain C host built with mingw-w64, under wine, with no
+Python on PATH or WINEPATH: equal to the same pair's Linux run to 1e-12 of each signal's peak.
+
+The Windows bench (wine, mingw-w64, the embeddable CPython and the wheels) is
+``support/windows_bench.py``: under CI a missing piece fails the test; elsewhere it skips with
+one line naming what is missing.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from support import c_host, cosim_host
+from support.closed_loop import closed_loop
+from support.standalone import bare_env, standalone_copy
+
+pytestmark = [pytest.mark.needs_cc, pytest.mark.interop, pytest.mark.slow]
+
+STOP = 0.02  #: [s] (200 steps of 0.1 ms: numba compiles the plant under wine once per cache)
+
+
+@pytest.fixture(scope="module")
+def bench():
+    from support import windows_bench
+
+    return windows_bench.require()
+
+
+def test_the_standalone_pair_runs_under_wine_with_no_python_equal_to_linux(
+        bench, project_fmus, tmp_path) -> None:
+    from support import windows_bench
+
+    loop = closed_loop(project_fmus["DrillstringPlant"], project_fmus["StrainController"],
+                       tmp_path / "loop", stop=STOP)
+    win, lin = {}, {}
+    for inst, name in (("plant", "DrillstringPlant"), ("controller", "StrainController")):
+        fmu = standalone_copy(project_fmus[name], ("linux64", "win64"))
+        folder = c_host.unzip(fmu, tmp_path / inst)
+        win[inst] = windows_bench.windows_path(folder)
+        lin[inst] = str(folder)
+    # the Linux run: the same host, the same FMUs, their linux64 runtime
+    host = cosim_host.compile_host(tmp_path)
+    spec = cosim_host.write_spec(loop, lin, tmp_path / "linux.spec")
+    linux = cosim_host.run([str(host), str(spec)], bare_env(tmp_path / "home"), tmp_path)
+    assert linux.returncode == 0, linux.stderr[-3000:]
+    # under wine: the mingw-built host, no Python on PATH / WINEPATH
+    exe = cosim_host.compile_host(tmp_path, cc=windows_bench.find_mingw())
+    spec = cosim_host.write_spec(loop, win, tmp_path / "win.spec")
+    run = bench.run(exe, [windows_bench.windows_path(spec)], timeout=3600,
+                    env={"WINEPATH": "", "PYTHONHOME": "", "PYTHONPATH": "",
+                         "DRILLCOSIM_CACHE": os.environ.get("DRILLCOSIM_CACHE", "")})
+    assert run.returncode == 0, (run.stdout[-1000:], run.stderr[-3000:])
+    assert "the FMU's own Python runtime (Python 3.13" in run.stderr
+    rows_win, rows_linux = cosim_host.rows(run.stdout), cosim_host.rows(linux.stdout)
+    assert rows_win.shape == rows_linux.shape == (loop.n_steps + 1, len(loop.outputs) + 1)
+    peak = np.max(np.abs(rows_linux), axis=0)
+    worst = np.max(np.abs(rows_win - rows_linux) - 1e-12 * peak, axis=0)
+    assert (worst <= 0).all(), {loop.outputs[j - 1]: float(np.max(np.abs(
+        rows_win[:, j] - rows_linux[:, j])) / peak[j]) for j in np.flatnonzero(worst > 0)}
