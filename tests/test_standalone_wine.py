@@ -25,8 +25,12 @@ STOP = 0.02  #: [s] (200 steps of 0.1 ms: numba compiles the plant under wine on
 
 @pytest.fixture(scope="module")
 def bench():
-    from support import windows_bench
-
+    try:
+        from support import windows_bench
+    except ImportError:  # the bench of the win64 work (branch i30a) not merged
+        if os.environ.get("CI") == "true":
+            raise
+        pytest.skip("no Windows bench (tests/support/windows_bench.py)")
     return windows_bench.require()
 
 

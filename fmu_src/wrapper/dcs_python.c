@@ -441,61 +441,68 @@ static void resources_of(const char *root, char *out, size_t n)
         *slash = '\0';
 }
 
+/* Load the runtime's libraries (preloads first), then its libpython, and resolve the C-API.
+ * 0, or -1 with why (g_loaded once its libpython stays in the process). */
+static int load_runtime(const DcsRuntime *rt, const char *head, char *why, size_t nwhy)
+{
+    size_t k, n = dcs_runtime_count(rt, "preload");
+    void *lib = NULL;
+    int rc = 0;
+    const char *e;
+    for (k = 0; k <= n && rc == 0; k++) { /* the preloads, then the library itself */
+        const char *file = k < n ? dcs_runtime_item(rt, "preload", k) : dcs_runtime_library(rt);
+        lib = dlopen(file, RTLD_NOW | RTLD_GLOBAL);
+        if (lib == NULL) {
+            e = dlerror();
+            snprintf(why, nwhy, "%scannot load %s: %s", head, file, e != NULL ? e : "?");
+            rc = -1;
+        }
+    }
+    if (rc == 0 && !version_fits(version_of(lib))) {
+        snprintf(why, nwhy, "%sis Python %.20s, not 3.%d to 3.%d", head, version_of(lib),
+                 DCS_PY_MINOR_MIN, DCS_PY_MINOR_MAX);
+        rc = -1;
+    }
+    if (rc == 0)
+        rc = resolve_api(lib, why, nwhy);
+    if (rc == 0)
+        g_loaded = 1; /* from here on this libpython stays in the process */
+    else if (lib != NULL)
+        dlclose(lib);
+    return rc;
+}
+
 /* Start a self-contained FMU's own runtime in a host without Python: every file checked
  * (size and SHA-256) before anything of it is loaded, its libraries loaded, the interpreter
  * started with its home, sys.path completed. */
 static int start_runtime(DcsInstance *in, DcsRuntime *rt, char *why, size_t nwhy)
 {
-    clock_t t0 = clock(), t1;
-    size_t k;
-    void *lib;
+    clock_t t0 = clock(), t1 = t0;
     char head[160];
+    int rc;
     PyGILState_STATE g;
     snprintf(head, sizeof head, "the FMU's own Python runtime (Python %s) ",
              dcs_runtime_python(rt));
-    if (dcs_runtime_verify(rt, 1, why, nwhy) != 0)
-        return -1;
-    t1 = clock();
-    for (k = 0; k < dcs_runtime_count(rt, "preload"); k++) {
-        const char *file = dcs_runtime_item(rt, "preload", k);
-        if (dlopen(file, RTLD_NOW | RTLD_GLOBAL) == NULL) {
-            const char *e = dlerror();
-            snprintf(why, nwhy, "%scannot load %s: %s", head, file, e != NULL ? e : "?");
-            return -1;
-        }
+    rc = dcs_runtime_verify(rt, 1, why, nwhy);
+    if (rc == 0) {
+        t1 = clock();
+        rc = load_runtime(rt, head, why, nwhy);
     }
-    lib = dlopen(dcs_runtime_library(rt), RTLD_NOW | RTLD_GLOBAL);
-    if (lib == NULL) {
-        const char *e = dlerror();
-        snprintf(why, nwhy, "%scannot load %s: %s", head, dcs_runtime_library(rt),
-                 e != NULL ? e : "?");
-        return -1;
+    if (rc == 0)
+        rc = start_interpreter(dcs_runtime_program(rt), 1, dcs_runtime_home(rt), why, nwhy);
+    if (rc == 0) {
+        g = p_PyGILState_Ensure();
+        rc = add_runtime(rt, why, nwhy);
+        p_PyGILState_Release(g);
     }
-    if (!version_fits(version_of(lib))) {
-        snprintf(why, nwhy, "%sis Python %.20s, not 3.%d to 3.%d", head, version_of(lib),
-                 DCS_PY_MINOR_MIN, DCS_PY_MINOR_MAX);
-        dlclose(lib);
-        return -1;
-    }
-    if (resolve_api(lib, why, nwhy) != 0) {
-        dlclose(lib);
-        return -1;
-    }
-    g_loaded = 1; /* from here on this libpython stays in the process */
-    if (start_interpreter(dcs_runtime_program(rt), 1, dcs_runtime_home(rt), why, nwhy) != 0)
-        return -1;
-    g = p_PyGILState_Ensure();
-    k = (size_t)add_runtime(rt, why, nwhy);
-    p_PyGILState_Release(g);
-    if (k != 0)
-        return -1;
-    dcs_log(in, fmi2OK, "logAll", "%s: fmi2Instantiate: the host has no Python; %sin %s "
-            "started (CPU time: %.3f s to check its files' sizes and SHA-256%s, %.3f s to "
-            "start the interpreter)", in->name, head, dcs_runtime_root(rt),
-            (double)(t1 - t0) / CLOCKS_PER_SEC,
-            dcs_sha256_accelerated() ? " with the CPU's SHA extensions" : "",
-            (double)(clock() - t1) / CLOCKS_PER_SEC);
-    return 0;
+    if (rc == 0)
+        dcs_log(in, fmi2OK, "logAll", "%s: fmi2Instantiate: the host has no Python; %sin %s "
+                "started (CPU time: %.3f s to check its files' sizes and SHA-256%s, %.3f s to "
+                "start the interpreter)", in->name, head, dcs_runtime_root(rt),
+                (double)(t1 - t0) / CLOCKS_PER_SEC,
+                dcs_sha256_accelerated() ? " with the CPU's SHA extensions" : "",
+                (double)(clock() - t1) / CLOCKS_PER_SEC);
+    return rc;
 }
 
 /* An FMU instantiated once an interpreter runs in the process (started by this wrapper or
@@ -512,13 +519,15 @@ static int join_runtime(DcsInstance *in, char *why, size_t nwhy)
     size_t n_roots = 0, i;
     int rc = dcs_runtime_open(in->resources, &rt, why, nwhy), known = 0;
     PyGILState_STATE g;
-    if (rc == 0)
-        return 0;
+    if (rc == 0) /* no runtime: nothing to join */
+        rt = NULL;
     g = p_PyGILState_Ensure();
-    roots = runtime_list(&n_roots);
+    roots = rc != 0 ? runtime_list(&n_roots) : NULL;
     for (i = 0; i < n_roots && rc > 0; i++)
         known = known || strcmp(roots[i], dcs_runtime_root(rt)) == 0;
-    if (n_roots == 0) { /* the host's Python or a discovered one: the runtime is not used */
+    if (rc == 0) {
+        /* a regular FMU */
+    } else if (n_roots == 0) { /* the host's Python or a discovered one: runtime not used */
         dcs_log(in, fmi2OK, "logAll", "%s: fmi2Instantiate: this process runs a Python "
                 "already: the FMU's own runtime is not used", in->name);
         rc = 0;
@@ -616,12 +625,10 @@ int dcs_python_ready(DcsInstance *in)
         rc = make_names(why, sizeof why);
     if (rc == 0 && !started_own && join_runtime(in, why, sizeof why) != 0) {
         /* this FMU only: the interpreter runs on for the others */
-        dcs_log(in, fmi2Error, "logStatusError", "%s: fmi2Instantiate: %s", in->name, why);
         g_ready = 1;
-        pthread_mutex_unlock(&g_lock);
-        return -1;
-    }
-    if (rc == 0) {
+        rc = -1;
+        message = dcs_format("%s: fmi2Instantiate: %s", in->name, why);
+    } else if (rc == 0) {
         g_ready = 1;
     } else if (g_final_error == NULL) {
         if (message == NULL) {

@@ -95,9 +95,10 @@ static char *join(const char *root, const char *rel)
 static long long file_size(const char *path)
 {
     struct stat st;
-    if (stat(path, &st) != 0 || !S_ISREG(st.st_mode))
-        return -1;
-    return (long long)st.st_size;
+    long long size = -1;
+    if (stat(path, &st) == 0 && S_ISREG(st.st_mode))
+        size = (long long)st.st_size;
+    return size;
 }
 
 /* The whole file into a malloc'd buffer (NUL-terminated), NULL if it cannot be read. */
@@ -105,15 +106,15 @@ static char *read_all(const char *path, size_t *len)
 {
     long long size = file_size(path);
     char *buf = NULL;
-    FILE *f;
-    if (size < 0 || size > MANIFEST_MAX || (f = fopen(path, "rb")) == NULL)
-        return NULL;
-    buf = (char *)malloc((size_t)size + 1);
-    if (buf != NULL && fread(buf, 1, (size_t)size, f) != (size_t)size) {
-        free(buf);
-        buf = NULL;
+    FILE *f = size >= 0 && size <= MANIFEST_MAX ? fopen(path, "rb") : NULL;
+    if (f != NULL) {
+        buf = (char *)malloc((size_t)size + 1);
+        if (buf != NULL && fread(buf, 1, (size_t)size, f) != (size_t)size) {
+            free(buf);
+            buf = NULL;
+        }
+        fclose(f);
     }
-    fclose(f);
     if (buf != NULL) {
         buf[size] = '\0';
         *len = (size_t)size;
@@ -124,100 +125,108 @@ static char *read_all(const char *path, size_t *len)
 void dcs_runtime_free(DcsRuntime *rt)
 {
     size_t i;
-    if (rt == NULL)
-        return;
-    for (i = 0; i < rt->n_items; i++) {
-        free(rt->items[i].key);
-        free(rt->items[i].value);
+    if (rt != NULL) {
+        for (i = 0; i < rt->n_items; i++) {
+            free(rt->items[i].key);
+            free(rt->items[i].value);
+        }
+        for (i = 0; i < rt->n_files; i++)
+            free(rt->files[i].path);
+        for (i = 0; i < rt->n_groups; i++)
+            free(rt->groups[i]);
+        free(rt->items);
+        free(rt->files);
+        free(rt->groups);
+        free(rt->group_hex);
+        free(rt->root);
+        free(rt);
     }
-    for (i = 0; i < rt->n_files; i++)
-        free(rt->files[i].path);
-    for (i = 0; i < rt->n_groups; i++)
-        free(rt->groups[i]);
-    free(rt->items);
-    free(rt->files);
-    free(rt->groups);
-    free(rt->group_hex);
-    free(rt->root);
-    free(rt);
 }
 
 static const char *item(const DcsRuntime *rt, const char *key)
 {
     size_t i;
-    for (i = 0; i < rt->n_items; i++)
+    const char *found = NULL;
+    for (i = 0; i < rt->n_items && found == NULL; i++)
         if (strcmp(rt->items[i].key, key) == 0)
-            return rt->items[i].value;
-    return NULL;
+            found = rt->items[i].value;
+    return found;
 }
 
 static int is_path_key(const char *key)
 {
     static const char *const keys[] = {"library", "program", "home", "preload", "path", NULL};
-    int i;
-    for (i = 0; keys[i] != NULL; i++)
-        if (strcmp(key, keys[i]) == 0)
-            return 1;
-    return 0;
+    int i, found = 0;
+    for (i = 0; keys[i] != NULL && !found; i++)
+        found = strcmp(key, keys[i]) == 0;
+    return found;
 }
 
-/* The group of a relative path: its first component below `site` ("" if not below it). */
+/* The group of a relative path: its first component below `site` (0, the base, if not below
+ * it); a new group is added for a new component. */
 static size_t group_of(DcsRuntime *rt, const char *site, const char *path)
 {
-    size_t n = site != NULL ? strlen(site) : 0, len, i;
+    size_t n = site != NULL ? strlen(site) : 0, len, i, group = 0;
     const char *top, *slash;
-    if (site == NULL || strncmp(path, site, n) != 0 || path[n] != '/')
-        return 0;
-    top = path + n + 1;
-    slash = strchr(top, '/');
-    len = slash != NULL ? (size_t)(slash - top) : strlen(top);
-    for (i = 1; i < rt->n_groups; i++)
-        if (strlen(rt->groups[i]) == len && strncmp(rt->groups[i], top, len) == 0)
-            return i;
-    rt->groups[rt->n_groups] = dup_n(top, len);
-    return rt->groups[rt->n_groups] != NULL ? rt->n_groups++ : 0;
+    if (site != NULL && strncmp(path, site, n) == 0 && path[n] == '/') {
+        top = path + n + 1;
+        slash = strchr(top, '/');
+        len = slash != NULL ? (size_t)(slash - top) : strlen(top);
+        for (i = 1; i < rt->n_groups && group == 0; i++)
+            if (strlen(rt->groups[i]) == len && strncmp(rt->groups[i], top, len) == 0)
+                group = i;
+        if (group == 0) {
+            rt->groups[rt->n_groups] = dup_n(top, len);
+            if (rt->groups[rt->n_groups] != NULL)
+                group = rt->n_groups++;
+        }
+    }
+    return group;
 }
 
-/* Parse the MANIFEST text (checked against its end line). 0, or -1 with why. */
-static int parse(DcsRuntime *rt, char *text, size_t len, const char *file, char *why,
-                 size_t nwhy)
+/* The end line of the MANIFEST text: the digest of every byte before it. 0 if it matches. */
+static int check_end(char *text, size_t len, char **end_line)
 {
-    char *line = text, *end_line = NULL, *p;
-    size_t n_lines = 0, i;
-    DcsSha256 *group_sha = NULL;
-    const char *site = NULL;
-    char hex[65];
+    char *p = text, hex[65];
     DcsSha256 whole;
-    for (p = text; p < text + len; p++)
-        n_lines += *p == '\n';
-    /* the end line: the digest of every byte before it */
-    for (p = text; p < text + len; p = strchr(p, '\n') + 1) {
+    *end_line = NULL;
+    while (p < text + len) {
+        char *nl = strchr(p, '\n');
         if (strncmp(p, "end ", 4) == 0)
-            end_line = p;
-        if (strchr(p, '\n') == NULL)
-            break;
+            *end_line = p;
+        p = nl != NULL ? nl + 1 : text + len;
     }
-    if (strncmp(text, "dcs-runtime 1\n", 14) != 0 || end_line == NULL) {
-        snprintf(why, nwhy, "%s is not a runtime MANIFEST of this wrapper (damaged?)", file);
-        return -1;
+    if (*end_line != NULL) {
+        dcs_sha256_init(&whole);
+        dcs_sha256_update(&whole, text, (size_t)(*end_line - text));
+        dcs_sha256_hex(&whole, hex);
     }
-    dcs_sha256_init(&whole);
-    dcs_sha256_update(&whole, text, (size_t)(end_line - text));
-    dcs_sha256_hex(&whole, hex);
-    if (strncmp(end_line + 4, hex, 64) != 0) {
-        snprintf(why, nwhy, "%s is damaged (its end line does not match its content)", file);
-        return -1;
+    return *end_line != NULL && strncmp(*end_line + 4, hex, 64) == 0 ? 0 : -1;
+}
+
+/* One "file <sha256> <size> <path>" line (after "file ") into e; 0 if well formed. */
+static int parse_file_line(const char *q, Entry *e)
+{
+    char *size_end = NULL;
+    int rc = -1;
+    if (strlen(q) >= 67 && q[64] == ' ') {
+        memcpy(e->hex, q, 64);
+        e->hex[64] = '\0';
+        e->size = strtoll(q + 65, &size_end, 10);
+        if (*size_end == ' ' && e->size >= 0) {
+            e->path = dup_n(size_end + 1, strlen(size_end + 1));
+            rc = e->path != NULL ? 0 : -1;
+        }
     }
-    *end_line = '\0';
-    rt->items = (Item *)calloc(n_lines + 1, sizeof *rt->items);
-    rt->files = (Entry *)calloc(n_lines + 1, sizeof *rt->files);
-    rt->groups = (char **)calloc(n_lines + 2, sizeof *rt->groups);
-    if (rt->items == NULL || rt->files == NULL || rt->groups == NULL) {
-        snprintf(why, nwhy, "out of memory reading %s", file);
-        return -1;
-    }
-    rt->groups[rt->n_groups++] = dup_n("", 0);
-    for (line = strchr(text, '\n') + 1; *line; line = p + 1) {
+    return rc;
+}
+
+/* Every line after the first: items and files. 0, or -1 with why. */
+static int parse_lines(DcsRuntime *rt, char *text, const char *file, char *why, size_t nwhy)
+{
+    char *line, *p;
+    int rc = 0;
+    for (line = strchr(text, '\n') + 1; *line && rc == 0; line = p + 1) {
         char *sp;
         p = strchr(line, '\n');
         if (p == NULL)
@@ -228,96 +237,119 @@ static int parse(DcsRuntime *rt, char *text, size_t len, const char *file, char 
             continue;
         *sp = '\0';
         if (strcmp(line, "file") == 0) {
-            Entry *e = &rt->files[rt->n_files];
-            char *q = sp + 1, *size_end;
-            if (strlen(q) < 67 || q[64] != ' ') {
-                snprintf(why, nwhy, "%s: a bad file line", file);
-                return -1;
-            }
-            memcpy(e->hex, q, 64);
-            e->hex[64] = '\0';
-            e->size = strtoll(q + 65, &size_end, 10);
-            if (*size_end != ' ' || e->size < 0) {
-                snprintf(why, nwhy, "%s: a bad file line", file);
-                return -1;
-            }
-            e->path = dup_n(size_end + 1, strlen(size_end + 1));
-            if (e->path == NULL)
-                return -1;
-            rt->n_files++;
+            rc = parse_file_line(sp + 1, &rt->files[rt->n_files]);
+            if (rc == 0)
+                rt->n_files++;
+            else
+                snprintf(why, nwhy, "%s: a bad file line (damaged?)", file);
         } else {
             Item *it = &rt->items[rt->n_items];
             it->key = dup_n(line, strlen(line));
             it->value = is_path_key(line) ? join(rt->root, sp + 1)
                                            : dup_n(sp + 1, strlen(sp + 1));
-            if (it->key == NULL || it->value == NULL)
-                return -1;
+            rc = it->key != NULL && it->value != NULL ? 0 : -1;
             rt->n_items++;
         }
     }
-    site = item(rt, "site"); /* relative: not a path key */
-    /* groups and their digests (over their file lines, in MANIFEST order) */
-    group_sha = (DcsSha256 *)calloc(rt->n_files + 1, sizeof *group_sha);
+    return rc;
+}
+
+/* The groups of the files and their digests (over their file lines, in MANIFEST order). */
+static int group_digests(DcsRuntime *rt)
+{
+    size_t i;
+    const char *site = item(rt, "site"); /* relative: not a path key */
+    DcsSha256 *sha = (DcsSha256 *)calloc(rt->n_files + 1, sizeof *sha);
     rt->group_hex = (char (*)[65])calloc(rt->n_files + 1, sizeof *rt->group_hex);
-    if (group_sha == NULL || rt->group_hex == NULL) {
-        free(group_sha);
-        return -1;
+    if (sha != NULL && rt->group_hex != NULL) {
+        for (i = 0; i <= rt->n_files; i++)
+            dcs_sha256_init(&sha[i]);
+        for (i = 0; i < rt->n_files; i++) {
+            Entry *e = &rt->files[i];
+            char sz[32];
+            e->group = group_of(rt, site, e->path);
+            snprintf(sz, sizeof sz, " %lld ", e->size);
+            dcs_sha256_update(&sha[e->group], e->hex, 64);
+            dcs_sha256_update(&sha[e->group], sz, strlen(sz));
+            dcs_sha256_update(&sha[e->group], e->path, strlen(e->path) + 1);
+        }
+        for (i = 0; i < rt->n_groups; i++)
+            dcs_sha256_hex(&sha[i], rt->group_hex[i]);
     }
-    for (i = 0; i <= rt->n_files; i++)
-        dcs_sha256_init(&group_sha[i]);
-    for (i = 0; i < rt->n_files; i++) {
-        Entry *e = &rt->files[i];
-        char sz[32];
-        e->group = group_of(rt, site, e->path);
-        snprintf(sz, sizeof sz, " %lld ", e->size);
-        dcs_sha256_update(&group_sha[e->group], e->hex, 64);
-        dcs_sha256_update(&group_sha[e->group], sz, strlen(sz));
-        dcs_sha256_update(&group_sha[e->group], e->path, strlen(e->path) + 1);
+    free(sha);
+    return rt->group_hex != NULL ? 0 : -1;
+}
+
+/* Parse the MANIFEST text (checked against its end line). 0, or -1 with why. */
+static int parse(DcsRuntime *rt, char *text, size_t len, const char *file, char *why,
+                 size_t nwhy)
+{
+    char *end_line = NULL, *p;
+    size_t n_lines = 0;
+    int rc = 0;
+    for (p = text; p < text + len; p++)
+        n_lines += *p == '\n';
+    if (strncmp(text, "dcs-runtime 1\n", 14) != 0 || check_end(text, len, &end_line) != 0) {
+        snprintf(why, nwhy, "%s is damaged (its end line does not match its content)", file);
+        rc = -1;
+    } else {
+        *end_line = '\0';
+        rt->items = (Item *)calloc(n_lines + 1, sizeof *rt->items);
+        rt->files = (Entry *)calloc(n_lines + 1, sizeof *rt->files);
+        rt->groups = (char **)calloc(n_lines + 2, sizeof *rt->groups);
+        if (rt->items == NULL || rt->files == NULL || rt->groups == NULL ||
+            (rt->groups[rt->n_groups++] = dup_n("", 0)) == NULL)
+            rc = -1;
     }
-    for (i = 0; i < rt->n_groups; i++)
-        dcs_sha256_hex(&group_sha[i], rt->group_hex[i]);
-    free(group_sha);
-    if (item(rt, "platform") == NULL || strcmp(item(rt, "platform"), DCS_RUNTIME_PLATFORM) ||
-        item(rt, "library") == NULL || item(rt, "python") == NULL) {
+    if (rc == 0)
+        rc = parse_lines(rt, text, file, why, nwhy);
+    if (rc == 0)
+        rc = group_digests(rt);
+    if (rc == 0 && (item(rt, "platform") == NULL ||
+                    strcmp(item(rt, "platform"), DCS_RUNTIME_PLATFORM) != 0 ||
+                    item(rt, "library") == NULL || item(rt, "python") == NULL)) {
         snprintf(why, nwhy, "%s is for %s, not %s (or lacks its library or python line)", file,
                  item(rt, "platform") ? item(rt, "platform") : "no platform",
                  DCS_RUNTIME_PLATFORM);
-        return -1;
+        rc = -1;
     }
-    return 0;
+    return rc;
 }
 
 int dcs_runtime_open(const char *resources, DcsRuntime **out, char *why, size_t nwhy)
 {
     char folder[4096], file[4200];
-    char *text;
+    char *text = NULL;
     size_t len = 0;
     struct stat st;
-    DcsRuntime *rt;
+    DcsRuntime *rt = NULL;
+    int rc = 0;
     *out = NULL;
+    why[0] = '\0';
     snprintf(folder, sizeof folder, "%s/%s/%s", resources, DCS_RUNTIME_DIR,
              DCS_RUNTIME_PLATFORM);
-    if (stat(folder, &st) != 0 || !S_ISDIR(st.st_mode))
-        return 0;
     snprintf(file, sizeof file, "%s/%s", folder, DCS_RUNTIME_MANIFEST);
-    text = read_all(file, &len);
-    if (text == NULL) {
-        snprintf(why, nwhy, "the FMU's own Python runtime is damaged: %s is missing or "
-                 "unreadable (unzip the FMU again)", file);
-        return -1;
+    if (stat(folder, &st) == 0 && S_ISDIR(st.st_mode)) { /* else: no runtime, rc 0 */
+        text = read_all(file, &len);
+        rt = (DcsRuntime *)calloc(1, sizeof *rt);
+        if (text == NULL) {
+            snprintf(why, nwhy, "the FMU's own Python runtime is damaged: %s is missing or "
+                     "unreadable (unzip the FMU again)", file);
+            rc = -1;
+        } else if (rt == NULL || (rt->root = dup_n(folder, strlen(folder))) == NULL ||
+                   parse(rt, text, len, file, why, nwhy) != 0) {
+            if (why[0] == '\0')
+                snprintf(why, nwhy, "out of memory reading %s", file);
+            rc = -1;
+        } else {
+            *out = rt;
+            rt = NULL;
+            rc = 1;
+        }
     }
-    rt = (DcsRuntime *)calloc(1, sizeof *rt);
-    if (rt == NULL || (rt->root = dup_n(folder, strlen(folder))) == NULL ||
-        parse(rt, text, len, file, why, nwhy) != 0) {
-        if (rt == NULL || rt->root == NULL || why[0] == '\0')
-            snprintf(why, nwhy, "out of memory reading %s", file);
-        dcs_runtime_free(rt);
-        free(text);
-        return -1;
-    }
+    dcs_runtime_free(rt);
     free(text);
-    *out = rt;
-    return 1;
+    return rc;
 }
 
 /* SHA-256 and length of a file; 0, or -1 if it cannot be read. */
@@ -326,25 +358,27 @@ static int hash_file(const char *path, char hex[65], long long *size)
     static unsigned char buf[1 << 20];
     DcsSha256 s;
     size_t k;
+    int rc = -1;
     FILE *f = fopen(path, "rb");
-    if (f == NULL)
-        return -1;
-    dcs_sha256_init(&s);
-    *size = 0;
-    while ((k = fread(buf, 1, sizeof buf, f)) > 0) {
-        dcs_sha256_update(&s, buf, k);
-        *size += (long long)k;
+    if (f != NULL) {
+        dcs_sha256_init(&s);
+        *size = 0;
+        while ((k = fread(buf, 1, sizeof buf, f)) > 0) {
+            dcs_sha256_update(&s, buf, k);
+            *size += (long long)k;
+        }
+        rc = ferror(f) ? -1 : 0;
+        fclose(f);
+        dcs_sha256_hex(&s, hex);
     }
-    k = (size_t)ferror(f);
-    fclose(f);
-    dcs_sha256_hex(&s, hex);
-    return k ? -1 : 0;
+    return rc;
 }
 
 int dcs_runtime_verify(const DcsRuntime *rt, int hashes, char *why, size_t nwhy)
 {
     size_t i;
-    for (i = 0; i < rt->n_files; i++) {
+    int rc = 0;
+    for (i = 0; i < rt->n_files && rc == 0; i++) {
         const Entry *e = &rt->files[i];
         char path[4200], hex[65];
         long long size;
@@ -354,17 +388,16 @@ int dcs_runtime_verify(const DcsRuntime *rt, int hashes, char *why, size_t nwhy)
             snprintf(why, nwhy, "the FMU's own Python runtime is incomplete: %s is missing "
                      "(unzip the FMU again; %zu files are listed in %s/%s)", path, rt->n_files,
                      rt->root, DCS_RUNTIME_MANIFEST);
-            return -1;
-        }
-        if (size != e->size ||
-            (hashes && (hash_file(path, hex, &size) != 0 || strcmp(hex, e->hex) != 0))) {
+            rc = -1;
+        } else if (size != e->size ||
+                   (hashes && (hash_file(path, hex, &size) != 0 || strcmp(hex, e->hex) != 0))) {
             snprintf(why, nwhy, "the FMU's own Python runtime is damaged: %s differs from the "
                      "file it was built with (%s; unzip the FMU again)", path,
                      size != e->size ? "another size" : "another SHA-256");
-            return -1;
+            rc = -1;
         }
     }
-    return 0;
+    return rc;
 }
 
 const char *dcs_runtime_root(const DcsRuntime *rt) { return rt->root; }
@@ -384,10 +417,11 @@ size_t dcs_runtime_count(const DcsRuntime *rt, const char *key)
 const char *dcs_runtime_item(const DcsRuntime *rt, const char *key, size_t k)
 {
     size_t i;
-    for (i = 0; i < rt->n_items; i++)
+    const char *found = NULL;
+    for (i = 0; i < rt->n_items && found == NULL; i++)
         if (strcmp(rt->items[i].key, key) == 0 && k-- == 0)
-            return rt->items[i].value;
-    return NULL;
+            found = rt->items[i].value;
+    return found;
 }
 
 int dcs_runtime_compatible(const DcsRuntime *running, const DcsRuntime *other, char *why,
@@ -395,21 +429,22 @@ int dcs_runtime_compatible(const DcsRuntime *running, const DcsRuntime *other, c
 {
     size_t i, j;
     char differ[1024] = "";
+    int ok = 1;
     if (strcmp(running->group_hex[0], other->group_hex[0]) != 0) {
         snprintf(why, nwhy, "its interpreter or standard library (Python %s) is not the one "
                  "running (Python %s)", dcs_runtime_python(other), dcs_runtime_python(running));
-        return 0;
+        ok = 0;
     }
-    for (i = 1; i < other->n_groups; i++)
+    for (i = 1; i < other->n_groups && ok; i++)
         for (j = 1; j < running->n_groups; j++)
             if (strcmp(other->groups[i], running->groups[j]) == 0 &&
                 strcmp(other->group_hex[i], running->group_hex[j]) != 0 &&
                 strlen(differ) + strlen(other->groups[i]) + 3 < sizeof differ)
                 snprintf(differ + strlen(differ), sizeof differ - strlen(differ), "%s%s",
                          differ[0] ? ", " : "", other->groups[i]);
-    if (differ[0]) {
+    if (ok && differ[0]) {
         snprintf(why, nwhy, "its packages %s differ from those running", differ);
-        return 0;
+        ok = 0;
     }
-    return 1;
+    return ok;
 }

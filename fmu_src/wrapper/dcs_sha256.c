@@ -4,13 +4,14 @@
  * Two implementations of the block function: portable C, and on x86-64 the SHA extensions
  * (SHA-NI: Intel since Goldmont / Ice Lake, AMD since Zen), chosen once at run time from
  * CPUID. The portable one runs at ~0.1-0.3 GB/s, the SHA-NI one at ~1.5-2 GB/s: what the
- * runtime check costs at each start (dcs_runtime.c) depends on it.
+ * runtime check costs at each start (dcs_runtime.c) depends on it. -DDCS_NO_SHA_NI builds the
+ * portable one only (benchmarks/bench_standalone.py measures both).
  */
 #include "dcs_sha256.h"
 
 #include <string.h>
 
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__)) && !defined(DCS_NO_SHA_NI)
 #define DCS_SHA_NI 1
 #include <cpuid.h>
 #include <immintrin.h>
@@ -108,25 +109,25 @@ static int has_sha_ni(void)
 #endif
 
 /* blocks 64-byte blocks of p into the state */
+int dcs_sha256_accelerated(void)
+{
+    int accelerated = 0;
+#ifdef DCS_SHA_NI
+    accelerated = has_sha_ni();
+#endif
+    return accelerated;
+}
+
 static void compress_blocks(uint32_t h[8], const unsigned char *p, size_t blocks)
 {
 #ifdef DCS_SHA_NI
     if (has_sha_ni()) {
         compress_ni(h, p, blocks);
-        return;
+        blocks = 0;
     }
 #endif
     for (; blocks > 0; blocks--, p += 64)
         compress(h, p);
-}
-
-int dcs_sha256_accelerated(void)
-{
-#ifdef DCS_SHA_NI
-    return has_sha_ni();
-#else
-    return 0;
-#endif
 }
 
 void dcs_sha256_init(DcsSha256 *s)
