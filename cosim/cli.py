@@ -94,16 +94,24 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
 
 def _cmd_build(args: argparse.Namespace) -> int:
     from drillcosim.api import build_fmus, load_scene
+    from drillcosim.cosim.master.errors import UserError
     from drillcosim.cosim.scenario.build import scene_recipes
+    from drillcosim.fmu_src.platforms import select
 
+    try:
+        select(args.platforms)  # a bad --platforms is bad input: one line, exit 2
+    except ValueError as exc:
+        if args.platforms is not None:
+            raise UserError(f"--platforms: {exc}") from None
     if args.scene:
         recipes = scene_recipes(load_scene(args.scene))
-        for instance, path in build_fmus(args.out, scene=args.scene).items():
+        for instance, path in build_fmus(args.out, scene=args.scene,
+                                         platforms=args.platforms).items():
             kind = "built for the scene" if recipes[instance].base else "the default build"
             print(f"built {path} ({instance}: {kind})")
         return EXIT_OK
     try:
-        built = build_fmus(args.out)  # prints "built <path>" per Python FMU
+        built = build_fmus(args.out, platforms=args.platforms)  # "built <path>" per FMU
     except RuntimeError as exc:  # the C controller needs only a C compiler
         print(f"drillcosim build: StrainControllerC.fmu not built: {exc}", file=sys.stderr)
         return EXIT_FAILED
@@ -346,6 +354,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--scene", metavar="SCENE", help="build the FMUs that run this scene (name "
                    "or path): plant and controllers for its layout (DrillstringPlant_<scene>, "
                    "StrainController_<scene>), or the default ones where they fit")
+    p.add_argument("--platforms", metavar="LIST", default=None,
+                   help="binary platforms of the FMUs, comma-separated: linux64,win64 (win64 "
+                   "cross-compiled with mingw-w64); default: every one whose C compiler is "
+                   "found, a skipped one named in one line")
     p.set_defaults(func=_cmd_build)
     p = sub.add_parser("bench", help="plant work-precision benchmarks -> BENCHMARKS.md")
     p.add_argument("--quick", action="store_true", help="short horizons (< 3 min)")
