@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 FMUS := build/fmus/DrillstringPlant.fmu build/fmus/StrainController.fmu build/fmus/TopDriveController.fmu build/fmus/StateSpaceController.fmu
 C_FMUS := build/fmus/StrainControllerC.fmu
 SRC := $(shell find plant controller fmu_src -name '*.py' -o -name '*.c' -o -name '*.h' -o -name '*.json' 2>/dev/null)
-C_SRC := $(wildcard fmu_src/c_controller/*.c fmu_src/c_controller/*.h fmu_src/c_controller/*.xml fmu_src/wrapper/fmi2/*.h fmu_src/wrapper/dcs_registry.*) fmu_src/build_c.py
+C_SRC := $(wildcard fmu_src/c_controller/*.c fmu_src/c_controller/*.h fmu_src/c_controller/*.xml fmu_src/wrapper/fmi2/*.h fmu_src/wrapper/dcs_registry.* fmu_src/wrapper/dcs_lock.h) fmu_src/build_c.py
 
 .PHONY: all install fmus run test lint bench clean
 

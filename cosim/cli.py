@@ -94,17 +94,26 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
 
 def _cmd_build(args: argparse.Namespace) -> int:
     from drillcosim.api import build_fmus, load_scene
+    from drillcosim.cosim.master.errors import UserError
     from drillcosim.cosim.scenario.build import scene_recipes
+    from drillcosim.fmu_src.platforms import select
 
+    try:
+        select(args.platforms)  # a bad --platforms is bad input: one line, exit 2
+    except ValueError as exc:
+        if args.platforms is not None:
+            raise UserError(f"--platforms: {exc}") from None
     if args.scene:
         recipes = scene_recipes(load_scene(args.scene))
-        built = build_fmus(args.out, scene=args.scene, standalone=args.standalone)
+        built = build_fmus(args.out, scene=args.scene, platforms=args.platforms,
+                           standalone=args.standalone)
         for instance, path in built.items():
             kind = "built for the scene" if recipes[instance].base else "the default build"
             print(f"built {path} ({instance}: {kind}{_self_contained(path)})")
         return EXIT_OK
     try:
-        built = build_fmus(args.out, standalone=args.standalone)  # prints "built <path>"
+        built = build_fmus(args.out, platforms=args.platforms,
+                           standalone=args.standalone)  # "built <path>" per FMU
     except RuntimeError as exc:  # the C controller needs only a C compiler
         print(f"drillcosim build: {exc}", file=sys.stderr)
         return EXIT_FAILED
@@ -360,9 +369,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--scene", metavar="SCENE", help="build the FMUs that run this scene (name "
                    "or path): plant and controllers for its layout (DrillstringPlant_<scene>, "
                    "StrainController_<scene>), or the default ones where they fit")
+    p.add_argument("--platforms", metavar="LIST", default=None,
+                   help="binary platforms of the FMUs, comma-separated: linux64,win64 (win64 "
+                   "cross-compiled with mingw-w64); default: every one whose C compiler is "
+                   "found, a skipped one named in one line")
     p.add_argument("--standalone", action="store_true", help="also write self-contained "
-                   "copies into <out>/standalone/: each carries its own Python runtime (no "
-                   "Python needed on the target; ~115 MB for the plant), see docs/interop.md")
+                   "copies into <out>/standalone/: each carries its own Python runtime for "
+                   "each of its platforms (no Python needed on the target; the plant ~115 MB "
+                   "for linux64, ~80 MB for win64), see docs/interop.md")
     p.set_defaults(func=_cmd_build)
     p = sub.add_parser("bench", help="plant work-precision benchmarks -> BENCHMARKS.md")
     p.add_argument("--quick", action="store_true", help="short horizons (< 3 min)")

@@ -1,12 +1,14 @@
 /*
  * Attaching to, or starting, the Python interpreter the slaves run in.
  *
- * - Python host (fmpy, libcosimpy): the C-API symbols are found in the process (RTLD_DEFAULT)
- *   and its running interpreter is used; it must be CPython 3.DCS_PY_MINOR_MIN to
+ * - Python host (fmpy, libcosimpy): the C-API symbols are found in the process's libpython
+ *   (dcs_process_python: POSIX RTLD_DEFAULT; Windows the loaded python3XX.dll) and its running
+ *   interpreter is used; it must be CPython 3.DCS_PY_MINOR_MIN to
  *   3.DCS_PY_MINOR_MAX (one clear message otherwise).
  * - Host without Python (a C/C++ tool): a Python is found by dcs_discover.c (candidates checked
- *   in child processes started as `python -E -X utf8`), its shared libpython is dlopen()ed
- *   with RTLD_GLOBAL (extension modules such as numpy need its symbols globally) and started
+ *   in child processes started as `python -E -X utf8`), its shared libpython is loaded
+ *   (dcs_library_open: POSIX RTLD_GLOBAL, extension modules such as numpy need its symbols
+ *   globally; Windows with its own folder searched for its dependencies) and started
  *   through the stable ABI only (no PyConfig: its layout differs per version):
  *       Py_IgnoreEnvironmentFlag = 1  PYTHONHOME, PYTHONPATH, ... of the host are ignored
  *                                     (the child check ran with -E, the same rule);
@@ -30,9 +32,7 @@
  */
 #include "dcs_python.h"
 
-#include <dlfcn.h>
 #include <locale.h>
-#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -40,6 +40,8 @@
 #include <wchar.h>
 
 #include "dcs_discover.h"
+#include "dcs_lock.h"
+#include "dcs_platform.h"
 #include "dcs_runtime.h"
 #include "dcs_sha256.h"
 
@@ -64,7 +66,7 @@ void (*p_PyBuffer_Release)(DcsBuffer *);
 
 DcsNames dcs_py;
 
-static pthread_mutex_t g_lock = PTHREAD_MUTEX_INITIALIZER;
+static DcsLock g_lock = DCS_LOCK_INIT;
 static int g_ready = 0;           /* API resolved, interpreter running, names interned */
 static int g_loaded = 0;          /* a libpython is in the process (ours or the host's) */
 static char *g_final_error = NULL; /* a failure once g_loaded: final for the process */
@@ -76,11 +78,12 @@ int dcs_python_started(void)
 }
 
 /* One symbol into *slot (a data pointer; function pointers are copied bytewise, as POSIX
- * allows for dlsym results). 0 if found, else -1 with why set (the first missing one). */
+ * allows for dlsym results and Windows gives both kinds through GetProcAddress). 0 if found,
+ * else -1 with why set (the first missing one). */
 static int resolve_one(void *handle, const char *name, void *slot, size_t size, char *why,
                        size_t nwhy, int rc)
 {
-    void *sym = dlsym(handle, name);
+    void *sym = dcs_library_symbol(handle, name);
     memcpy(slot, &sym, size);
     if (sym == NULL && rc == 0)
         snprintf(why, nwhy, "Python C-API symbol %s not found", name);
@@ -122,53 +125,9 @@ static int version_fits(const char *version)
 static const char *version_of(void *handle)
 {
     const char *(*get)(void) = NULL;
-    void *sym = dlsym(handle, "Py_GetVersion");
+    void *sym = dcs_library_symbol(handle, "Py_GetVersion");
     memcpy(&get, &sym, sizeof get);
     return get != NULL ? get() : "?";
-}
-
-/* UTF-8 bytes -> wchar_t (UTF-32 on Linux), invalid bytes as U+DC80..U+DCFF (surrogateescape,
- * as Python decodes file names). 0 on success. Runs before Python exists: Py_DecodeLocale
- * would need PyMem_RawFree, not in the limited API of 3.10. */
-static int utf8_to_wide(const char *s, wchar_t *out, size_t n)
-{
-    const unsigned char *p = (const unsigned char *)s;
-    size_t k = 0;
-    while (*p && k + 1 < n) {
-        unsigned c = p[0], cp = 0, len = 0, i;
-        if (c < 0x80) {
-            cp = c;
-            len = 1;
-        } else if ((c & 0xE0) == 0xC0 && c >= 0xC2) {
-            cp = c & 0x1F;
-            len = 2;
-        } else if ((c & 0xF0) == 0xE0) {
-            cp = c & 0x0F;
-            len = 3;
-        } else if ((c & 0xF8) == 0xF0 && c <= 0xF4) {
-            cp = c & 0x07;
-            len = 4;
-        }
-        for (i = 1; i < len && len > 1; i++) {
-            if ((p[i] & 0xC0) != 0x80) {
-                len = 0;
-                break;
-            }
-            cp = (cp << 6) | (p[i] & 0x3F);
-        }
-        if (len > 2 && (cp < (len == 3 ? 0x800u : 0x10000u) || cp > 0x10FFFF ||
-                        (cp >= 0xD800 && cp <= 0xDFFF)))
-            len = 0; /* overlong, out of range or a surrogate */
-        if (len == 0) {
-            out[k++] = (wchar_t)(0xDC00 + p[0]);
-            p++;
-        } else {
-            out[k++] = (wchar_t)cp;
-            p += len;
-        }
-    }
-    out[k] = L'\0';
-    return *p == '\0' ? 0 : -1;
 }
 
 /* Start the interpreter whose program name is executable. own_runtime: a self-contained FMU's
@@ -182,8 +141,8 @@ static int start_interpreter(const char *executable, int own_runtime, const char
     char *saved = NULL;
     const char *current = setlocale(LC_CTYPE, NULL);
     int rc = 0;
-    if (utf8_to_wide(executable, program, sizeof program / sizeof program[0]) != 0 ||
-        (home != NULL && utf8_to_wide(home, home_w, sizeof home_w / sizeof home_w[0]) != 0)) {
+    if (dcs_utf8_to_wide(executable, program, sizeof program / sizeof program[0]) != 0 ||
+        (home != NULL && dcs_utf8_to_wide(home, home_w, sizeof home_w / sizeof home_w[0]) != 0)) {
         snprintf(why, nwhy, "its path is too long: %.200s...", executable);
         rc = -1;
     } else {
@@ -213,19 +172,19 @@ static int start_interpreter(const char *executable, int own_runtime, const char
 static int load_candidate(const DcsPython *py, void *ctx, char *why, size_t nwhy, int *stop)
 {
     void *lib;
+    char error[512];
     int rc = -1;
     (void)ctx;
-    lib = dlopen(py->libpython, RTLD_NOW | RTLD_GLOBAL);
+    lib = dcs_library_open(py->libpython, error, sizeof error);
     if (lib == NULL) {
-        const char *e = dlerror();
         snprintf(why, nwhy, "Python %s, but its libpython %s cannot be loaded: %s", py->version,
-                 py->libpython, e != NULL ? e : "unknown error");
+                 py->libpython, error);
     } else if (!version_fits(version_of(lib))) {
         snprintf(why, nwhy, "its libpython %s is Python %.20s, not 3.%d to 3.%d",
                  py->libpython, version_of(lib), DCS_PY_MINOR_MIN, DCS_PY_MINOR_MAX);
-        dlclose(lib);
+        dcs_library_close(lib);
     } else if (resolve_api(lib, why, nwhy) != 0) {
-        dlclose(lib);
+        dcs_library_close(lib);
     } else {
         *stop = 1; /* from here on this libpython stays in the process */
         g_loaded = 1;
@@ -327,22 +286,23 @@ static void requirements(const char *resources, char *out, size_t n)
  * fix it. */
 static int discover(const char *unzip_dir, DcsLoad load, const char *used, char **text)
 {
-    char requires[512], resources[DCS_PATH_MAX], *report = NULL, *fix = NULL;
-    const char *xdg = getenv("XDG_CONFIG_HOME");
-    const char *cfg = xdg != NULL && xdg[0] == '/' ? xdg : "~/.config";
+    char requires[512], resources[DCS_PATH_MAX], cfg[DCS_PATH_MAX], *report = NULL;
+    char *fix = NULL;
     const char *req;
     DcsWant want = {DCS_PY_MINOR_MIN, DCS_PY_MINOR_MAX, DCS_BUILD_MINOR};
     int rc;
     snprintf(resources, sizeof resources, "%s/resources", unzip_dir);
     requirements(resources, requires, sizeof requires);
     req = requires[0] ? requires : "nothing";
+    if (dcs_user_config_file(cfg, sizeof cfg) != 0)
+        snprintf(cfg, sizeof cfg, "the user's drillcosim/drillcosim.conf");
     rc = dcs_discover_python(unzip_dir, &want, requires, DCS_BUILD_PYTHON, load, NULL, used,
                              &report);
     if (rc != 0)
         fix = dcs_format("How to fix: install %s into a CPython 3.%d to 3.%d on PATH "
                          "(python3.X -m pip install %s), or name such a Python: "
                          "$DRILLCOSIM_PYTHON=/path/to/python3, or a line 'python = "
-                         "/path/to/python3' in %s/drillcosim/drillcosim.conf. PYTHONHOME and "
+                         "/path/to/python3' in %s. PYTHONHOME and "
                          "PYTHONPATH are ignored. `drillcosim doctor FMU` prints this report; "
                          "see docs/interop.md of drillcosim.", req, DCS_PY_MINOR_MIN,
                          DCS_PY_MINOR_MAX, req, cfg);
@@ -448,13 +408,12 @@ static int load_runtime(const DcsRuntime *rt, const char *head, char *why, size_
     size_t k, n = dcs_runtime_count(rt, "preload");
     void *lib = NULL;
     int rc = 0;
-    const char *e;
+    char error[512];
     for (k = 0; k <= n && rc == 0; k++) { /* the preloads, then the library itself */
         const char *file = k < n ? dcs_runtime_item(rt, "preload", k) : dcs_runtime_library(rt);
-        lib = dlopen(file, RTLD_NOW | RTLD_GLOBAL);
+        lib = dcs_library_open(file, error, sizeof error);
         if (lib == NULL) {
-            e = dlerror();
-            snprintf(why, nwhy, "%scannot load %s: %s", head, file, e != NULL ? e : "?");
+            snprintf(why, nwhy, "%scannot load %s: %s", head, file, error);
             rc = -1;
         }
     }
@@ -468,7 +427,7 @@ static int load_runtime(const DcsRuntime *rt, const char *head, char *why, size_
     if (rc == 0)
         g_loaded = 1; /* from here on this libpython stays in the process */
     else if (lib != NULL)
-        dlclose(lib);
+        dcs_library_close(lib);
     return rc;
 }
 
@@ -566,10 +525,12 @@ static int join_runtime(DcsInstance *in, char *why, size_t nwhy)
  * message listing every candidate tried, what it lacked and how to fix it. */
 static int start_in_plain_host(DcsInstance *in, char **message)
 {
-    char unzip[DCS_PATH_MAX], *slash, *text = NULL;
+    char unzip[DCS_PATH_MAX], *slash = NULL, *p, *text = NULL;
     int rc;
     snprintf(unzip, sizeof unzip, "%s", in->resources);
-    slash = strrchr(unzip, '/');
+    for (p = unzip; *p; p++)
+        if (dcs_is_dir_sep(*p))
+            slash = p;
     if (slash != NULL && slash != unzip)
         *slash = '\0'; /* <unzip>/resources -> <unzip> */
     rc = discover(unzip, load_candidate, "used", &text);
@@ -592,23 +553,24 @@ int dcs_python_ready(DcsInstance *in)
     int rc = 0;
     char why[4096] = "";
     char *message = NULL;
+    void *process_python = NULL;
     DcsRuntime *rt = NULL;
     int started_own = 0;
-    pthread_mutex_lock(&g_lock);
+    dcs_lock(&g_lock);
     if (g_ready) {
         rc = 0;
     } else if (g_final_error != NULL) {
         rc = -1;
-    } else if (dlsym(RTLD_DEFAULT, "Py_IsInitialized") != NULL) {
+    } else if (dcs_process_python(&process_python)) {
         g_loaded = 1; /* the process's own libpython: nothing else can be tried */
-        if (!version_fits(version_of(RTLD_DEFAULT))) {
+        if (!version_fits(version_of(process_python))) {
             snprintf(why, sizeof why, "this process runs Python %.20s, but the FMU's wrapper "
                      "runs on CPython 3.%d to 3.%d: load the FMU from a process of one of "
-                     "these versions", version_of(RTLD_DEFAULT), DCS_PY_MINOR_MIN,
+                     "these versions", version_of(process_python), DCS_PY_MINOR_MIN,
                      DCS_PY_MINOR_MAX);
             rc = -1;
         } else {
-            rc = resolve_api(RTLD_DEFAULT, why, sizeof why);
+            rc = resolve_api(process_python, why, sizeof why);
         }
         if (rc == 0 && !p_Py_IsInitialized()) {
             /* a host that links libpython without starting it: start it as a plain host */
@@ -647,7 +609,7 @@ int dcs_python_ready(DcsInstance *in)
                      g_final_error != NULL ? g_final_error
                      : message != NULL ? message : "fmi2Instantiate: Python cannot be started");
     free(message);
-    pthread_mutex_unlock(&g_lock);
+    dcs_unlock(&g_lock);
     return rc;
 }
 
@@ -661,7 +623,7 @@ FMI2_Export int drillcosim_doctor(const char *unzip_dir, char *out, size_t size)
     DcsRuntime *rt = NULL;
     int rc = -1, own;
     if (unzip_dir != NULL && out != NULL && size > 0) {
-        pthread_mutex_lock(&g_lock); /* the discovery's buffers are shared */
+        dcs_lock(&g_lock); /* the discovery's buffers are shared */
         snprintf(resources, sizeof resources, "%s/resources", unzip_dir);
         own = dcs_runtime_open(resources, &rt, why, sizeof why);
         if (own > 0 && dcs_runtime_verify(rt, 1, why, sizeof why) != 0)
@@ -679,7 +641,7 @@ FMI2_Export int drillcosim_doctor(const char *unzip_dir, char *out, size_t size)
         if (own != 0)
             rc = own > 0 ? 1 : 0;
         dcs_runtime_free(rt);
-        pthread_mutex_unlock(&g_lock);
+        dcs_unlock(&g_lock);
         snprintf(out, size, "%s", text != NULL ? text : "(out of memory)\n");
         free(text);
     }

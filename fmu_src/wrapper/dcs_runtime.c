@@ -26,15 +26,13 @@
  * standard library, its extension modules and libraries). Two runtimes are compatible when
  * their bases are identical and every group both carry is identical (dcs_runtime_compatible).
  */
-#define _FILE_OFFSET_BITS 64
 #include "dcs_runtime.h"
 
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
-#include <sys/types.h>
 
+#include "dcs_platform.h"
 #include "dcs_sha256.h"
 
 #ifdef _WIN32
@@ -91,13 +89,17 @@ static char *join(const char *root, const char *rel)
     return d;
 }
 
-/* Size of a regular file, -1 if it is missing or not a regular file. */
+/* Size of a regular file, -1 if it is missing or not a regular file (the runtime's files
+ * are far below 2 GB: ftell's long suffices on Windows too). */
 static long long file_size(const char *path)
 {
-    struct stat st;
     long long size = -1;
-    if (stat(path, &st) == 0 && S_ISREG(st.st_mode))
-        size = (long long)st.st_size;
+    FILE *f = dcs_is_regular_file(path) == 1 ? dcs_fopen(path, "rb") : NULL;
+    if (f != NULL) {
+        if (fseek(f, 0, SEEK_END) == 0)
+            size = (long long)ftell(f);
+        fclose(f);
+    }
     return size;
 }
 
@@ -106,7 +108,7 @@ static char *read_all(const char *path, size_t *len)
 {
     long long size = file_size(path);
     char *buf = NULL;
-    FILE *f = size >= 0 && size <= MANIFEST_MAX ? fopen(path, "rb") : NULL;
+    FILE *f = size >= 0 && size <= MANIFEST_MAX ? dcs_fopen(path, "rb") : NULL;
     if (f != NULL) {
         buf = (char *)malloc((size_t)size + 1);
         if (buf != NULL && fread(buf, 1, (size_t)size, f) != (size_t)size) {
@@ -321,7 +323,6 @@ int dcs_runtime_open(const char *resources, DcsRuntime **out, char *why, size_t 
     char folder[4096], file[4200];
     char *text = NULL;
     size_t len = 0;
-    struct stat st;
     DcsRuntime *rt = NULL;
     int rc = 0;
     *out = NULL;
@@ -329,7 +330,7 @@ int dcs_runtime_open(const char *resources, DcsRuntime **out, char *why, size_t 
     snprintf(folder, sizeof folder, "%s/%s/%s", resources, DCS_RUNTIME_DIR,
              DCS_RUNTIME_PLATFORM);
     snprintf(file, sizeof file, "%s/%s", folder, DCS_RUNTIME_MANIFEST);
-    if (stat(folder, &st) == 0 && S_ISDIR(st.st_mode)) { /* else: no runtime, rc 0 */
+    if (dcs_is_regular_file(folder) == -1) { /* a folder; else: no runtime, rc 0 */
         text = read_all(file, &len);
         rt = (DcsRuntime *)calloc(1, sizeof *rt);
         if (text == NULL) {
@@ -359,7 +360,7 @@ static int hash_file(const char *path, char hex[65], long long *size)
     DcsSha256 s;
     size_t k;
     int rc = -1;
-    FILE *f = fopen(path, "rb");
+    FILE *f = dcs_fopen(path, "rb");
     if (f != NULL) {
         dcs_sha256_init(&s);
         *size = 0;
