@@ -13,6 +13,8 @@
    times each after one warm-up of each (numba's cache and the native images warm, as after a
    first run on a machine), on the same machine in the same run; the wrapper's own log line
    of the self-contained start gives the CPU time of the check and of the interpreter start.
+   With ``--wine`` the same under wine: the win64 binaries in the mingw-built C host, the
+   regular FMU running in the Windows bench's CPython (``tests/support/windows_bench.py``).
 
 The FMUs are built fresh into a temporary folder (the runtime comes from the per-user cache of
 runtimes when it was assembled before). Prints a markdown section (for BENCHMARKS.md).
@@ -101,6 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--no-win64", action="store_true", help="leave out the win64 runtime "
                         "(its embeddable CPython and wheels are downloaded with pip)")
+    parser.add_argument("--wine", action="store_true", help="also compare the first "
+                        "fmi2Instantiate under wine (needs the Windows bench of the tests)")
     args = parser.parse_args(argv)
     started = _dt.datetime.now()
     tmp = Path(tempfile.mkdtemp(prefix="bench_standalone_"))
@@ -190,8 +194,54 @@ def main(argv: list[str] | None = None) -> int:
             f"slave's import and the native images (as for the regular FMU). The regular FMU "
             f"checks its Python in a child process first (`python -E -X utf8 -c ...`: version, "
             f"libpython, `import numpy scipy numba`)."]
+    if args.wine:
+        out += wine_first_instantiate(fmus["DrillstringPlant"][0], tmp, args.repeat)
     print("\n".join(out))
     return 0
+
+
+def wine_first_instantiate(plant: Path, tmp: Path, repeat: int) -> list[str]:
+    """The same comparison under wine: the regular plant's win64 binary with the bench's
+    Windows CPython named by ``DRILLCOSIM_PYTHON``, and the self-contained one with its win64
+    runtime, in the plain C host built with mingw-w64 (its own timer: QueryPerformanceCounter)."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from support import cosim_host, windows_bench
+
+    bench = windows_bench.prepare(log=lambda *_: None)
+    os.environ.setdefault("DRILLCOSIM_WIN64_DOWNLOADS", str(
+        windows_bench.bench_dir() / "downloads" / "win_amd64-cp313"))
+    standalone = make_standalone(plant, tmp / "wine" / plant.name, ("win64",))
+    exe = cosim_host.compile_host(tmp / "wine", cc=windows_bench.find_mingw() or "")
+    specs = {}
+    for kind, fmu in (("regular", plant), ("self-contained", standalone)):
+        folder = tmp / "wine" / kind
+        with zipfile.ZipFile(fmu) as zf:
+            zf.extractall(folder)
+        specs[kind] = tmp / "wine" / f"{kind}.spec"
+        specs[kind].write_text(f"step 0.001\nstop 0\nfmu plant DrillstringPlant "
+                               f"{windows_bench.windows_path(folder)}\n")
+    envs = {"regular": {"DRILLCOSIM_PYTHON": windows_bench.windows_path(bench.python)},
+            "self-contained": {}}
+    times: dict[str, list[float]] = {k: [] for k in specs}
+    for i in range(repeat + 1):
+        for kind, spec in specs.items():
+            proc = bench.run(exe, [windows_bench.windows_path(spec)], env=envs[kind],
+                             timeout=3600)
+            found = re.search(r"host: fmi2Instantiate plant ([\d.]+) s", proc.stderr)
+            if proc.returncode != 0 or found is None:
+                raise RuntimeError(f"wine, {kind}: exit {proc.returncode}\n"
+                                   f"{proc.stderr[-2000:]}")
+            if i > 0:  # the first: numba compiles the plant under wine (shared cache)
+                times[kind].append(float(found.group(1)))
+    med = {k: statistics.median(v) for k, v in times.items()}
+    rows = ["", f"Under wine 8 (`--wine`: the win64 binaries, the mingw-built C host, median of "
+            f"{repeat} after one warm-up each):", "",
+            "| FMU | fmi2Instantiate | min | max |", "|---|---:|---:|---:|"]
+    rows += [f"| {kind} | {med[kind]:.3f} s | {min(v):.3f} s | {max(v):.3f} s |"
+             for kind, v in times.items()]
+    rows += ["", f"Self-contained / regular under wine: "
+             f"{med['self-contained'] / med['regular']:.2f}x."]
+    return rows
 
 
 if __name__ == "__main__":

@@ -25,13 +25,16 @@ STOP = 0.02  #: [s] (200 steps of 0.1 ms: numba compiles the plant under wine on
 
 @pytest.fixture(scope="module")
 def bench():
-    try:
-        from support import windows_bench
-    except ImportError:  # the bench of the win64 work (branch i30a) not merged
-        if os.environ.get("CI") == "true":
-            raise
-        pytest.skip("no Windows bench (tests/support/windows_bench.py)")
-    return windows_bench.require()
+    """The prepared bench; the win64 runtime's wheels are taken from its persistent downloads
+    (``$DRILLCOSIM_WIN64_DOWNLOADS``, unless set)."""
+    from support import windows_bench
+
+    found = windows_bench.require()
+    wheels = windows_bench.bench_dir() / "downloads" / "win_amd64-cp313"
+    with pytest.MonkeyPatch.context() as mp:
+        if not os.environ.get("DRILLCOSIM_WIN64_DOWNLOADS"):
+            mp.setenv("DRILLCOSIM_WIN64_DOWNLOADS", str(wheels))
+        yield found
 
 
 def test_the_standalone_pair_runs_under_wine_with_no_python_equal_to_linux(
