@@ -225,12 +225,13 @@ def wine_first_instantiate(plant: Path, tmp: Path, repeat: int) -> list[str]:
     times: dict[str, list[float]] = {k: [] for k in specs}
     for i in range(repeat + 1):
         for kind, spec in specs.items():
-            proc = bench.run(exe, [windows_bench.windows_path(spec)], env=envs[kind],
-                             timeout=3600)
-            found = re.search(r"host: fmi2Instantiate plant ([\d.]+) s", proc.stderr)
-            if proc.returncode != 0 or found is None:
-                raise RuntimeError(f"wine, {kind}: exit {proc.returncode}\n"
-                                   f"{proc.stderr[-2000:]}")
+            out = tmp / "wine" / f"{kind}.csv"
+            code, _rows, log = cosim_host.run_to_file(
+                [bench.wine, str(exe), windows_bench.windows_path(spec),
+                 windows_bench.windows_path(out)], out, bench.env(envs[kind]), tmp)
+            found = re.search(r"host: fmi2Instantiate plant ([\d.]+) s", log)
+            if code != 0 or found is None:
+                raise RuntimeError(f"wine, {kind}: exit {code}\n{log[-2000:]}")
             if i > 0:  # the first: numba compiles the plant under wine (shared cache)
                 times[kind].append(float(found.group(1)))
     med = {k: statistics.median(v) for k, v in times.items()}

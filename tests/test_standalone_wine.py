@@ -57,12 +57,15 @@ def test_the_standalone_pair_runs_under_wine_with_no_python_equal_to_linux(
     # under wine: the mingw-built host, no Python on PATH / WINEPATH
     exe = cosim_host.compile_host(tmp_path, cc=windows_bench.find_mingw())
     spec = cosim_host.write_spec(loop, win, tmp_path / "win.spec")
-    run = bench.run(exe, [windows_bench.windows_path(spec)], timeout=3600,
-                    env={"WINEPATH": "", "PYTHONHOME": "", "PYTHONPATH": "",
-                         "DRILLCOSIM_CACHE": os.environ.get("DRILLCOSIM_CACHE", "")})
-    assert run.returncode == 0, (run.stdout[-1000:], run.stderr[-3000:])
-    assert "the FMU's own Python runtime (Python 3.13" in run.stderr
-    rows_win, rows_linux = cosim_host.rows(run.stdout), cosim_host.rows(linux.stdout)
+    out = tmp_path / "win.csv"
+    env = bench.env({"WINEPATH": "", "DRILLCOSIM_PYTHON": ""})
+    code, text, log = cosim_host.run_to_file(
+        [bench.wine, str(exe), windows_bench.windows_path(spec), windows_bench.windows_path(out)],
+        out, env, tmp_path)
+    assert code == 0, log[-3000:]
+    assert "the FMU's own Python runtime (Python 3.13" in log
+    assert "joins the one running" in log
+    rows_win, rows_linux = cosim_host.rows(text), cosim_host.rows(linux.stdout)
     assert rows_win.shape == rows_linux.shape == (loop.n_steps + 1, len(loop.outputs) + 1)
     peak = np.max(np.abs(rows_linux), axis=0)
     worst = np.max(np.abs(rows_win - rows_linux) - 1e-12 * peak, axis=0)

@@ -181,7 +181,8 @@ def _build_distribution(root: Path, dist: metadata.Distribution) -> None:
     """The selected files of one distribution under ``root/<site-packages>``, compiled."""
     site = root / _site_packages()
     base = Path(dist.locate_file(""))
-    for rel in select((str(f) for f in dist.files or []), imported_packages()):
+    for rel in select((str(f) for f in dist.files or []), imported_packages(),
+                      lambda rel: (base / rel).read_bytes()):
         if not rel.startswith(tuple(PACKAGE_FILES_DROPPED)):
             _copy(base / rel, site / rel)
     compileall.compile_dir(str(site), quiet=2, workers=1, ddir="",

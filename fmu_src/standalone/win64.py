@@ -161,7 +161,8 @@ def assemble(root: Path, requires: tuple[str, ...], python: Path,
         if name.lower() not in needed:
             continue
         with zipfile.ZipFile(wheel) as zf:
-            for rel in select([n for n in zf.namelist() if not n.endswith("/")], packages):
+            for rel in select([n for n in zf.namelist() if not n.endswith("/")], packages,
+                              zf.read):
                 target = site / rel
                 target.parent.mkdir(parents=True, exist_ok=True)
                 target.write_bytes(zf.read(rel))

@@ -17,7 +17,7 @@ from fmpy import read_model_description
 
 from drillcosim.fmu_src.wrapper import HERE as WRAPPER_DIR
 
-__all__ = ["SOURCE", "compile_host", "rows", "run", "write_spec"]
+__all__ = ["SOURCE", "compile_host", "rows", "run", "run_to_file", "write_spec"]
 
 SOURCE = Path(__file__).resolve().parent / "fmi2_cosim_host.c"
 
@@ -80,3 +80,17 @@ def run(cmd: Sequence[str], env: Mapping[str, str], cwd: Path,
     """Run the host command (``[host, spec]``, or under wine) with stdin the null device."""
     return subprocess.run(list(cmd), env=dict(env), cwd=cwd, capture_output=True, text=True,
                           timeout=timeout, stdin=subprocess.DEVNULL)
+
+
+def run_to_file(cmd: Sequence[str], out: Path, env: Mapping[str, str], cwd: Path,
+                timeout: float = 3600) -> tuple[int, str, str]:
+    """Run the host with its rows written to ``out`` and its log to ``out.log`` (the last
+    argument of ``cmd`` is ``out`` as the host sees it) and the standard handles on the null
+    device: a wineserver the run starts keeps no pipe of ours open. Returns (exit status,
+    rows text, log text)."""
+    proc = subprocess.run(list(cmd), env=dict(env), cwd=cwd, stdin=subprocess.DEVNULL,
+                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                          timeout=timeout)
+    log = Path(f"{out}.log")
+    return (proc.returncode, out.read_text() if out.is_file() else "",
+            log.read_text(errors="replace") if log.is_file() else "")

@@ -2,8 +2,11 @@
  * A plain C FMI 2.0 co-simulation host of several FMUs for the tests: no Python in the process.
  * Builds with gcc/clang on Linux and with mingw-w64 for Windows (run under wine).
  *
- *   fmi2_cosim_host SPEC
+ *   fmi2_cosim_host SPEC [OUT]
  *
+ * With OUT the rows go to the file OUT and the log lines to OUT.log instead of stdout and
+ * stderr (under wine: the standard handles can then be the null device, and no pipe is left
+ * open by a wineserver the run started).
  * SPEC is a text file, one item a line (fields separated by one space; the last field of
  * "fmu" and "string" lines is the rest of the line):
  *   step H                 communication step [s] (time counted in steps: t_k = k * H)
@@ -105,17 +108,19 @@ typedef struct {
 
 static Fmu fmus[MAX_FMUS];
 static int n_fmus;
+static FILE *out_rows, *out_log;
 
 static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status,
                    fmi2String category, fmi2String message, ...)
 {
     va_list ap;
     (void)env;
-    fprintf(stderr, "[%s %d %s] ", name, (int)status, category);
+    fprintf(out_log, "[%s %d %s] ", name, (int)status, category);
     va_start(ap, message);
-    vfprintf(stderr, message, ap);
+    vfprintf(out_log, message, ap);
     va_end(ap);
-    fputc('\n', stderr);
+    fputc('\n', out_log);
+    fflush(out_log);
 }
 
 static int fmu_index(const char *name)
@@ -124,7 +129,7 @@ static int fmu_index(const char *name)
     for (i = 0; i < n_fmus; i++)
         if (strcmp(fmus[i].name, name) == 0)
             return i;
-    fprintf(stderr, "unknown FMU %s\n", name);
+    fprintf(out_log, "unknown FMU %s\n", name);
     exit(2);
 }
 
@@ -145,7 +150,7 @@ static int load(Fmu *f)
     snprintf(path, sizeof path, "%s/binaries/%s/%s%s", f->dir, PLATFORM, f->id, SUFFIX);
     lib = open_library(path);
     if (lib == NULL) {
-        fprintf(stderr, "cannot load %s\n", path);
+        fprintf(out_log, "cannot load %s\n", path);
         return -1;
     }
 #define GET(field, name) f->field = (name##TYPE *)symbol(lib, #name)
@@ -195,8 +200,17 @@ int main(int argc, char **argv)
     fmi2Status st = fmi2OK;
     fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
     FILE *spec;
-    if (argc != 2 || (spec = fopen(argv[1], "r")) == NULL) {
-        fprintf(stderr, "usage: %s SPEC\n", argv[0]);
+    out_rows = stdout;
+    out_log = stderr;
+    if (argc == 3) {
+        char log_name[4200];
+        snprintf(log_name, sizeof log_name, "%s.log", argv[2]);
+        out_rows = fopen(argv[2], "w");
+        out_log = fopen(log_name, "w");
+    }
+    if (argc < 2 || argc > 3 || out_rows == NULL || out_log == NULL ||
+        (spec = fopen(argv[1], "r")) == NULL) {
+        fprintf(stderr, "usage: %s SPEC [OUT]\n", argv[0]);
         return 2;
     }
     while (fgets(line, sizeof line, spec) != NULL) {
@@ -227,13 +241,13 @@ int main(int argc, char **argv)
             p->vr = (fmi2ValueReference)strtoul(c, NULL, 10);
             snprintf(p->text, sizeof p->text, "%s", line + skip);
         } else if (line[0] != '\0' && line[0] != '#') {
-            fprintf(stderr, "bad SPEC line: %s\n", line);
+            fprintf(out_log, "bad SPEC line: %s\n", line);
             return 2;
         }
     }
     fclose(spec);
     if (h <= 0 || n_fmus == 0) {
-        fprintf(stderr, "SPEC needs step > 0 and an fmu\n");
+        fprintf(out_log, "SPEC needs step > 0 and an fmu\n");
         return 2;
     }
     for (i = 0; i < n_fmus; i++) {
@@ -245,7 +259,8 @@ int main(int argc, char **argv)
         t0 = seconds();
         fmus[i].c = fmus[i].instantiate(fmus[i].name, fmi2CoSimulation, "", uri, &cb,
                                         fmi2False, fmi2True);
-        fprintf(stderr, "host: fmi2Instantiate %s %.6f s\n", fmus[i].name, seconds() - t0);
+        fprintf(out_log, "host: fmi2Instantiate %s %.6f s\n", fmus[i].name, seconds() - t0);
+        fflush(out_log);
         if (fmus[i].c == NULL)
             return 3;
     }
@@ -270,20 +285,20 @@ int main(int argc, char **argv)
             st = t->set_real(t->c, &links[i].dst_vr, 1, &values[i]);
         }
         if (st < fmi2Error)
-            printf("%.17g", k * h);
+            fprintf(out_rows, "%.17g", k * h);
         for (i = 0; i < n_outs && st < fmi2Error; i++) {
             Fmu *f = &fmus[outs[i].fmu];
             double v = 0;
             st = f->get_real(f->c, &outs[i].vr, 1, &v);
-            printf(",%.17g", v);
+            fprintf(out_rows, ",%.17g", v);
         }
         if (st < fmi2Error)
-            printf("\n");
+            fprintf(out_rows, "\n");
         for (i = 0; i < n_fmus && k < n_steps && st < fmi2Error; i++)
             st = fmus[i].do_step(fmus[i].c, (k) * h, (k + 1) * h - k * h, fmi2True);
     }
     if (st >= fmi2Error) {
-        fprintf(stderr, "a call returned status %d\n", (int)st);
+        fprintf(out_log, "a call returned status %d\n", (int)st);
         rc = 4;
     }
     for (i = 0; i < n_fmus; i++) {
@@ -291,5 +306,7 @@ int main(int argc, char **argv)
             fmus[i].terminate(fmus[i].c);
         fmus[i].free_instance(fmus[i].c);
     }
+    fclose(out_rows);
+    fclose(out_log);
     return rc;
 }
