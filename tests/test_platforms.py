@@ -221,3 +221,35 @@ def test_what_each_binary_needs(project_fmus: dict[str, Path], c_controller_fmu:
                     assert (elf_class, machine) == (2, 62)  # ELFCLASS64, EM_X86_64
                     assert not any("python" in n for n in needed), needed
     assert MODEL_IDENTIFIER == c_controller_fmu.stem
+
+
+def test_doctor_lists_the_platforms_and_what_each_uses(project_fmus: dict[str, Path],
+                                                       tmp_path: Path) -> None:
+    mingw()
+    from drillcosim.fmu_src.wrapper.doctor import diagnose
+
+    fmu = project_fmus["StrainController"]
+    d = diagnose(fmu)
+    assert [(p.platform, p.here, p.binary) for p in d.platforms] == [
+        ("linux64", True, "binaries/linux64/StrainController.so"),
+        ("win64", False, "binaries/win64/StrainController.dll")]
+    assert d.platforms[0].uses == ("in a host without Python: " + next(
+        ln.split(": ", 1)[1] for ln in d.c_host_report.splitlines()
+        if ln.endswith("would be used")) if d.usable else
+        "no usable Python for a host without one (see below)")
+    assert d.platforms[1].uses.startswith("a 64-bit CPython 3.10-3.13 for Windows with numpy:")
+    assert "%DRILLCOSIM_PYTHON%" in d.platforms[1].uses
+    assert "Software\\Python\\PythonCore\\3.X" in d.platforms[1].uses
+    lines = d.text(fmu).splitlines()
+    assert lines[1] == ("Platforms: linux64, win64 (none for 32-bit hosts: a 32-bit FMI tool "
+                        "cannot load this FMU)")
+    # an FMU without this machine's binary: bad input, one line
+    windows_only = tmp_path / "StrainController.fmu"
+    with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(windows_only, "w") as dst:
+        for info in src.infolist():
+            if not info.filename.startswith("binaries/linux64/"):
+                dst.writestr(info, src.read(info.filename))
+    proc = subprocess.run([sys.executable, "-m", "drillcosim", "doctor", str(windows_only)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and proc.stderr.strip().count("\n") == 0, proc.stderr
+    assert "no binary for this machine (linux64); it carries win64" in proc.stderr

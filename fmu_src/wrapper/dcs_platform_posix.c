@@ -26,6 +26,8 @@ extern char **environ;
 const char dcs_path_list_sep = ':';
 const char *const dcs_python_plain_names[] = {"python3", NULL};
 const char dcs_executable_suffix[] = "";
+const DcsWording dcs_wording = {"python3.X -m pip install", "/path/to/python3",
+                                "$DRILLCOSIM_PYTHON"};
 
 /* ------------------------------------------------------------------ shared libraries */
 void *dcs_library_open(const char *path, char *why, size_t nwhy)

@@ -22,6 +22,8 @@ const char dcs_path_list_sep = ';';
  * python3.exe and python3.X.exe aliases. */
 const char *const dcs_python_plain_names[] = {"python.exe", "python3.exe", NULL};
 const char dcs_executable_suffix[] = ".exe";
+const DcsWording dcs_wording = {"py -3.X -m pip install", "C:\\...\\python.exe",
+                                "%DRILLCOSIM_PYTHON%"};
 
 #define WIDE_MAX 32768 /* the longest path the wide API takes */
 
@@ -110,21 +112,23 @@ static int is_libpython(const wchar_t *file)
 
 int dcs_process_python(void **lib)
 {
-    HMODULE mods[1024];
+    static HMODULE mods[4096];
     DWORD needed = 0, i, count;
-    wchar_t file[MAX_PATH + 1];
+    wchar_t *file = (wchar_t *)malloc(WIDE_MAX * sizeof *file);
     *lib = NULL;
-    if (!K32EnumProcessModules(GetCurrentProcess(), mods, sizeof mods, &needed))
+    if (file == NULL ||
+        !K32EnumProcessModules(GetCurrentProcess(), mods, sizeof mods, &needed))
         needed = 0;
     count = needed / sizeof mods[0];
     if (count > sizeof mods / sizeof mods[0])
         count = sizeof mods / sizeof mods[0];
     for (i = 0; i < count && *lib == NULL; i++) {
-        DWORD n = GetModuleFileNameW(mods[i], file, MAX_PATH);
-        if (n > 0 && n < MAX_PATH && is_libpython(file) &&
+        DWORD n = GetModuleFileNameW(mods[i], file, WIDE_MAX);
+        if (n > 0 && n < WIDE_MAX && is_libpython(file) &&
             GetProcAddress(mods[i], "Py_IsInitialized") != NULL)
             *lib = (void *)mods[i];
     }
+    free(file);
     return *lib != NULL;
 }
 
