@@ -2,7 +2,7 @@
 
     python benchmarks/bench_wine.py [--steps 4000] [--repeat 3] [--fmu-dir build/fmus]
 
-The same plain C host (``fmu_step_timer.c``; no Python in the process, so a Python FMU finds and
+The same plain C host (``tests/support/fmi2_probe.c``; no Python in the process, so a Python FMU finds and
 starts its Python as in Simulink or fmusim) is built with gcc for Linux and with mingw-w64 for
 Windows (run under wine, the Windows bench of ``tests/support/windows_bench.py``). Per step:
 ``fmi2SetReal`` of the inputs, ``fmi2DoStep``, ``fmi2GetReal`` of every output.
@@ -39,7 +39,7 @@ from fmpy import read_model_description  # noqa: E402
 
 from support import windows_bench  # noqa: E402
 
-TIMER = Path(__file__).resolve().parent / "fmu_step_timer.c"
+TIMER = ROOT / "tests" / "support" / "fmi2_probe.c"
 FMI2 = ROOT / "fmu_src" / "wrapper" / "fmi2"
 
 
@@ -112,7 +112,8 @@ def main(argv: list[str] | None = None) -> int:
         wall = time.perf_counter() - start
         if proc.returncode != 0:
             raise RuntimeError(f"{side} {name}: exit {proc.returncode}\n{proc.stderr[-3000:]}")
-        return float(proc.stdout.split()[0]), wall
+        timing = [ln for ln in proc.stdout.splitlines() if ln.startswith("TIMING ")]
+        return (float(timing[-1].split()[1]) if timing else float("nan")), wall
 
     first = {side: run(side, "plant", 10, 0)[1] for side in ("linux", "win")}
     second = {side: run(side, "plant", 10, 0)[1] for side in ("linux", "win")}
@@ -133,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
 
 `python benchmarks/bench_wine.py --steps {args.steps} --repeat {args.repeat}` on {platform.node()}
 ({os.cpu_count()} cores, {platform.machine()}), wine 8 (Debian), the same C host
-(`benchmarks/fmu_step_timer.c`, gcc / mingw-w64 -O2), best of {args.repeat} interleaved blocks.
+(`tests/support/fmi2_probe.c`, gcc / mingw-w64 -O2), best of {args.repeat} interleaved blocks.
 Per step: fmi2SetReal of the inputs, fmi2DoStep, fmi2GetReal of every output.
 
 | FMU | step | linux64 native [us/step] | win64 under wine [us/step] | wine / native |

@@ -1,7 +1,7 @@
 """Finding a Python on Windows, and the bad cases there: the win64 wrapper under wine.
 
-A host without Python (``support/instantiate_probe.c`` built with mingw-w64: fmi2Instantiate and
-the FMI logger's messages, nothing else) loads the strain controller FMU's win64 DLL:
+A host without Python (``support/fmi2_probe.c`` built with mingw-w64: fmi2Instantiate and the FMI
+logger's messages) loads the strain controller FMU's win64 DLL:
 
 * the search order's Windows candidates: ``%DRILLCOSIM_PYTHON%``, ``PATH`` (``python.exe``),
   and the keys CPython's installer writes (PEP 514, ``HKEY_CURRENT_USER\\Software\\Python\\
@@ -28,6 +28,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
+from fmpy import read_model_description
 
 from drillcosim.fmu_src.wrapper import HERE as WRAPPER_DIR
 from support import windows_bench
@@ -35,7 +36,7 @@ from support.windows_bench import windows_path
 
 pytestmark = [pytest.mark.needs_cc, pytest.mark.interop, pytest.mark.slow]
 
-PROBE = Path(__file__).resolve().parent / "support" / "instantiate_probe.c"
+PROBE = Path(__file__).resolve().parent / "support" / "fmi2_probe.c"
 CORE = "HKCU\\Software\\Python\\PythonCore"
 
 
@@ -46,7 +47,7 @@ def bench() -> windows_bench.Bench:
 
 @pytest.fixture(scope="module")
 def probe(bench, tmp_path_factory) -> Path:
-    exe = tmp_path_factory.mktemp("probe") / "instantiate_probe.exe"
+    exe = tmp_path_factory.mktemp("probe") / "fmi2_probe.exe"
     subprocess.run([windows_bench.find_mingw(), "-std=c99", "-O1", "-Wall", "-Wextra",
                     "-Werror", f"-I{WRAPPER_DIR / 'fmi2'}", "-o", str(exe), str(PROBE)],
                    check=True, capture_output=True, text=True)
@@ -54,14 +55,15 @@ def probe(bench, tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def controller(bench, project_fmus, tmp_path_factory) -> tuple[str, str]:
-    """(DLL, resource URI) of the strain controller FMU unzipped, as Windows sees them."""
+def controller(bench, project_fmus, tmp_path_factory) -> tuple[str, str, str]:
+    """(DLL, resource URI, GUID) of the strain controller FMU unzipped, as Windows sees them."""
     folder = tmp_path_factory.mktemp("controller_unzipped")
-    with zipfile.ZipFile(project_fmus["StrainController"]) as zf:
+    fmu = project_fmus["StrainController"]
+    with zipfile.ZipFile(fmu) as zf:
         zf.extractall(folder)
     dll = folder / "binaries" / "win64" / "StrainController.dll"
     uri = "file:///" + windows_path(folder / "resources").replace("\\", "/")
-    return windows_path(dll), uri
+    return windows_path(dll), uri, read_model_description(str(fmu)).guid
 
 
 def instantiate(bench, probe, controller, **env: str) -> tuple[int, list[tuple[int, str]]]:
@@ -76,7 +78,8 @@ def instantiate(bench, probe, controller, **env: str) -> tuple[int, list[tuple[i
         if len(head) == 2:
             status, text = head[1].split(" ", 1)
             records.append((int(status), text))
-    assert proc.stdout.rstrip().endswith(("INSTANCE OK", "INSTANCE NULL")), proc.stdout[-3000:]
+    assert proc.stdout.rstrip().splitlines()[-1] in ("INSTANCE OK", "INSTANCE NULL"), (
+        proc.stdout[-3000:])
     return proc.returncode, records
 
 

@@ -16,6 +16,7 @@
 #include <string.h>
 
 #include "dcs_platform.h"
+#include "dcs_wrapper.h" /* dcs_strdup */
 
 const char dcs_path_list_sep = ';';
 /* python.org's installer puts python.exe on PATH; the Microsoft Store's Python adds
@@ -235,8 +236,6 @@ int dcs_canonical_path(const char *path, char *out, size_t n)
 char *dcs_file_uri_path(const char *decoded)
 {
     const char *p = decoded;
-    char *out;
-    size_t n;
     if (p[0] == '/' && p[1] == '/') {
         const char *host = p + 2, *slash = strchr(host, '/');
         size_t len = slash != NULL ? (size_t)(slash - host) : strlen(host);
@@ -246,11 +245,7 @@ char *dcs_file_uri_path(const char *decoded)
     }
     if (p[0] == '/' && p[1] != '\0' && p[2] == ':')
         p++; /* /C:/a */
-    n = strlen(p) + 1;
-    out = (char *)malloc(n);
-    if (out != NULL)
-        memcpy(out, p, n);
-    return out;
+    return dcs_strdup(p);
 }
 
 void dcs_expand_home(const char *path, char *out, size_t n)

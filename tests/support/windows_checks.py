@@ -7,7 +7,8 @@ Usage::
 
 ``JOBS.json`` is a list of ``[name, kind, arguments]``; every job runs in this one process (a
 Python start under wine costs seconds), each in its own ``try``: the output is one JSON line,
-``{name: {"ok": true, "result": ...} | {"ok": false, "error": traceback}}``. Kinds:
+``{name: {"ok": true, "result": ..., "seconds": s} | {"ok": false, "error": traceback, ...}}``.
+Kinds:
 
 * ``loop`` - a co-simulation of FMUs through fmpy's ``FMU2Slave``: Jacobi stepping with a
   zero-order hold (at t_k every connection's source is read, every target set, the outputs
@@ -219,10 +220,12 @@ def run_jobs(jobs: list) -> dict:
     """Run ``[name, kind, arguments]`` jobs in order, each caught on its own."""
     results = {}
     for name, kind, arguments in jobs:
+        start = time.perf_counter()
         try:
             results[name] = {"ok": True, "result": KINDS[kind](**arguments)}
         except Exception:  # reported to the test, which fails naming the job
             results[name] = {"ok": False, "error": traceback.format_exc()}
+        results[name]["seconds"] = time.perf_counter() - start
     return results
 
 

@@ -1,18 +1,21 @@
 /*
- * Per-step cost of one FMU in a plain C host (no Python in the process), for
- * benchmarks/bench_wine.py: the same source built with gcc (Linux) and mingw-w64 (run under wine).
+ * One FMU in a plain C host (no Python in the process): fmi2Instantiate and its messages, and
+ * optionally the cost of a step. Built with gcc (Linux) and mingw-w64 (Windows, run under wine)
+ * for tests/test_windows_discovery.py and benchmarks/bench_wine.py.
  *
- *   fmu_step_timer LIBRARY RESOURCE_URI GUID STEP STEPS REPEAT SET_VR... -- OUT_VR...
- *                  [-- r:VR=VALUE...]
+ *   fmi2_probe LIBRARY RESOURCE_URI GUID [STEP STEPS REPEAT SET_VR... -- OUT_VR...
+ *              [-- r:VR=VALUE...]]
  *
- * Instantiates the FMU (a Python FMU finds its Python as in any host without one), runs
- * setupExperiment, initialization (with the r:VR=VALUE parameters), then STEPS warm-up steps and
- * REPEAT blocks of STEPS steps, each step fmi2SetReal of the SET_VRs (a value that changes every
- * step), fmi2DoStep, fmi2GetReal of the OUT_VRs. Prints the best block's microseconds per step
- * and the last outputs' sum (so nothing is optimised away). Exit 0, or 3 instantiate failed,
- * 4 a call failed, 2 usage / library.
+ * Every message of the FMU's logger is printed to stdout as one record "LOG <status>
+ * <category>|<message>" followed by a line "END"; then "INSTANCE OK" or "INSTANCE NULL". With
+ * STEP..., after setupExperiment and initialization (with the r:VR=VALUE parameters): STEPS
+ * warm-up steps, then REPEAT blocks of STEPS steps, each step fmi2SetReal of the SET_VRs (a
+ * value that changes every step), fmi2DoStep, fmi2GetReal of the OUT_VRs; printed: "TIMING <the
+ * best block's microseconds per step> <the last outputs' sum>". Exit status: 0, 3 fmi2Instantiate
+ * returned NULL, 4 a call failed, 2 usage or a library that cannot be loaded.
  */
 #define _POSIX_C_SOURCE 199309L
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -63,9 +66,15 @@ static double now_s(void)
 static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status,
                    fmi2String category, fmi2String message, ...)
 {
+    static char text[65536];
+    va_list ap;
     (void)env;
-    if (status >= fmi2Warning)
-        fprintf(stderr, "[%s %d %s] %s\n", name, (int)status, category, message);
+    (void)name;
+    va_start(ap, message);
+    vsnprintf(text, sizeof text, message, ap);
+    va_end(ap);
+    printf("LOG %d %s|%s\nEND\n", (int)status, category, text);
+    fflush(stdout);
 }
 
 #define LOAD(type, var, name)                                                                  \
@@ -93,14 +102,14 @@ int main(int argc, char **argv)
     int a = 7, part = 0, ok = 1, rc = 0;
     void *lib;
     fmi2Component c = NULL;
-    if (argc < 8) {
-        fprintf(stderr, "usage: fmu_step_timer LIB URI GUID STEP STEPS REPEAT VR... -- VR... "
-                        "[-- r:VR=VALUE...]\n");
+    if (argc != 4 && argc < 8) {
+        fprintf(stderr, "usage: fmi2_probe LIB URI GUID [STEP STEPS REPEAT VR... -- VR... "
+                        "[-- r:VR=VALUE...]]\n");
         return 2;
     }
-    h = atof(argv[4]);
-    steps = atol(argv[5]);
-    repeat = atol(argv[6]);
+    h = argc > 4 ? atof(argv[4]) : 0.0;
+    steps = argc > 5 ? atol(argv[5]) : 0;
+    repeat = argc > 6 ? atol(argv[6]) : -1;
     for (; a < argc; a++) {
         if (strcmp(argv[a], "--") == 0)
             part++;
@@ -126,15 +135,18 @@ int main(int argc, char **argv)
     if (!ok) {
         fprintf(stderr, "cannot load %s\n", argv[1]);
         rc = 2;
-    } else if ((c = instantiate("timer", fmi2CoSimulation, argv[3], argv[2], &cb, fmi2False,
-                                fmi2False)) == NULL) {
+    } else if ((c = instantiate("probe", fmi2CoSimulation, argv[3], argv[2], &cb, fmi2False,
+                                fmi2True)) == NULL) {
+        printf("INSTANCE NULL\n");
         rc = 3;
+    } else if (printf("INSTANCE OK\n") < 0 || argc == 4) {
+        /* instantiate only */
     } else if (setup(c, fmi2False, 0.0, 0.0, fmi2False, 0.0) > fmi2Warning ||
                enter(c) > fmi2Warning || (n_par && set(c, par_vr, n_par, par_v) > fmi2Warning) ||
                leave(c) > fmi2Warning) {
         rc = 4;
     }
-    for (r = -1; rc == 0 && r < repeat; r++) { /* r = -1: warm-up */
+    for (r = -1; rc == 0 && argc > 4 && r < repeat; r++) { /* r = -1: warm-up */
         double start = now_s(), per;
         for (k = 0; rc == 0 && k < steps; k++) {
             for (i = 0; i < n_in; i++)
@@ -150,8 +162,8 @@ int main(int argc, char **argv)
     }
     for (i = 0; i < n_out; i++)
         sum += out_v[i];
-    if (rc == 0)
-        printf("%.4f %.17g\n", 1e6 * best, sum);
+    if (rc == 0 && argc > 4)
+        printf("TIMING %.4f %.17g\n", 1e6 * best, sum);
     if (c != NULL)
         release(c);
     return rc;
