@@ -27,7 +27,7 @@ from pathlib import Path
 
 import pytest
 
-from drillcosim.fmu_src.build_c import MODEL_IDENTIFIER, compile_library
+from drillcosim.fmu_src.build_c import MODEL_IDENTIFIER
 from drillcosim.fmu_src.platforms import PLATFORMS, host_platform, select
 from drillcosim.fmu_src.wrapper import compile_wrapper, python_range
 
@@ -82,7 +82,7 @@ def test_the_native_platform_must_have_its_compiler(monkeypatch: pytest.MonkeyPa
 
 
 def test_cli_platforms_bad_input_is_one_line(tmp_path: Path) -> None:
-    proc = subprocess.run([sys.executable, "-m", "drillcosim", "build", "--out", str(tmp_path),
+    proc = subprocess.run([sys.executable, "-m", "drillcosim.cosim.cli", "build", "--out", str(tmp_path),
                            "--platforms", "linux64,win32"], capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 2, proc.stderr
@@ -113,9 +113,7 @@ def test_the_wrapper_compiles_with_gcc_clang_and_mingw(tmp_path: Path) -> None:
     assert compile_wrapper(tmp_path / "clang.so", cc=clang).stat().st_size > 0
     mingw()
     assert compile_wrapper(tmp_path / "w.dll", platform="win64").stat().st_size > 0
-    for p in ("linux64", "win64"):
-        assert compile_library(tmp_path / f"c-{p}{PLATFORMS[p].suffix}",
-                               platform=p).stat().st_size > 0
+    # the C controller: every build compiles it for both (the c_controller_fmu fixture)
 
 
 def _pythons_with_headers() -> dict[int, str]:
@@ -129,12 +127,14 @@ def _pythons_with_headers() -> dict[int, str]:
 
 
 def test_win64_wrapper_compiles_against_each_versions_headers(tmp_path: Path) -> None:
-    """The limited API of 3.10 declared by any building CPython 3.10-3.13, with the Windows
-    pyconfig.h in place of its own."""
+    """The limited API of 3.10 declared by a building CPython 3.10 and 3.13 (the oldest and the
+    newest: 3.11 changed how pyport.h reads pyconfig.h; this interpreter's is the build's own),
+    with the Windows pyconfig.h in place of its own."""
     mingw()
     from drillcosim.fmu_src.wrapper import HERE
 
-    headers = _pythons_with_headers()
+    found = _pythons_with_headers()
+    headers = {m: found[m] for m in {min(found, default=0), max(found, default=0)} if m in found}
     if not headers:
         pytest.skip("no CPython 3.10-3.13 headers under ~/.pyenv/versions")
     for minor, inc in headers.items():
@@ -221,3 +221,35 @@ def test_what_each_binary_needs(project_fmus: dict[str, Path], c_controller_fmu:
                     assert (elf_class, machine) == (2, 62)  # ELFCLASS64, EM_X86_64
                     assert not any("python" in n for n in needed), needed
     assert MODEL_IDENTIFIER == c_controller_fmu.stem
+
+
+def test_doctor_lists_the_platforms_and_what_each_uses(project_fmus: dict[str, Path],
+                                                       tmp_path: Path) -> None:
+    mingw()
+    from drillcosim.fmu_src.wrapper.doctor import diagnose
+
+    fmu = project_fmus["StrainController"]
+    d = diagnose(fmu)
+    assert [(p.platform, p.here, p.binary) for p in d.platforms] == [
+        ("linux64", True, "binaries/linux64/StrainController.so"),
+        ("win64", False, "binaries/win64/StrainController.dll")]
+    assert d.platforms[0].uses == ("in a host without Python: " + next(
+        ln.split(": ", 1)[1] for ln in d.c_host_report.splitlines()
+        if ln.endswith("would be used")) if d.usable else
+        "no usable Python for a host without one (see below)")
+    assert d.platforms[1].uses.startswith("a 64-bit CPython 3.10-3.13 for Windows with numpy:")
+    assert "%DRILLCOSIM_PYTHON%" in d.platforms[1].uses
+    assert "Software\\Python\\PythonCore\\3.X" in d.platforms[1].uses
+    lines = d.text(fmu).splitlines()
+    assert lines[1] == ("Platforms: linux64, win64 (none for 32-bit hosts: a 32-bit FMI tool "
+                        "cannot load this FMU)")
+    # an FMU without this machine's binary: bad input, one line
+    windows_only = tmp_path / "StrainController.fmu"
+    with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(windows_only, "w") as dst:
+        for info in src.infolist():
+            if not info.filename.startswith("binaries/linux64/"):
+                dst.writestr(info, src.read(info.filename))
+    proc = subprocess.run([sys.executable, "-m", "drillcosim.cosim.cli", "doctor", str(windows_only)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and proc.stderr.strip().count("\n") == 0, proc.stderr
+    assert "no binary for this machine (linux64); it carries win64" in proc.stderr

@@ -28,7 +28,11 @@ Which Python runs the slave
   and started through the stable ABI with the environment ignored (``Py_IgnoreEnvironmentFlag``),
   so a host's ``PYTHONHOME``/``PYTHONPATH`` change nothing, no signal handlers, and the host's
   ``LC_CTYPE`` restored after the start (``dcs_python.c``, ``dcs_discover.c``;
-  ``docs/interop.md``). ``drillcosim doctor`` runs the same search without starting anything
+  ``docs/interop.md``). On Windows the same order with Windows' names
+  (``%APPDATA%\\drillcosim\\drillcosim.conf``; ``python.exe``, ``python3.exe``, ``python3.X.exe`` on
+  ``PATH``), then the Pythons CPython's installer registered (PEP 514), and no building
+  interpreter (the win64 binary is cross-built). What the operating system is asked is one file
+  per platform behind ``dcs_platform.h``. ``drillcosim doctor`` runs the same search without starting anything
   (the exported ``drillcosim_doctor``; :mod:`.doctor`).
 
 The status protocol (what a slave method's outcome becomes)

@@ -77,6 +77,12 @@ int dcs_user_config_file(char *out, size_t n);
 extern const char *const dcs_python_plain_names[];
 extern const char dcs_executable_suffix[];
 
+/* How messages name things here: an install command, a Python's path, the variable. */
+typedef struct {
+    const char *pip, *python_path, *python_variable;
+} DcsWording;
+extern const DcsWording dcs_wording;
+
 /* A Python the system lists as installed (Windows: PEP 514). */
 typedef struct {
     int minor;                     /* 3.minor */

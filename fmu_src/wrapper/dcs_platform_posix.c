@@ -20,12 +20,15 @@
 #include <unistd.h>
 
 #include "dcs_platform.h"
+#include "dcs_wrapper.h" /* dcs_strdup */
 
 extern char **environ;
 
 const char dcs_path_list_sep = ':';
 const char *const dcs_python_plain_names[] = {"python3", NULL};
 const char dcs_executable_suffix[] = "";
+const DcsWording dcs_wording = {"python3.X -m pip install", "/path/to/python3",
+                                "$DRILLCOSIM_PYTHON"};
 
 /* ------------------------------------------------------------------ shared libraries */
 void *dcs_library_open(const char *path, char *why, size_t nwhy)
@@ -60,12 +63,8 @@ char *dcs_own_library_path(void)
 {
     Dl_info info;
     char *out = NULL;
-    if (dladdr((void *)&dcs_own_library_path, &info) != 0 && info.dli_fname != NULL) {
-        size_t n = strlen(info.dli_fname) + 1;
-        out = (char *)malloc(n);
-        if (out != NULL)
-            memcpy(out, info.dli_fname, n);
-    }
+    if (dladdr((void *)&dcs_own_library_path, &info) != 0 && info.dli_fname != NULL)
+        out = dcs_strdup(info.dli_fname);
     return out;
 }
 
@@ -119,17 +118,11 @@ int dcs_canonical_path(const char *path, char *out, size_t n)
 char *dcs_file_uri_path(const char *decoded)
 {
     const char *p = decoded;
-    size_t n;
-    char *out;
     if (p[0] == '/' && p[1] == '/') {
         const char *slash = strchr(p + 2, '/');
         p = slash != NULL ? slash : p + strlen(p);
     }
-    n = strlen(p) + 1;
-    out = (char *)malloc(n);
-    if (out != NULL)
-        memcpy(out, p, n);
-    return out;
+    return dcs_strdup(p);
 }
 
 void dcs_expand_home(const char *path, char *out, size_t n)
@@ -145,14 +138,7 @@ void dcs_expand_home(const char *path, char *out, size_t n)
 char *dcs_getenv(const char *name)
 {
     const char *v = getenv(name);
-    char *out = NULL;
-    if (v != NULL) {
-        size_t n = strlen(v) + 1;
-        out = (char *)malloc(n);
-        if (out != NULL)
-            memcpy(out, v, n);
-    }
-    return out;
+    return v != NULL ? dcs_strdup(v) : NULL;
 }
 
 int dcs_user_config_file(char *out, size_t n)

@@ -16,12 +16,15 @@
 #include <string.h>
 
 #include "dcs_platform.h"
+#include "dcs_wrapper.h" /* dcs_strdup */
 
 const char dcs_path_list_sep = ';';
 /* python.org's installer puts python.exe on PATH; the Microsoft Store's Python adds
  * python3.exe and python3.X.exe aliases. */
 const char *const dcs_python_plain_names[] = {"python.exe", "python3.exe", NULL};
 const char dcs_executable_suffix[] = ".exe";
+const DcsWording dcs_wording = {"py -3.X -m pip install", "C:\\...\\python.exe",
+                                "%DRILLCOSIM_PYTHON%"};
 
 #define WIDE_MAX 32768 /* the longest path the wide API takes */
 
@@ -110,21 +113,23 @@ static int is_libpython(const wchar_t *file)
 
 int dcs_process_python(void **lib)
 {
-    HMODULE mods[1024];
+    static HMODULE mods[4096];
     DWORD needed = 0, i, count;
-    wchar_t file[MAX_PATH + 1];
+    wchar_t *file = (wchar_t *)malloc(WIDE_MAX * sizeof *file);
     *lib = NULL;
-    if (!K32EnumProcessModules(GetCurrentProcess(), mods, sizeof mods, &needed))
+    if (file == NULL ||
+        !K32EnumProcessModules(GetCurrentProcess(), mods, sizeof mods, &needed))
         needed = 0;
     count = needed / sizeof mods[0];
     if (count > sizeof mods / sizeof mods[0])
         count = sizeof mods / sizeof mods[0];
     for (i = 0; i < count && *lib == NULL; i++) {
-        DWORD n = GetModuleFileNameW(mods[i], file, MAX_PATH);
-        if (n > 0 && n < MAX_PATH && is_libpython(file) &&
+        DWORD n = GetModuleFileNameW(mods[i], file, WIDE_MAX);
+        if (n > 0 && n < WIDE_MAX && is_libpython(file) &&
             GetProcAddress(mods[i], "Py_IsInitialized") != NULL)
             *lib = (void *)mods[i];
     }
+    free(file);
     return *lib != NULL;
 }
 
@@ -231,8 +236,6 @@ int dcs_canonical_path(const char *path, char *out, size_t n)
 char *dcs_file_uri_path(const char *decoded)
 {
     const char *p = decoded;
-    char *out;
-    size_t n;
     if (p[0] == '/' && p[1] == '/') {
         const char *host = p + 2, *slash = strchr(host, '/');
         size_t len = slash != NULL ? (size_t)(slash - host) : strlen(host);
@@ -242,11 +245,7 @@ char *dcs_file_uri_path(const char *decoded)
     }
     if (p[0] == '/' && p[1] != '\0' && p[2] == ':')
         p++; /* /C:/a */
-    n = strlen(p) + 1;
-    out = (char *)malloc(n);
-    if (out != NULL)
-        memcpy(out, p, n);
-    return out;
+    return dcs_strdup(p);
 }
 
 void dcs_expand_home(const char *path, char *out, size_t n)

@@ -300,12 +300,12 @@ static int discover(const char *unzip_dir, DcsLoad load, const char *used, char 
                              &report);
     if (rc != 0)
         fix = dcs_format("How to fix: install %s into a CPython 3.%d to 3.%d on PATH "
-                         "(python3.X -m pip install %s), or name such a Python: "
-                         "$DRILLCOSIM_PYTHON=/path/to/python3, or a line 'python = "
-                         "/path/to/python3' in %s. PYTHONHOME and "
-                         "PYTHONPATH are ignored. `drillcosim doctor FMU` prints this report; "
-                         "see docs/interop.md of drillcosim.", req, DCS_PY_MINOR_MIN,
-                         DCS_PY_MINOR_MAX, req, cfg);
+                         "(%s %s), or name such a Python: %s=%s, or a line 'python = %s' in "
+                         "%s. PYTHONHOME and PYTHONPATH are ignored. `drillcosim doctor FMU` "
+                         "prints this report; see docs/interop.md of drillcosim.", req,
+                         DCS_PY_MINOR_MIN, DCS_PY_MINOR_MAX, dcs_wording.pip, req,
+                         dcs_wording.python_variable, dcs_wording.python_path,
+                         dcs_wording.python_path, cfg);
     *text = dcs_format("%sthis FMU runs its model in CPython 3.%d to 3.%d%s%s; in a host "
                        "process without a Python of its own it looks for one, in this "
                        "order:\n%s%s", rc != 0 ? "no usable Python found: " : "",

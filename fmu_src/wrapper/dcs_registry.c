@@ -15,6 +15,36 @@
 
 #include "dcs_registry.h"
 
+#ifdef _WIN32
+#ifndef WIN32_LEAN_AND_MEAN
+#define WIN32_LEAN_AND_MEAN
+#endif
+#include <windows.h>
+
+/* DcsLock is an SRWLOCK by layout (dcs_lock.h) */
+typedef char dcs_lock_is_an_srwlock[sizeof(DcsLock) == sizeof(SRWLOCK) ? 1 : -1];
+
+void dcs_lock(DcsLock *l)
+{
+    AcquireSRWLockExclusive((PSRWLOCK)(void *)l);
+}
+
+void dcs_unlock(DcsLock *l)
+{
+    ReleaseSRWLockExclusive((PSRWLOCK)(void *)l);
+}
+#else
+void dcs_lock(DcsLock *l)
+{
+    pthread_mutex_lock(l);
+}
+
+void dcs_unlock(DcsLock *l)
+{
+    pthread_mutex_unlock(l);
+}
+#endif
+
 static size_t slot_of(const void *p, size_t cap)
 {
     uint64_t h = (uint64_t)(uintptr_t)p;

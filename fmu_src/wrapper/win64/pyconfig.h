@@ -61,8 +61,10 @@
 #define HAVE_LARGEFILE_SUPPORT
 
 typedef long long Py_ssize_t; /* __int64 */
-#define PY_SSIZE_T_MAX LLONG_MAX
 #define HAVE_PY_SSIZE_T 1
+#if PY_MINOR_VERSION >= 11 /* 3.10's pyport.h defines it itself (patchlevel.h comes first) */
+#define PY_SSIZE_T_MAX LLONG_MAX
+#endif
 
 #define PY_LONG_LONG long long
 #define PY_LLONG_MIN LLONG_MIN
