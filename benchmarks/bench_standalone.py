@@ -17,7 +17,7 @@
    regular FMU running in the Windows bench's CPython (``tests/support/windows_bench.py``).
 
 The FMUs are built fresh into a temporary folder (the runtime comes from the per-user cache of
-runtimes when it was assembled before). Prints a markdown section (for BENCHMARKS.md).
+runtimes when it was assembled before). Prints a markdown section (for docs/performance.md).
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ Windows (run under wine, the Windows bench of ``tests/support/windows_bench.py``
 Also measured: the first process of each side with empty caches (numba compiles the plant's
 kernels and writes its cache and native image), and the second (loads them). The
 configurations run interleaved ``--repeat`` times; the best block is reported (shared machine).
-Prints a markdown section (for BENCHMARKS.md).
+Prints a markdown section (for docs/performance.md).
 """
 
 from __future__ import annotations

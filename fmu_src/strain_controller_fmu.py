@@ -44,25 +44,25 @@ the scene's matrix, else the identity): per axis ``F = gain * M @ strain`` acros
 Error handling (the wrapper's status protocol, see ``fmu_src/slave_support``)
 ------------------------------------------------------------------------------
 * parameter out of range: fmi2ExitInitializationMode -> fmi2Error naming it; the instance
-  stays in initialization mode (a doStep is refused). Use ``fmi2Reset`` or a new instance;
-* non-finite input or time, invalid tunable parameter, fixed parameter changed,
-  negative step -> fmi2Error from that doStep (state unchanged, the importer may
-  correct the cause and retry); doStep before initialization -> fmi2Error
-  (checked by the wrapper itself);
-* unknown value reference, wrong type, setting an output, a state that is not one
-  of this FMU -> fmi2Error from that get/set/setFMUstate call itself (a get
-  returns NaN / 0 / false for that reference, a set ignores it);
+  stays in initialization mode (a doStep is refused): correct it and call it again;
+* non-finite input or time, invalid tunable parameter, negative step -> fmi2Error
+  from that doStep (state unchanged, the importer may correct the cause and retry);
+  doStep before initialization -> fmi2Error (checked by the wrapper itself);
+* unknown value reference, wrong type, setting an output or a fixed parameter after
+  initialization, a state refused (``slave_support.state``) -> fmi2Error from that
+  get/set/setFMUstate call itself (a get returns NaN / 0 / false for that reference;
+  a refused set sets none of the call's values);
 * an unexpected exception -> fmi2Error, the instance stays usable. Never fmi2Fatal.
 
 The Real inputs and outputs live in the shared buffers ``self.inputs`` / ``self.outputs``:
 in step mode the wrapper moves them without Python, and ``fmi2DoStep`` calls the law's
 compiled step (or, without numba, is one Python call); both give the same bits.
 
-FMU state (``fmi2Get/SetFMUstate``, serialisable): pythonfmu's default saves the
-registered variables only (here including the buffered inputs and outputs);
-``_get_fmu_state`` / ``_set_fmu_state`` (``slave_support.LawSlave``) add the lag state of the
-controller and the initialization flag (JSON-safe Python floats, so serialisation
-round-trips bit for bit).
+FMU state (``fmi2Get/SetFMUstate``, serialisable; the rules of ``slave_support.state``):
+the registered variables (the buffered inputs and outputs included) and the lag state of
+the controller (``slave_support.LawSlave``; JSON-safe Python floats, so serialisation
+round-trips bit for bit); after initialization a state's parameters are checked as at
+initialization before any of it is applied.
 """
 
 from __future__ import annotations

@@ -35,7 +35,9 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
 import sys
+import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from fractions import Fraction
@@ -103,7 +105,23 @@ TOP_VALUES = tuple(k for k in PLANT_KEYS if k not in SECTIONS)
 
 class ConfigError(UserError):
     """A scene, a key or a value that is not allowed: one line naming the file or the override,
-    the key, and what is allowed."""
+    the key, and what is allowed.
+
+    Attributes
+    ----------
+    given_as : str or None
+        How the value blamed was given when not by the scene file: the name
+        :func:`load_config` got for it in ``given_as`` (the API's keyword, e.g. ``stop_time``,
+        ``overrides``, ``controller_fmu``), or ``override``. The message is then
+        ``"<given_as>: <detail>"``; a command line names its own option with :attr:`detail`.
+    detail : str
+        The message without the ``given_as`` prefix (the whole message when None).
+    """
+
+    def __init__(self, message: str, given_as: str | None = None) -> None:
+        super().__init__(f"{given_as}: {message}" if given_as else message)
+        self.given_as = given_as
+        self.detail = message
 
 
 def _suggest(word: str, choices: Sequence[str]) -> str:
@@ -442,6 +460,17 @@ def _params(table_name: str, table: Mapping[str, Any], source: str) -> Any:
         raise ConfigError(f"{source}: [{table_name}] {exc}") from None
 
 
+def _not_an_fmu(path: Path) -> str | None:
+    """Why the file ``path`` is not an FMU (None: a zip archive with a ``modelDescription.xml``;
+    its content is read when the system is built)."""
+    if not zipfile.is_zipfile(path):
+        return "not an FMU (an FMU is a zip archive with a modelDescription.xml)"
+    with zipfile.ZipFile(path) as archive:
+        if "modelDescription.xml" not in archive.namelist():
+            return "not an FMU: the zip archive has no modelDescription.xml"
+    return None
+
+
 def _fmu_file(table_name: str, table: Mapping[str, Any], source: str) -> Path | None:
     if "fmu" not in table:
         return None
@@ -455,6 +484,8 @@ def _fmu_file(table_name: str, table: Mapping[str, Any], source: str) -> Path | 
         path = src.resolve().parent / path
     if not path.is_file():
         raise ConfigError(f"{source}: [{table_name}] fmu = {value!r}: no file '{path}'")
+    if (why := _not_an_fmu(path)) is not None:
+        raise ConfigError(f"{source}: [{table_name}] fmu = {value!r}: {why}")
     return path
 
 
@@ -505,7 +536,8 @@ def _state_space(table: Mapping[str, Any], cosim: CosimSettings, source: str,
 def load_config(scene: str | Path = "paper_closed_loop",
                 overrides: Mapping[str, Any] | None = None, *,
                 plant_fmu: str | Path | None = None, controller_fmu: str | Path | None = None,
-                folder: Path | None = None) -> SceneConfig:
+                folder: Path | None = None,
+                given_as: Mapping[str, str] | None = None) -> SceneConfig:
     """Read a scene, apply overrides, validate everything once.
 
     Parameters
@@ -519,6 +551,11 @@ def load_config(scene: str | Path = "paper_closed_loop",
         they take precedence over the scene's ``[plant] fmu`` / ``[controller] fmu``.
     folder : Path, optional
         Where scene names are looked up (default: the shipped scenes).
+    given_as : mapping, optional
+        How each override was given (key path -> name, e.g. ``{"cosim.stop_time":
+        "stop_time"}``; ``plant.fmu`` / ``controller.fmu`` for ``plant_fmu`` /
+        ``controller_fmu``): an error about an overridden value names it so (default:
+        ``override``, ``plant_fmu``, ``controller_fmu``), not the scene file.
 
     Returns
     -------
@@ -530,12 +567,45 @@ def load_config(scene: str | Path = "paper_closed_loop",
         Any bad input, one line naming the file or override, the key and what is allowed.
     """
     over = key_paths(overrides)
+    given = {"plant.fmu": "plant_fmu", "controller.fmu": "controller_fmu",
+             **{p: "override" for p in over}, **(given_as or {})}
+    source = str(scene)
     try:
         data, path = read_scene_tables(scene, folder)
+        source = str(path)
         data = _apply(data, over)
-        sc = scene_from_dict(data, name=path.stem, source=str(path))
+        return _validate(data, scene_from_dict(data, name=path.stem, source=source), over,
+                         plant_fmu, controller_fmu, given)
+    except ConfigError as exc:
+        if exc.given_as:  # named already
+            raise
+        raise _name_override(str(exc), source, over, given) from None
     except SceneError as exc:
-        raise ConfigError(str(exc)) from None
+        raise _name_override(str(exc), source, over, given) from None
+
+
+#: ``[table] key`` or ``table.key`` / ``key`` followed by `` = ``: the key a message blames
+_BLAMED = re.compile(r"\[(\w+)\] (\w+)\b|(\w+(?:\.\w+)?) =")
+
+
+def _name_override(message: str, source: str, over: Mapping[str, Any],
+                   given: Mapping[str, str]) -> ConfigError:
+    """The error of ``message``; one that blames the scene file ``source`` for a key whose
+    value is an override names how the override was given instead (``given``)."""
+    prefix = f"{source}: "
+    match = _BLAMED.match(message, len(prefix)) if message.startswith(prefix) else None
+    if match is None:
+        return ConfigError(message)
+    path = f"{match[1]}.{match[2]}" if match[1] else match[3]
+    if path not in over:
+        return ConfigError(message)
+    return ConfigError(f"{path}{message[match.end(2 if match[1] else 3):]}", given[path])
+
+
+def _validate(data: dict[str, Any], sc: Scene, over: Mapping[str, Any],
+              plant_fmu: str | Path | None, controller_fmu: str | Path | None,
+              given: Mapping[str, str]) -> SceneConfig:
+    """The typed configuration of the scene ``sc`` (its tables ``data``, overrides applied)."""
     source = sc.source
     tables = {}
     for key in ("plant", *CONTROLLER_TABLES, "cosim"):
@@ -573,15 +643,18 @@ def load_config(scene: str | Path = "paper_closed_loop",
         raise ConfigError(f"{source}: a controller FMU was given ({controller_fmu}) but the "
                           "scene's controller is off: set controller.enabled=true")
     files: dict[str, Path] = {}
-    for instance, table_name, given in ((PLANT, "plant", plant_fmu),
-                                        (CONTROLLER, "controller", controller_fmu),
-                                        (TOP_DRIVE, "top_drive_controller", None)):
+    for instance, table_name, fmu in ((PLANT, "plant", plant_fmu),
+                                      (CONTROLLER, "controller", controller_fmu),
+                                      (TOP_DRIVE, "top_drive_controller", None)):
         if instance not in instances:
             continue
-        if given:
-            if not Path(given).is_file():
-                raise ConfigError(f"{table_name} FMU: no file '{given}'")
-            files[instance] = Path(given)
+        if fmu:
+            name = given[f"{table_name}.fmu"]
+            if not Path(fmu).is_file():
+                raise ConfigError(f"no file '{fmu}'", name)
+            if (why := _not_an_fmu(Path(fmu))) is not None:
+                raise ConfigError(f"'{fmu}' is {why}", name)
+            files[instance] = Path(fmu)
         elif (chosen := _fmu_file(table_name, tables[table_name], source)) is not None:
             files[instance] = chosen
     set_keys = {CONTROLLER_TABLES[t][0]: tuple(k for k in tables[t]

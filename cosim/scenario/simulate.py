@@ -113,4 +113,5 @@ def simulate(built: BuiltSystem, stop_time: float | None = None, *,
                                  progress=progress, csv_path=csv_path, observers=observers)
     return Result(built.config, built.engine, result.data,
                   {"time": "s", **{n: built.units[n] for n in names}}, stop, result.end_time,
-                  result.wall_time, result.real_time_factor, failure, result.csv_path)
+                  result.wall_time, result.real_time_factor, failure, result.csv_path,
+                  result.profile())

@@ -63,7 +63,7 @@ class _Slave(ctypes.Structure):
                 ("n_in", ctypes.c_int32), ("n_out", ctypes.c_int32), ("u", _VP), ("y", _VP),
                 ("n_plain", ctypes.c_int32), ("n_delayed", ctypes.c_int32),
                 ("n_push", ctypes.c_int32), ("plain", _I32P), ("delayed", _I32P),
-                ("push", _I32P)]
+                ("push", _I32P), ("timing", _F64P)]
 
 
 class _Steps(ctypes.Structure):
@@ -131,6 +131,7 @@ class NativeLoop:
         y_address = ctypes.addressof(alg.y)
         for c, plan in zip(self.c_slaves, plans):
             c.period, c.h = plan.period, plan.h
+            c.timing = ctypes.cast(ctypes.byref(alg.timing, 8 * 4 * plan.index), _F64P)
             c.n_in, c.n_out = len(plan.in_names), len(plan.out_names)
             c.u = ctypes.addressof(plan.u)
             c.y = y_address + 8 * plan.out_offset
