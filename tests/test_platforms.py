@@ -82,7 +82,7 @@ def test_the_native_platform_must_have_its_compiler(monkeypatch: pytest.MonkeyPa
 
 
 def test_cli_platforms_bad_input_is_one_line(tmp_path: Path) -> None:
-    proc = subprocess.run([sys.executable, "-m", "drillcosim.cosim.cli", "build", "--out", str(tmp_path),
+    proc = subprocess.run([sys.executable, "-m", "drillcosim", "build", "--out", str(tmp_path),
                            "--platforms", "linux64,win32"], capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 2, proc.stderr
