@@ -175,16 +175,6 @@ static void foreign_line(const char *out, char *dst, size_t n)
     }
 }
 
-/* Remove the '\r' of "\r\n" line ends (a Windows child's text mode) in place. */
-static void drop_carriage_returns(char *text)
-{
-    char *o = text;
-    for (; *text; text++)
-        if (*text != '\r')
-            *o++ = *text;
-    *o = '\0';
-}
-
 /* Check one interpreter; 0 if it fits (py filled), else -1 with the reason in why. */
 static int check_candidate(const char *exe, const DcsWant *want, const char *requires,
                            DcsPython *py, char *why, size_t nwhy)
@@ -199,7 +189,7 @@ static int check_candidate(const char *exe, const DcsWant *want, const char *req
         snprintf(why, nwhy, "not an executable file");
     } else if (run_child(exe, want, requires, out, sizeof out, &exit_code, why, nwhy) != 0) {
         /* why set by the platform layer */
-    } else if (drop_carriage_returns(out), strstr(out, "dcs:done") == NULL) {
+    } else if (strstr(out, "dcs:done") == NULL) {
         foreign_line(out, line, sizeof line);
         snprintf(why, nwhy, "does not run as a Python 3 interpreter (exit status %d%s%s)",
                  exit_code, line[0] ? ": " : "", line);

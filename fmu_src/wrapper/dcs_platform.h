@@ -101,6 +101,8 @@ int dcs_installed_pythons(DcsInstalled *out, int max);
  * null device, stdout and stderr into one pipe read into out (NUL-terminated; what does not
  * fit is read and dropped so the child never blocks), default signal dispositions (POSIX; no
  * fork of a possibly threaded host), no console window (Windows); killed after timeout_ms.
+ * Lines end in "\n" alone: on Windows each line's trailing white space is removed (the "\r"
+ * of a child's text mode; a Windows file name cannot end with a space), on POSIX nothing.
  * Returns 0 when it ended by itself, *exit_code its exit status (-1 if a signal ended it);
  * -1 if it could not be started or was killed at the timeout (why says which). */
 int dcs_run_process(const char *const argv[], char *out, size_t nout, long timeout_ms,

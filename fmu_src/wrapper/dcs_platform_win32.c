@@ -413,6 +413,28 @@ static void append_quoted(char *line, size_t n, const char *arg)
     line[len] = '\0';
 }
 
+/* A Windows child writes text mode: "\r\n" line ends (Python's print on a pipe). The callers
+ * read lines ending in "\n" only: every line's trailing white space ("\r", " ", "\t") is
+ * removed in place, so a path read back from the child (its libpython) ends where the path
+ * does (a Windows file name cannot end with a space: Win32 drops it). */
+static void drop_line_end_spaces(char *text)
+{
+    char *in = text, *out = text, *line = text;
+    for (;; in++) {
+        if (*in == '\n' || *in == '\0') {
+            while (out > line && (out[-1] == '\r' || out[-1] == ' ' || out[-1] == '\t'))
+                out--;
+            if (*in == '\0')
+                break;
+            *out++ = '\n';
+            line = out;
+        } else {
+            *out++ = *in;
+        }
+    }
+    *out = '\0';
+}
+
 /* Read the pipe until the child ended and the pipe is empty or broken, or the deadline. */
 static int read_child(HANDLE process, HANDLE pipe, char *out, size_t nout, long timeout_ms)
 {
@@ -444,6 +466,7 @@ static int read_child(HANDLE process, HANDLE pipe, char *out, size_t nout, long 
         ended = WaitForSingleObject(process, 10) == WAIT_OBJECT_0;
     }
     out[len] = '\0';
+    drop_line_end_spaces(out);
     return timed_out;
 }
 

@@ -34,8 +34,10 @@ What the bench does to the official files, and why (each a gap of wine 8, not of
 A Windows process under wine must not get a regular file as stdin, stdout or stderr (CPython
 dies in ``init_sys_streams``): :meth:`Bench.run` gives it /dev/null and pipes.
 
-:func:`require` is the tests' gate: a missing piece fails the test under CI (``CI=true``) and
-skips it elsewhere, with one line naming what is missing.
+:func:`require` is the tests' gate: wine, mingw-w64 and the prepared bench are the rows
+``wine``, ``mingw-w64`` and ``windows-bench`` of ``.ci/required-tools`` (``.ci/run`` installs
+them: apt for the first two, ``python tests/support/windows_bench.py prepare`` for the third); a
+missing one fails the test under CI (``CI=true``) and skips it elsewhere, with one line naming it.
 """
 
 from __future__ import annotations
@@ -57,7 +59,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["BENCH_VERSION", "WHEELS", "Bench", "bench_dir", "find_mingw", "find_wine",
-           "missing", "prepare", "require", "windows_path"]
+           "prepare", "ready", "require", "windows_path"]
 
 #: Bump when the preparation changes (a new folder is prepared).
 BENCH_VERSION = 1
@@ -281,46 +283,43 @@ def prepare(log=print) -> Bench:
     return bench
 
 
-def missing() -> list[str]:
-    """What the bench lacks on this machine (one item each), [] if nothing."""
-    gaps = []
-    if find_wine() is None:
-        gaps.append("wine (Debian: apt install wine64)")
-    if find_mingw() is None:
-        gaps.append("x86_64-w64-mingw32-gcc (Debian: apt install gcc-mingw-w64-x86-64)")
-    return gaps
+def ready() -> bool:
+    """Is the bench prepared here (wine, the prefix, the Pythons with the wheels)? Nothing is
+    fetched or started (``.ci/required-tools``' check of the row ``windows-bench``)."""
+    base = bench_dir()
+    return (find_wine() is not None and (base / "prefix" / "system.reg").is_file()
+            and (base / f"python-{_key()}" / "COMPLETE").is_file())
 
 
 def require() -> Bench:
-    """The prepared bench for a test; a missing piece fails the test under CI (``CI=true``)
-    and skips it elsewhere, in one line naming it."""
-    import pytest
+    """The prepared bench for a test. A missing piece is the row of ``.ci/required-tools`` it
+    belongs to (``wine``, ``mingw-w64``, ``windows-bench``): the test fails under CI
+    (``CI=true``) and skips elsewhere, in one line naming it (``support.required.missing``)."""
+    from support.required import missing
 
-    gaps = missing()
-    bench = None
-    if not gaps:
-        try:
-            bench = prepare(log=lambda _text: None)
-        except RuntimeError as exc:
-            gaps.append(f"the Windows Python ({str(exc).splitlines()[0]}; "
-                        f"`make windows-bench` fetches it)")
-    if gaps:
-        text = "Windows bench missing: " + "; ".join(gaps)
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(text + " (required under CI)", pytrace=False)
-        pytest.skip(text)
-    assert bench is not None
-    return bench
+    if find_wine() is None:
+        missing("wine", "neither wine nor /usr/lib/wine/wine64 found (Debian: apt install wine64)")
+    if find_mingw() is None:
+        missing("mingw-w64", "x86_64-w64-mingw32-gcc not found (Debian: apt install "
+                "gcc-mingw-w64-x86-64)")
+    try:
+        return prepare(log=lambda _text: None)
+    except RuntimeError as exc:
+        missing("windows-bench", f"the Windows Python and wheels: {str(exc).splitlines()[0]} "
+                "(python tests/support/windows_bench.py prepare fetches them)")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python tests/support/windows_bench.py prepare|where``."""
+    """``python tests/support/windows_bench.py prepare|ready|where``: fetch and unpack the bench
+    (exit 0 when ready), exit 0 if it is ready (1 if not) without fetching, print its folder."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("command", choices=("prepare", "where"))
+    parser.add_argument("command", choices=("prepare", "ready", "where"))
     args = parser.parse_args(argv)
     if args.command == "where":
         print(bench_dir())
         return 0
+    if args.command == "ready":
+        return 0 if ready() else 1
     try:
         bench = prepare()
     except RuntimeError as exc:
