@@ -40,7 +40,7 @@ def bench():
 
 
 def test_the_standalone_pair_runs_under_wine_with_no_python_equal_to_linux(
-        bench, project_fmus, tmp_path) -> None:
+        bench, windows_caches, project_fmus, tmp_path) -> None:
     from support import windows_bench
 
     loop = closed_loop(project_fmus["DrillstringPlant"], project_fmus["StrainController"],
@@ -62,7 +62,7 @@ def test_the_standalone_pair_runs_under_wine_with_no_python_equal_to_linux(
     exe = cosim_host.compile_host(tmp_path, cc=windows_bench.find_mingw())
     spec = cosim_host.write_spec(loop, win, tmp_path / "win.spec")
     out = tmp_path / "win.csv"
-    env = bench.env({"WINEPATH": "", "DRILLCOSIM_PYTHON": ""})
+    env = bench.env({"WINEPATH": "", "DRILLCOSIM_PYTHON": "", **windows_caches})
     code, text, log = cosim_host.run_to_file(
         [bench.wine, str(exe), windows_bench.windows_path(spec), windows_bench.windows_path(out)],
         out, env, tmp_path)

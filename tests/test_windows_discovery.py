@@ -22,6 +22,7 @@ Under CI a missing wine, mingw-w64 or Windows Python fails; elsewhere the tests 
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import textwrap
 import zipfile
@@ -41,8 +42,9 @@ CORE = "HKCU\\Software\\Python\\PythonCore"
 
 
 @pytest.fixture(scope="module")
-def bench() -> windows_bench.Bench:
-    return windows_bench.require()
+def bench(windows_caches: dict[str, str]) -> windows_bench.Bench:
+    """The bench, its Windows processes on this run's shared caches (conftest)."""
+    return dataclasses.replace(windows_bench.require(), base_env=windows_caches)
 
 
 @pytest.fixture(scope="module")

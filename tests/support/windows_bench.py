@@ -55,7 +55,7 @@ import tarfile
 import tempfile
 import zipfile
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 __all__ = ["BENCH_VERSION", "WHEELS", "Bench", "bench_dir", "find_mingw", "find_wine",
@@ -132,11 +132,14 @@ class Bench:
     root : Path
         The prepared folder: ``cp313/python.exe`` (with the wheels), ``cp313-bare/`` (the
         same Python without site-packages), ``cp39/`` (a CPython 3.9).
+    base_env : mapping of str to str
+        Variables every process of this bench gets (e.g. a test run's shared caches).
     """
 
     wine: str
     prefix: Path
     root: Path
+    base_env: Mapping[str, str] = field(default_factory=dict)
 
     @property
     def python(self) -> Path:
@@ -151,6 +154,7 @@ class Bench:
             env.pop(name, None)
         env.update({"WINEPREFIX": str(self.prefix), "WINEDEBUG": "-all",
                     "WINEDLLOVERRIDES": "mscoree,mshtml="})
+        env.update(self.base_env)
         env.update(extra or {})
         return env
 
