@@ -110,12 +110,16 @@ def runtime_folder(platform: str, requires: Sequence[str]) -> Path:
 
 
 def make_standalone(fmu: Path | str, out: Path | str,
-                    platforms: Sequence[str] | None = None) -> Path:
+                    platforms: Sequence[str] | None = None, *,
+                    compression: int = zipfile.ZIP_DEFLATED) -> Path:
     """Write ``out``: the FMU ``fmu`` with a Python runtime for each of ``platforms`` (default:
     every platform the FMU carries a binary for, ``binaries/<platform>/``).
 
     The modules the runtime must provide are the FMU's ``resources/python_requires.txt``; an
-    FMU without one runs no Python (the C controller) and is copied as it is.
+    FMU without one runs no Python (the C controller) and is copied as it is. ``compression``
+    is the runtime members' zip method: deflated (what ``drillcosim build --standalone``
+    ships), or ``zipfile.ZIP_STORED`` where the size does not matter (the tests: deflating
+    the plant's 350 MB runtime is most of the time it takes to make the FMU).
 
     Returns
     -------
@@ -147,7 +151,7 @@ def make_standalone(fmu: Path | str, out: Path | str,
                 for platform, folder in folders.items():
                     for path in sorted(p for p in folder.rglob("*") if p.is_file()):
                         name = f"{RUNTIME_DIR}/{platform}/{path.relative_to(folder).as_posix()}"
-                        dst.write(path, name)
+                        dst.write(path, name, compress_type=compression)
             os.replace(tmp, out)
         finally:
             if os.path.exists(tmp):

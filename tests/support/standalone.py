@@ -30,14 +30,15 @@ def content_key(fmu: Path) -> str:
 
 
 def standalone_copy(fmu: Path, platforms: tuple[str, ...] = ("linux64",)) -> Path:
-    """The self-contained copy of ``fmu`` with runtimes for ``platforms`` (cached by
-    content)."""
+    """The self-contained copy of ``fmu`` with runtimes for ``platforms`` (cached by content;
+    its runtime members stored, not deflated: the FMU is read the same way, and zipped ~10x
+    faster: the controller's 100 MB runtime took 0.5 s of CPU stored, 6.0 s deflated)."""
     with zipfile.ZipFile(fmu) as zf:
         requires = tuple(zf.read("resources/python_requires.txt").decode().split())
     runtime = "-".join(runtime_folder(p, requires).name for p in platforms)
-    out = user_cache() / "test-standalone" / f"{content_key(fmu)}-{runtime}" / fmu.name
-    if not out.is_file():
-        make_standalone(fmu, out, platforms)
+    out = user_cache() / "test-standalone" / f"{content_key(fmu)}-{runtime}-stored" / fmu.name
+    if not out.is_file():  # the runtime stored, not deflated: the zip is made in seconds
+        make_standalone(fmu, out, platforms, compression=zipfile.ZIP_STORED)
     return out
 
 
