@@ -22,12 +22,13 @@ processes):
   the same libm on both;
 * ``fmpy.validation.validate_fmu`` finds no problem in any FMU, there and on Linux;
 
-then, each in a fresh Windows process (one process: a crash or a hang shows as its exit):
+then in fresh Windows processes (a crash or a hang shows as the process's exit):
 
 * a second process runs the plant from the first one's caches: the compiled steps come from
   the native image (llvmlite's MCJIT loading numba's COFF object code), not from a compile;
-* the misuse fuzzer (``support/fuzz_fmi.py``), short, on the plant, the strain controller and the
-  C controller: no crash, no hang, never fmi2Fatal, a healthy instance reproduces its reference;
+  then, in that same process, the misuse fuzzer (``support/fuzz_fmi.py``), short, on the
+  plant, the strain controller and the C controller: no crash, no hang, never fmi2Fatal, a
+  healthy instance reproduces its reference;
 * two builds of the strain controller whose law differs (the second doubles the force) in one
   host, loaded from DLLs of one name in two folders: each runs its own code, in both orders.
 
@@ -239,17 +240,33 @@ def test_validate_fmu_is_clean_for_every_fmu_with_both_platforms(systems, linux,
             assert {f"binaries/linux64/{ident}.so", f"binaries/win64/{ident}.dll"} <= names
 
 
-def test_a_second_process_runs_the_compiled_steps_from_the_native_image(
-        bench, caches, systems, windows, tmp_path) -> None:
-    """numba's cache (written by the first process) and the native image beside the package's
-    stable copy: the second process loads machine code instead of compiling."""
+@pytest.fixture(scope="module")
+def second_process(bench, caches, systems, windows, tmp_path_factory) -> tuple[dict, float]:
+    """One more Windows process on the first one's caches: the plant's loop again (10 steps),
+    then the misuse fuzzer on the plant, the strain controller and the C controller (one wine
+    process for both checks: its start and imports cost seconds under wine)."""
     loop = json.loads(json.dumps(systems["python"][0]))
     loop["stop"] = 10 * STEP
     for fmu in loop["fmus"].values():
         fmu["path"] = windows_bench.windows_path(fmu["path"])
-    results, seconds = _run_checks(
+    fmus = {"plant": systems["python"][0]["fmus"]["plant"]["path"],
+            "controller": systems["python"][0]["fmus"]["controller"]["path"],
+            "c_controller": systems["c"][0]["fmus"]["controller"]["path"]}
+    jobs = [["again", "loop", loop]] + [
+        [f"fuzz_{name}", "fuzz", {"fmu": windows_bench.windows_path(path),
+                                  "examples": FUZZ_EXAMPLES, "seed": 1}]
+        for name, path in fmus.items()]
+    return _run_checks(
         lambda spec: bench.run_python(CHECKS, [windows_bench.windows_path(spec)], env=caches,
-                                      timeout=1800), [["again", "loop", loop]], tmp_path, "again")
+                                      timeout=1800), jobs, tmp_path_factory.mktemp("second"),
+        "second")
+
+
+def test_a_second_process_runs_the_compiled_steps_from_the_native_image(
+        second_process, windows) -> None:
+    """numba's cache (written by the first process) and the native image beside the package's
+    stable copy: the second process loads machine code instead of compiling."""
+    results, seconds = second_process
     again = results["again"]
     print(f"\nsecond wine process: {seconds:.1f} s; first fmi2Instantiate of the plant "
           f"{again['instantiate_s']['plant']:.2f} s (first process "
@@ -260,19 +277,11 @@ def test_a_second_process_runs_the_compiled_steps_from_the_native_image(
                                   np.array(windows["python"]["rows"])[:11])
 
 
-def test_fuzzed_call_sequences_on_win64_never_crash_hang_or_go_fatal(
-        bench, caches, systems, windows, tmp_path) -> None:
-    fmus = {"plant": systems["python"][0]["fmus"]["plant"]["path"],
-            "controller": systems["python"][0]["fmus"]["controller"]["path"],
-            "c_controller": systems["c"][0]["fmus"]["controller"]["path"]}
-    jobs = [[name, "fuzz", {"fmu": windows_bench.windows_path(path),
-                            "examples": FUZZ_EXAMPLES, "seed": 1}]
-            for name, path in fmus.items()]
-    results, seconds = _run_checks(
-        lambda spec: bench.run_python(CHECKS, [windows_bench.windows_path(spec)], env=caches,
-                                      timeout=1800), jobs, tmp_path, "fuzz")
-    print(f"\nfuzz under wine: {seconds:.1f} s")
-    for name, report in results.items():
+def test_fuzzed_call_sequences_on_win64_never_crash_hang_or_go_fatal(second_process) -> None:
+    results, _seconds = second_process
+    fuzzed = {k: v for k, v in results.items() if k.startswith("fuzz_")}
+    assert len(fuzzed) == 3, sorted(results)
+    for name, report in fuzzed.items():
         assert report["examples"] >= FUZZ_EXAMPLES and report["calls_total"] > 0, (name, report)
         assert report["fatal"] == 0, (name, report)
         assert report["healthy_equal"] and report["reference_finite"], (name, report)
