@@ -80,6 +80,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=4000)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--fmu-dir", type=Path, default=ROOT / "build" / "fmus")
+    parser.add_argument("--default-caches", action="store_true",
+                        help="each side's default caches (the user's; under wine the prefix's), "
+                             "warm from earlier runs, instead of empty ones: the per-step "
+                             "figures without the minutes of a first compile under wine")
     args = parser.parse_args(argv)
     bench = windows_bench.prepare()
     work = Path(tempfile.mkdtemp(prefix="bench_wine_"))
@@ -90,14 +94,15 @@ def main(argv: list[str] | None = None) -> int:
     cases = {"plant": _case(args.fmu_dir / "DrillstringPlant.fmu", work / "plant", plant_step),
              "c": _case(args.fmu_dir / "StrainControllerC.fmu", work / "c", c_step)}
     steps = {"plant": (plant_step, args.steps), "c": (c_step, 50 * args.steps)}
-    linux_env = {**os.environ, "DRILLCOSIM_PYTHON": sys.executable,
-                 "DRILLCOSIM_CACHE": str(work / "cache-linux" / "drillcosim"),
-                 "NUMBA_CACHE_DIR": str(work / "cache-linux" / "numba"),
-                 "OPENBLAS_NUM_THREADS": "1"}
+    linux_env = {**os.environ, "DRILLCOSIM_PYTHON": sys.executable, "OPENBLAS_NUM_THREADS": "1"}
     win_env = {"DRILLCOSIM_PYTHON": windows_bench.windows_path(bench.python),
-               "DRILLCOSIM_CACHE": windows_bench.windows_path(work / "cache-win" / "drillcosim"),
-               "NUMBA_CACHE_DIR": windows_bench.windows_path(work / "cache-win" / "numba"),
                "OPENBLAS_NUM_THREADS": "1"}
+    if not args.default_caches:
+        linux_env.update({"DRILLCOSIM_CACHE": str(work / "cache-linux" / "drillcosim"),
+                          "NUMBA_CACHE_DIR": str(work / "cache-linux" / "numba")})
+        win_env.update({
+            "DRILLCOSIM_CACHE": windows_bench.windows_path(work / "cache-win" / "drillcosim"),
+            "NUMBA_CACHE_DIR": windows_bench.windows_path(work / "cache-win" / "numba")})
 
     def run(side: str, name: str, n: int, repeat: int) -> tuple[float, float]:
         step = steps[name][0]
@@ -129,10 +134,12 @@ def main(argv: list[str] | None = None) -> int:
     rows = {name: f"| {label[name]} | {steps[name][0] * 1e3:g} ms | {best['linux', name]:.3f} "
                   f"| {best['win', name]:.3f} | {ratio[name]:.2f} |" for name in ("plant", "c")}
     today = _dt.date.today().isoformat()
+    flag = " --default-caches" if args.default_caches else ""
+    caches = "the default (warm) caches" if args.default_caches else "empty caches"
     print(f"""
 ## The win64 binaries under wine vs the linux64 binaries ({today})
 
-`python benchmarks/bench_wine.py --steps {args.steps} --repeat {args.repeat}` on {platform.node()}
+`python benchmarks/bench_wine.py --steps {args.steps} --repeat {args.repeat}{flag}` on {platform.node()}
 ({os.cpu_count()} cores, {platform.machine()}), wine 8 (Debian), the same C host
 (`tests/support/fmi2_probe.c`, gcc / mingw-w64 -O2), best of {args.repeat} interleaved blocks.
 Per step: fmi2SetReal of the inputs, fmi2DoStep, fmi2GetReal of every output.
@@ -145,8 +152,8 @@ Per step: fmi2SetReal of the inputs, fmi2DoStep, fmi2GetReal of every output.
 Plant ratio / C controller ratio: {ratio['plant'] / ratio['c']:.2f} (1 = our wrapper adds nothing
 beyond wine's cost).
 
-First process with empty caches (instantiate + 10 steps, wall; numba compiles the plant's
-kernels): native {first['linux']:.1f} s, under wine {first['win']:.1f} s
+First process with {caches} (instantiate + 10 steps, wall; with empty caches numba
+compiles the plant's kernels): native {first['linux']:.1f} s, under wine {first['win']:.1f} s
 ({first['win'] / first['linux']:.1f}x); second process (numba's cache / native image):
 native {second['linux']:.1f} s, under wine {second['win']:.1f} s.
 """)
