@@ -3,7 +3,8 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-FMUS := build/fmus/DrillstringPlant.fmu build/fmus/StrainController.fmu build/fmus/TopDriveController.fmu build/fmus/StateSpaceController.fmu
+# the Python FMUs: the plant and one per registered controller law (fmu_src/build.py REGISTRY)
+FMUS := build/fmus/.python-fmus
 C_FMUS := build/fmus/StrainControllerC.fmu
 SRC := $(shell find plant controller fmu_src -name '*.py' -o -name '*.c' -o -name '*.h' -o -name '*.json' 2>/dev/null)
 C_SRC := $(wildcard fmu_src/c_controller/*.c fmu_src/c_controller/*.h fmu_src/c_controller/*.xml fmu_src/wrapper/fmi2/*.h fmu_src/wrapper/dcs_registry.* fmu_src/wrapper/dcs_lock.h) fmu_src/build_c.py
@@ -23,8 +24,9 @@ $(STAMP): $(BIN)/python pyproject.toml
 
 install: $(STAMP)
 
-$(FMUS) &: $(STAMP) $(SRC) $(wildcard scenes/*.toml)
+$(FMUS): $(STAMP) $(SRC) $(wildcard scenes/*.toml)
 	$(BIN)/python -m drillcosim.fmu_src.build --out build/fmus
+	touch $(FMUS)
 
 $(C_FMUS): $(STAMP) $(C_SRC)
 	$(BIN)/python -m drillcosim.fmu_src.build_c --out build/fmus

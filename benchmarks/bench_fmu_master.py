@@ -35,6 +35,7 @@ from drillcosim.cosim.scenario.config import load_config  # noqa: E402
 from drillcosim.fmu_src.build import build_all  # noqa: E402
 from drillcosim.plant.model import DrillstringModel  # noqa: E402
 from drillcosim.plant.scene import load_scene  # noqa: E402
+from drillcosim.plant.signals import actuator_inputs  # noqa: E402
 from drillcosim.plant.simulator import PlantSimulator  # noqa: E402
 
 
@@ -57,7 +58,7 @@ def plant_fmu(fmu: Path, stop: float, h: float = 1e-3) -> tuple[float, float]:
     md = read_model_description(str(fmu))
     unzip = extract(str(fmu))
     vr = {v.name: v.valueReference for v in md.modelVariables}
-    ins = [vr[f"actuator{s}_force_{a}"] for s in (1, 2) for a in "CE"]
+    ins = [vr[n] for n in actuator_inputs(2)]
     outs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
     t0 = time.perf_counter()
     s = FMU2Slave(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier,

@@ -14,9 +14,15 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["ENV", "compiled_law", "enabled"]
+__all__ = ["ENV", "FALLBACK", "INTERNAL", "OK", "REFUSED", "compiled_law", "enabled"]
 
 ENV = "DRILLCOSIM_COMPILED_STEP"
+
+#: The codes a law's compiled core returns (``controller/law.py``, rule 4).
+OK = 0
+FALLBACK = 1  # run this step in Python (nothing changed)
+REFUSED = 2  # the Python law refuses this step (nothing changed)
+INTERNAL = 9  # an exception inside the compiled code (a bug; numba's wrapper would return 0)
 
 
 def enabled() -> bool:
@@ -25,9 +31,9 @@ def enabled() -> bool:
 
 
 def compiled_law(entry: str, pack: Callable[[], tuple[object, list[Any]]]) -> Any:
-    """A :class:`controller.compiled.CompiledLaw` of the C entry point ``entry`` (a name in
-    ``compiled``: ``"strain_step"``, ``"top_drive_step"``) and its context ``pack``; None with
-    compiled steps switched off or numba not loaded in this process."""
+    """A :class:`controller.compiled.CompiledLaw` of the C entry point ``entry`` (a registered
+    law's ``KIND``) and its context ``pack``; None with compiled steps switched off or numba not
+    loaded in this process."""
     if not enabled() or "numba" not in sys.modules:
         return None
     try:

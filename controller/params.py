@@ -7,11 +7,11 @@ the controller FMU and must run in a Python that has nothing but numpy).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from numbers import Real
 from typing import Literal
 
-import numpy as np
+from .law import Settings, setting
 
 __all__ = ["MODES", "ControllerParams", "Mode", "check_gain_matrix"]
 
@@ -19,47 +19,6 @@ Mode = Literal["unrestricted", "compressive_only"]
 #: Allowed values of :attr:`ControllerParams.mode`, in the order of the FMU's
 #: integer encoding (0 = ``"unrestricted"``, 1 = ``"compressive_only"``).
 MODES: tuple[str, ...] = ("unrestricted", "compressive_only")
-
-
-def _check_real(name: str, value: object, low: float, high: float, *, low_open: bool = False,
-                high_open: bool = False) -> float:
-    """Return ``value`` as float if it lies in the interval, else raise ValueError.
-
-    Parameters
-    ----------
-    name : str
-        Parameter name, quoted in the error message.
-    value : object
-        Candidate value; must be a real number (``bool`` is rejected).
-    low, high : float
-        Interval bounds (may be infinite).
-    low_open, high_open : bool
-        Whether the respective bound is excluded.
-
-    Returns
-    -------
-    float
-        The validated value.
-
-    Raises
-    ------
-    ValueError
-        If the value is not a real number, is NaN or lies outside the interval.
-        The message names the parameter, the value and the allowed range.
-    """
-    left = "<" if low_open else "<="
-    right = "<" if high_open else "<="
-    allowed = f"allowed: {low:g} {left} {name} {right} {high:g}"
-    if isinstance(value, bool) or not isinstance(value, Real):
-        raise ValueError(f"{name} = {value!r} is not a real number; {allowed}")
-    x = float(value)
-    if math.isnan(x):
-        raise ValueError(f"{name} = nan is not allowed; {allowed}")
-    too_low = x <= low if low_open else x < low
-    too_high = x >= high if high_open else x > high
-    if too_low or too_high:
-        raise ValueError(f"{name} = {x!r} is out of range; {allowed}")
-    return x
 
 
 def check_gain_matrix(value: object) -> tuple[tuple[float, ...], ...]:
@@ -102,7 +61,7 @@ def check_gain_matrix(value: object) -> tuple[tuple[float, ...], ...]:
 
 
 @dataclass(frozen=True)
-class ControllerParams:
+class ControllerParams(Settings):
     """Parameters of the proportional strain-feedback law (paper section 4).
 
     Parameters
@@ -142,36 +101,30 @@ class ControllerParams:
         parameter, the offending value and the allowed range. NaN is rejected.
     """
 
-    gain: float = 1e9
-    mode: Mode = "unrestricted"
-    force_limit: float = 5000.0
-    symmetric_force_limit: float = math.inf
-    switch_on_time: float = 0.0
-    lag_time_constant: float = 0.0
-    enabled: bool = True
-    gain_matrix: tuple = ()
+    gain: float = setting(1e9, "N", "Proportional gain, N per unit strain; 0 <= gain < inf "
+                          "(paper: 1e9)", range=(0.0, math.inf), open=(False, True))
+    force_limit: float = setting(5000.0, "N", "Peak push force in compressive_only mode; "
+                                 "0 <= force_limit <= inf", range=(0.0, math.inf))
+    symmetric_force_limit: float = setting(
+        math.inf, "N", "Limit on |force| in unrestricted mode; >= 0 (1e30 = effectively none)",
+        range=(0.0, math.inf))
+    switch_on_time: float = setting(0.0, "s", "Controller output is zero before this time; >= 0",
+                                    range=(0.0, math.inf), open=(False, True))
+    mode: Mode = setting("unrestricted", "", "Actuator: push and pull, or push only",
+                         choices=MODES, fixed=True)
+    lag_time_constant: float = setting(0.0, "s", "First-order actuator lag time constant; 0 = no "
+                                       "lag", range=(0.0, math.inf), open=(False, True),
+                                       fixed=True)
+    enabled: bool = setting(True, "", "false = open loop (zero force at all times)", fixed=True)
+    gain_matrix: tuple = field(default=(), metadata={
+        "unit": "1", "doc": "relative gains M (n_sites x n_sites, row i = force of site i from "
+        "the strain of site j), the same for both axes: F_axis = gain * M @ strain_axis (MIMO "
+        "across the sites); [] or the identity = one P law per channel. Its FMU has the "
+        "parameters gain_matrix_<i>_<j>"})
 
     def __post_init__(self) -> None:
-        inf = math.inf
-        checked = {
-            "gain": _check_real("gain", self.gain, 0.0, inf, high_open=True),
-            "force_limit": _check_real("force_limit", self.force_limit, 0.0, inf),
-            "symmetric_force_limit": _check_real(
-                "symmetric_force_limit", self.symmetric_force_limit, 0.0, inf),
-            "switch_on_time": _check_real(
-                "switch_on_time", self.switch_on_time, 0.0, inf, high_open=True),
-            "lag_time_constant": _check_real(
-                "lag_time_constant", self.lag_time_constant, 0.0, inf, high_open=True),
-        }
-        if self.mode not in MODES:
-            choices = ", ".join(map(repr, MODES))
-            raise ValueError(f"mode = {self.mode!r} is not allowed; allowed: one of {choices}")
-        if not isinstance(self.enabled, (bool, np.bool_)):
-            raise ValueError(f"enabled = {self.enabled!r} is not allowed; allowed: True or False")
-        checked["enabled"] = bool(self.enabled)
-        checked["gain_matrix"] = check_gain_matrix(self.gain_matrix)
-        for name, value in checked.items():
-            object.__setattr__(self, name, value)
+        super().__post_init__()
+        object.__setattr__(self, "gain_matrix", check_gain_matrix(self.gain_matrix))
 
     @property
     def lower_limit(self) -> float:

@@ -42,10 +42,13 @@ from typing import Any
 
 import numpy as np
 
-from .acceleration import compiled_law
+from .acceleration import OK, REFUSED, compiled_law
+from .law import Law
+from .ports import Port, limit, parameter, real_input, real_output
 
-__all__ = ["FORMAT", "MULTIPLE_RTOL", "Signal", "StateSpaceController", "StateSpaceParams",
-           "Workspace", "load_state_space", "state_space_from_mapping"]
+__all__ = ["FORMAT", "MULTIPLE_RTOL", "NO_LIMIT", "Signal", "StateSpaceController",
+           "StateSpaceParams", "Workspace", "load_state_space", "state_space_core",
+           "state_space_from_mapping"]
 
 #: ``format`` key of a state-space file (:meth:`StateSpaceParams.to_mapping`).
 FORMAT = "drillcosim.state_space/1"
@@ -371,8 +374,13 @@ class Workspace:
         return int(self.array[_COUNT])
 
 
+#: The FMU's "no limit" of an output (a start value every XML reader parses; no force comes
+#: near it).
+NO_LIMIT = 1e300
+
+
 # ---------------------------------------------------------------------- the law
-class StateSpaceController:
+class StateSpaceController(Law):
     """The discrete linear law of the module docstring, with its state in a :class:`Workspace`.
 
     Parameters
@@ -385,6 +393,102 @@ class StateSpaceController:
     agree to rounding). A call that fails validation raises ValueError and leaves the state
     unchanged.
     """
+
+    KIND = "state_space"
+    TABLE = "controller"
+    FMU = "StateSpaceController"
+    DESCRIPTION = ("Generic discrete state-space controller u = clip(C x + D y), x+ = A x + B y "
+                   "(matrices in resources/state_space.json)")
+    PARAMS = StateSpaceParams
+    COMPILED = ("state_space_core", (1, 2, 1, 1, 1, 1, 1, 1, 1))
+    #: The FMU's matrices: ``resources/<RESOURCE>`` (this module's JSON format), read at
+    #: instantiation and checked against the FMU's layout (:meth:`load_resource`).
+    RESOURCE = "state_space.json"
+    #: The default FMU's matrices, beside this module: the paper's P law for two sites (no
+    #: state, ``D = 1e9 I``, Ts = 0.25 ms).
+    DEFAULT_RESOURCE = "state_space_default.json"
+
+    # ------------------------------------------------------------------ interface
+    @classmethod
+    def layout_for(cls, params: StateSpaceParams, n_sites: int) -> dict[str, Any]:
+        """The interface of ``params``: its signals (name, unit, description), output limits
+        (None: none), number of states and sample period."""
+        def lim(x: float) -> float | None:
+            return None if math.isinf(x) else x
+
+        return {
+            "inputs": [[s.name, s.unit, f"Input {i} of the state-space law (plant output "
+                        f"{s.name})"] for i, s in enumerate(params.inputs, start=1)],
+            "outputs": [[s.name, s.unit, f"Output {i} of the state-space law (plant input "
+                         f"{s.name})"] for i, s in enumerate(params.outputs, start=1)],
+            "lower": [lim(s.lower) for s in params.outputs],
+            "upper": [lim(s.upper) for s in params.outputs],
+            "n_states": params.n_states, "sample_period": params.sample_period}
+
+    @classmethod
+    def default_layout(cls) -> dict[str, Any]:
+        """The layout of the default FMU's matrices (:data:`DEFAULT_RESOURCE`)."""
+        params = load_state_space(Path(__file__).resolve().parent / cls.DEFAULT_RESOURCE)
+        return {**cls.layout_for(params, 2), "description": (
+            f"{cls.DESCRIPTION}; this build: the paper's P law, 2 sites x gauges C/E, D = 1e9 "
+            f"N/strain, no state, Ts = 0.25 ms")}
+
+    @classmethod
+    def load_resource(cls, path: Path, layout: Mapping[str, Any]) -> StateSpaceParams:
+        """The matrices file ``path``, checked against ``layout`` (ValueError: one line)."""
+        if not path.is_file():
+            raise ValueError(f"resources/{path.name} is missing: the FMU has no matrices")
+        params = load_state_space(path)
+        want = {"inputs": [tuple(r[:2]) for r in layout["inputs"]],
+                "outputs": [tuple(r[:2]) for r in layout["outputs"]],
+                "n_states": layout["n_states"], "sample_period": float(layout["sample_period"])}
+        have = {"inputs": [(s.name, s.unit) for s in params.inputs],
+                "outputs": [(s.name, s.unit) for s in params.outputs],
+                "n_states": params.n_states, "sample_period": params.sample_period}
+        for key, value in want.items():
+            if have[key] != value:
+                raise ValueError(f"resources/{path.name} does not fit this FMU: {key} "
+                                 f"{have[key]!r}; the FMU declares {value!r}")
+        return params
+
+    @classmethod
+    def io_ports(cls, layout: Mapping[str, Any]) -> tuple[Port, ...]:
+        return (*(real_input(n, u, d) for n, u, d in layout["inputs"]),
+                *(real_output(n, u, f"{d} (after the step: from the inputs set before it)")
+                  for n, u, d in layout["outputs"]))
+
+    @classmethod
+    def parameter_ports(cls, layout: Mapping[str, Any]) -> tuple[Port, ...]:
+        """The tunable saturation limits ``lower_limit_<output>``, ``upper_limit_<output>``
+        (start: the layout's, else -+ :data:`NO_LIMIT`)."""
+        out = []
+        for (name, unit, _doc), lo, hi in zip(layout["outputs"], layout["lower"],
+                                              layout["upper"]):
+            for side, start, none in (("lower", lo, -NO_LIMIT), ("upper", hi, NO_LIMIT)):
+                out.append(parameter(limit(side, name), unit,
+                                     f"Saturation: {side} limit of {name} (+-{NO_LIMIT!r} = none)",
+                                     none if start is None else float(start)))
+        return tuple(out)
+
+    @classmethod
+    def encode(cls, params: StateSpaceParams, layout: Mapping[str, Any]) -> dict[str, Any]:
+        """Nothing: the limits are the layout's starts."""
+        return {}
+
+    @classmethod
+    def decode(cls, values: Mapping[str, Any], layout: Mapping[str, Any],
+               base: StateSpaceParams | None = None) -> StateSpaceParams:
+        """``base`` (the matrices of :meth:`load_resource`) with the limits of ``values``."""
+        if base is None:
+            raise ValueError("a state-space law's matrices come from its resource file")
+        outs = [n for n, _u, _d in layout["outputs"]]
+        lower = [values[limit("lower", o)] for o in outs]
+        upper = [values[limit("upper", o)] for o in outs]
+        bad = [o for o, lo, hi in zip(outs, lower, upper) if not lo <= hi]
+        if bad:
+            raise ValueError(f"lower_limit > upper_limit (or NaN) for {', '.join(bad)}; "
+                             "allowed: lower <= upper")
+        return base.with_limits(lower, upper)
 
     def __init__(self, params: StateSpaceParams) -> None:
         self._params = params
@@ -482,8 +586,17 @@ class StateSpaceController:
             ws.array[_COUNT] += 1.0
         return ws.outputs.copy()
 
+    def initial_outputs(self) -> np.ndarray:
+        """The outputs of the last sample (zero after :meth:`reset`)."""
+        return self.workspace.outputs.copy()
+
+    def advance(self, t: float, h: float, inputs: np.ndarray, outputs: np.ndarray) -> None:
+        """:meth:`step` with ``inputs``, the outputs written into ``outputs``."""
+        outputs[:] = self.step(t, h, inputs)
+
     def compiled_step(self, inputs: np.ndarray, outputs: np.ndarray) -> Any:
-        """This law's compiled step (:class:`controller.compiled.CompiledLaw`) reading the inputs
+        """This law's compiled step (:class:`controller.compiled.CompiledLaw`, core
+        :func:`state_space_core`) reading the inputs
         from ``inputs`` (shape (m,)) and writing the outputs into ``outputs`` (shape (p,)),
         float64 buffers; None without numba or with compiled steps switched off. A step it
         refuses (bad time, step or input; nothing changed) is left to :meth:`step`, which
@@ -494,4 +607,45 @@ class StateSpaceController:
             return ws, [ws.timing, ws.matrix, ws.vector, ws.scratch, ws.lower, ws.upper,
                         ws.outputs, inputs, outputs]
 
-        return compiled_law("state_space_step", pack)
+        return compiled_law(self.KIND, pack)
+
+
+# ------------------------------------------------------------------------ compiled core
+# the timing slots of the workspace's header as the core reads them: the sample period, the
+# samples run, the tolerance of "h is a multiple of the sample period"
+S_PERIOD, S_COUNT, S_RTOL = range(3)
+
+
+def state_space_core(t, h, timing, matrix, w, scratch, lower, upper, law_outputs, inputs,
+                     outputs):
+    """:meth:`controller.StateSpaceController.step` on the views of its workspace: ``w = [x;
+    y]`` (the state, then the inputs the law holds), ``matrix = [[C, D], [A, B]]``, one
+    product per sample (``scratch = matrix w``)."""
+    if not (math.isfinite(t) and math.isfinite(h) and h >= 0.0):
+        return REFUSED
+    ts = timing[S_PERIOD]
+    k_float = h / ts
+    k = int(k_float + 0.5)
+    if abs(k_float - k) > timing[S_RTOL] * max(1.0, k_float):
+        return REFUSED
+    m = inputs.size
+    p = law_outputs.size
+    n = w.size - m
+    for j in range(m):
+        if not math.isfinite(inputs[j]):
+            return REFUSED
+    for j in range(m):
+        w[n + j] = inputs[j]
+    for _ in range(k):
+        np.dot(matrix, w, scratch)                  # BLAS, no allocation
+        for i in range(p):
+            v = scratch[i]
+            lo = lower[i]
+            hi = upper[i]
+            law_outputs[i] = lo if v < lo else (hi if v > hi else v)  # numpy's clip
+        for i in range(n):
+            w[i] = scratch[p + i]
+        timing[S_COUNT] += 1.0
+    for i in range(p):
+        outputs[i] = law_outputs[i]
+    return OK

@@ -47,22 +47,24 @@ and ``F(t + dt) = u`` for ``T = 0``. The command is zero while
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 
-from .acceleration import compiled_law
+from .acceleration import FALLBACK, OK, REFUSED, compiled_law
+from .law import Law
 from .params import ControllerParams
+from .ports import AXES, Port, gain_matrix_entry, parameter, strain, strain_site_ports
 
-__all__ = ["AXES", "CHANNELS", "N_CHANNELS", "SWITCH_TIME_RTOL", "StrainController", "channels"]
-
-#: Gauge axes of a site, in channel order.
-AXES: tuple[str, ...] = ("C", "E")
+__all__ = ["AXES", "CHANNELS", "N_CHANNELS", "SWITCH_TIME_RTOL", "StrainController", "channels",
+           "strain_core"]
 
 
 def channels(n_sites: int) -> tuple[str, ...]:
-    """Channel names in array order for ``n_sites`` sites: ``site1_C, site1_E, site2_C, ...``."""
-    return tuple(f"site{s}_{a}" for s in range(1, n_sites + 1) for a in AXES)
+    """Channel names in array order for ``n_sites`` sites: the strain inputs ``strain1_C,
+    strain1_E, strain2_C, ...``."""
+    return tuple(strain(s, a) for s in range(1, n_sites + 1) for a in AXES)
 
 
 #: Channel names of the default two-site controller.
@@ -74,7 +76,7 @@ N_CHANNELS = len(CHANNELS)
 SWITCH_TIME_RTOL = 1e-12
 
 
-class StrainController:
+class StrainController(Law):
     """Proportional strain-feedback controller, two channels (C, E) per actuator site.
 
     Parameters
@@ -92,6 +94,78 @@ class StrainController:
     validation (NaN strain, bad time step) raises ``ValueError`` and leaves the
     state unchanged.
     """
+
+    KIND = "proportional"
+    TABLE = "controller"
+    FMU = "StrainController"
+    DESCRIPTION = ("Proportional strain-feedback controller for lateral drillstring vibration "
+                   "(sites x gauges C/E); F = gain*strain, F > 0 = compressive at D / tensile at "
+                   "C; saturation, switch-on time, first-order actuator lag")
+    PARAMS = ControllerParams
+    COMPILED = ("strain_core", (1, 2, 1, 1, 1, 1))
+    #: The default FMU's sites, as the paper names them.
+    SITE_NAMES: ClassVar[dict[int, str]] = {1: "site 1 (long span)", 2: "site 2 (short span)"}
+
+    # ------------------------------------------------------------------ interface
+    @classmethod
+    def layout_for(cls, params: ControllerParams, n_sites: int) -> dict[str, Any]:
+        """``n_sites`` and the relative gain matrix's start (None: the default FMU's, which
+        has no matrix parameters: two sites, no matrix; else the matrix or the identity)."""
+        m = params.gain_matrix
+        if n_sites == 2 and not m:
+            return {"n_sites": 2, "gain_matrix": None}
+        matrix = [list(row) for row in m] or [[float(i == j) for j in range(n_sites)]
+                                              for i in range(n_sites)]
+        return {"n_sites": n_sites, "gain_matrix": matrix}
+
+    @classmethod
+    def io_ports(cls, layout: Mapping[str, Any]) -> tuple[Port, ...]:
+        """The strains and forces of ``layout["n_sites"]`` sites (the paper's two sites named
+        by their spans, where the layout has no matrix)."""
+        n = int(layout["n_sites"])
+        paper = n == 2 and layout.get("gain_matrix") is None
+        return strain_site_ports(n, cls.SITE_NAMES if paper else None)
+
+    @classmethod
+    def parameter_ports(cls, layout: Mapping[str, Any]) -> tuple[Port, ...]:
+        """The P law's fields, then (a layout with a matrix) the relative gains
+        ``gain_matrix_<i>_<j>`` [1], row by row, starting at the layout's matrix."""
+        out = list(super().parameter_ports(layout))
+        for i, row in enumerate(layout.get("gain_matrix") or (), start=1):
+            for j, start in enumerate(row, start=1):
+                out.append(parameter(
+                    gain_matrix_entry(i, j), "1",
+                    f"Relative gain from the strain of site {j} to the force of site {i}, both "
+                    f"axes: F_axis = gain * M @ strain_axis; identity = one P law per channel",
+                    float(start)))
+        return tuple(out)
+
+    @classmethod
+    def encode(cls, params: ControllerParams, layout: Mapping[str, Any]) -> dict[str, Any]:
+        out = super().encode(params, layout)
+        out.pop("gain_matrix", None)
+        n = int(layout["n_sites"])
+        if layout.get("gain_matrix") is not None:
+            m = params.gain_matrix or tuple(tuple(float(i == j) for j in range(n))
+                                            for i in range(n))
+            out.update({gain_matrix_entry(i, j): float(m[i - 1][j - 1])
+                        for i in range(1, n + 1) for j in range(1, n + 1)})
+        return out
+
+    @classmethod
+    def decode(cls, values: Mapping[str, Any], layout: Mapping[str, Any], base: Any = None
+               ) -> ControllerParams:
+        params = super().decode(values, layout)
+        if layout.get("gain_matrix") is None:
+            return params
+        n = int(layout["n_sites"])
+        matrix = tuple(tuple(values[gain_matrix_entry(i, j)] for j in range(1, n + 1))
+                       for i in range(1, n + 1))
+        return ControllerParams(**{**_fields(params), "gain_matrix": matrix})
+
+    @classmethod
+    def create(cls, params: ControllerParams, layout: Mapping[str, Any]) -> StrainController:
+        return cls(params, int(layout["n_sites"]))
 
     def __init__(self, params: ControllerParams | None = None, n_sites: int = 2) -> None:
         if isinstance(n_sites, bool) or not isinstance(n_sites, int) or n_sites < 1:
@@ -251,9 +325,12 @@ class StrainController:
             If ``t`` or ``dt`` is not finite, ``dt < 0``, or ``strains`` has the
             wrong shape or a non-finite entry. The state is left unchanged.
         """
-        if not (math.isfinite(t) and math.isfinite(dt) and dt >= 0.0):
-            raise ValueError(f"need finite t and finite dt >= 0, got t = {t!r}, dt = {dt!r}")
-        u = self.command(t, strains)
+        _check_step(t, dt)
+        return self._actuate(self.command(t, strains), dt)
+
+    def _actuate(self, u: np.ndarray, dt: float) -> np.ndarray:
+        """The actuator forces after ``dt`` [s] of the saturated command ``u`` [N] (the lag),
+        a copy of the new state."""
         tau = self._params.lag_time_constant
         if tau == 0.0:
             self._force[:] = u
@@ -265,10 +342,19 @@ class StrainController:
             self._force[:] = u + (self._force - u) * decay[1]
         return self._force.copy()
 
+    def initial_outputs(self) -> np.ndarray:
+        """The actuator forces (the lag state) [N]."""
+        return self.forces
+
+    def advance(self, t: float, h: float, inputs: np.ndarray, outputs: np.ndarray) -> None:
+        """:meth:`step` with the strains ``inputs``, the forces written into ``outputs``."""
+        outputs[:] = self.step(t, h, inputs)
+
     def compiled_step(self, inputs: np.ndarray, outputs: np.ndarray) -> Any:
-        """This law's compiled step (:class:`controller.compiled.CompiledLaw`) reading the
-        strains from ``inputs`` and writing the forces into ``outputs`` (float64 buffers, shape
-        (2 n_sites,)); None without numba or with compiled steps switched off."""
+        """This law's compiled step (:class:`controller.compiled.CompiledLaw`, core
+        :func:`strain_core`) reading the strains from ``inputs`` and writing the forces into
+        ``outputs`` (float64 buffers, shape (2 n_sites,)); None without numba or with compiled
+        steps switched off."""
         def pack() -> tuple[object, list[np.ndarray]]:
             p = self._params
             params = np.array([p.gain, p.lower_limit, p.upper_limit, p.switch_on_time,
@@ -276,7 +362,7 @@ class StrainController:
             matrix = self._matrix if self._matrix is not None else np.zeros((0, 0))
             return p, [params, matrix, self._decay, self._force, inputs, outputs]
 
-        return compiled_law("strain_step", pack)
+        return compiled_law(self.KIND, pack)
 
     def _check_strains(self, strains: np.ndarray) -> np.ndarray:
         eps = np.asarray(strains, dtype=float)
@@ -286,3 +372,58 @@ class StrainController:
             bad = [self.channels[i] for i in np.flatnonzero(~np.isfinite(eps))]
             raise ValueError(f"non-finite strain in channel(s) {', '.join(bad)}: {eps.tolist()}")
         return eps
+
+
+def _check_step(t: float, dt: float) -> None:
+    """ValueError unless ``t`` and ``dt`` are finite and ``dt >= 0``."""
+    if not (math.isfinite(t) and math.isfinite(dt) and dt >= 0.0):
+        raise ValueError(f"need finite t and finite dt >= 0, got t = {t!r}, dt = {dt!r}")
+
+
+def _fields(params: ControllerParams) -> dict[str, Any]:
+    return {name: getattr(params, name) for name in params.__dataclass_fields__}
+
+
+# ------------------------------------------------------------------------ compiled core
+# slots of the strain law's params array (the switch-on tolerance is passed in: the compiled
+# entry is keyed on this package's sources, but a number in the array needs no recompilation)
+P_GAIN, P_LOWER, P_UPPER, P_SWITCH_ON, P_ENABLED, P_TAU, P_RTOL = range(7)
+
+
+def strain_core(t, dt, params, matrix, decay, force, inputs, outputs):
+    """:meth:`controller.StrainController.step` on the buffers (see the module docstring)."""
+    if not (math.isfinite(t) and math.isfinite(dt) and dt >= 0.0):
+        return REFUSED
+    nch = force.size
+    for i in range(nch):
+        if not math.isfinite(inputs[i]):
+            return REFUSED
+    tau = params[P_TAU]
+    if tau != 0.0 and dt != decay[0]:
+        return FALLBACK  # the Python law computes exp(-dt / tau) and keeps it in `decay`
+    t_on = params[P_SWITCH_ON]
+    active = params[P_ENABLED] != 0.0 and t >= t_on - params[P_RTOL] * max(1.0, abs(t_on))
+    gain = params[P_GAIN]
+    lower = params[P_LOWER]
+    upper = params[P_UPPER]
+    n = matrix.shape[0]
+    for i in range(nch):
+        u = 0.0
+        if active:
+            if n == 0:
+                v = gain * inputs[i]
+            else:  # site s, axis a: sum over the sites j in order, as the Python law
+                s = i // 2
+                a = i - 2 * s
+                acc = matrix[s, 0] * inputs[a]
+                for j in range(1, n):
+                    acc = acc + matrix[s, j] * inputs[2 * j + a]
+                v = gain * acc
+            v = lower if v < lower else v  # numpy's clip keeps v when equal to a limit
+            u = upper if v > upper else v
+        if tau == 0.0:
+            force[i] = u
+        else:
+            force[i] = u + (force[i] - u) * decay[1]
+        outputs[i] = force[i]
+    return OK

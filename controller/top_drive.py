@@ -44,19 +44,30 @@ and returns the motor torque at ``t + dt``: ``P e(t) + I x(t + dt) + k_T T_s(t)`
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from .acceleration import compiled_law
-from .params import _check_real
+from .acceleration import OK, REFUSED, compiled_law
+from .law import Law, Settings, setting
+from .ports import Port, real_input, real_output
 
-__all__ = ["TopDriveController", "TopDriveControllerParams"]
+__all__ = ["TopDriveController", "TopDriveControllerParams", "drive_ports", "speed_reference",
+           "top_drive_core"]
+
+
+def drive_ports() -> tuple[Port, ...]:
+    """The inputs and output of a top-drive law: the drive speed and the top torque (plant
+    outputs), the motor torque (the plant's input in top_drive.mode "torque")."""
+    return (real_input("top_rotary_speed", "rad/s", "Rotary speed of the top drive"),
+            real_input("top_torque", "N.m", "Torque the top drive applies to the string"),
+            real_output("top_drive_torque", "N.m", "Motor torque on the top-drive rotor"))
 
 
 @dataclass(frozen=True)
-class TopDriveControllerParams:
+class TopDriveControllerParams(Settings):
     """Parameters of the top-drive speed controller (see the module docstring).
 
     Parameters
@@ -81,37 +92,32 @@ class TopDriveControllerParams:
         For any invalid value; the message names the parameter and the allowed range.
     """
 
-    target_speed: float = 2.0
-    p_gain: float = 300.0
-    i_gain: float = 1000.0
-    torque_feedback: float = 0.0
-    ramp_time: float = 1.0
-    enabled: bool = True
-
-    def __post_init__(self) -> None:
-        inf = math.inf
-        checked = {
-            "target_speed": _check_real("target_speed", self.target_speed, -1e3, 1e3),
-            "p_gain": _check_real("p_gain", self.p_gain, 0.0, inf, high_open=True),
-            "i_gain": _check_real("i_gain", self.i_gain, 0.0, inf, high_open=True),
-            "torque_feedback": _check_real("torque_feedback", self.torque_feedback, -10.0, 1.0,
-                                           high_open=True),
-            "ramp_time": _check_real("ramp_time", self.ramp_time, 0.0, inf, high_open=True),
-        }
-        if not isinstance(self.enabled, (bool, np.bool_)):
-            raise ValueError(f"enabled = {self.enabled!r} is not allowed; allowed: True or False")
-        checked["enabled"] = bool(self.enabled)
-        for name, value in checked.items():
-            object.__setattr__(self, name, value)
+    target_speed: float = setting(2.0, "rad/s", "Target rotary speed of the drive; "
+                                  "|target_speed| <= 1e3", range=(-1e3, 1e3))
+    p_gain: float = setting(300.0, "N.m.s/rad", "Proportional gain P of the speed controller; "
+                            "0 <= P < inf", range=(0.0, math.inf), open=(False, True))
+    i_gain: float = setting(1000.0, "N.m/rad", "Integral gain I of the speed controller; "
+                            "0 <= I < inf", range=(0.0, math.inf), open=(False, True))
+    torque_feedback: float = setting(0.0, "1", "Top-torque feedback gain k_T: T_m += k_T "
+                                     "top_torque; -10 <= k_T < 1 (0 = plain PI)",
+                                     range=(-10.0, 1.0), open=(False, True))
+    ramp_time: float = setting(1.0, "s", "The speed reference ramps from 0 to target_speed over "
+                               "this time; >= 0", range=(0.0, math.inf), open=(False, True))
+    enabled: bool = setting(True, "", "false = zero motor torque at all times", fixed=True)
 
     def reference(self, t: float) -> float:
         """Speed reference Omega_ref(t) [rad/s]: the ramp to ``target_speed``."""
-        if self.ramp_time == 0.0 or t >= self.ramp_time:
-            return self.target_speed
-        return self.target_speed * max(t, 0.0) / self.ramp_time
+        return speed_reference(self.target_speed, self.ramp_time, t)
 
 
-class TopDriveController:
+def speed_reference(target: float, ramp_time: float, t: float) -> float:
+    """The speed reference [rad/s] at ``t`` [s]: from 0 to ``target`` over ``ramp_time`` [s]."""
+    if ramp_time == 0.0 or t >= ramp_time:
+        return target
+    return target * max(t, 0.0) / ramp_time
+
+
+class TopDriveController(Law):
     """The sampled PI speed controller with top-torque feedback.
 
     Parameters
@@ -126,36 +132,53 @@ class TopDriveController:
     raises ``ValueError`` and leaves the state unchanged.
     """
 
+    KIND = "pi"
+    TABLE = "top_drive_controller"
+    FMU = "TopDriveController"
+    DESCRIPTION = ("Top-drive speed controller (PI on the drive speed with top-torque feedback, "
+                   "soft-torque style): motor torque = P e + I integral(e) + k_T top_torque, e = "
+                   "speed reference - drive speed; drives a plant in top_drive.mode 'torque'")
+    PARAMS = TopDriveControllerParams
+    COMPILED = ("top_drive_core", (1, 1, 1, 1))
+
+    @classmethod
+    def io_ports(cls, layout: Mapping[str, Any]) -> tuple[Port, ...]:
+        return drive_ports()
+
+    #: What the state holds, in order (:meth:`get_state`).
+    STATE: tuple[str, ...] = ("x", "T_m")
+
     def __init__(self, params: TopDriveControllerParams | None = None) -> None:
-        self._params = TopDriveControllerParams()
-        self.params = TopDriveControllerParams() if params is None else params
-        self._state = np.zeros(2)
+        self._params = self.PARAMS()
+        self.params = self.PARAMS() if params is None else params
+        self._state = np.zeros(len(self.STATE))
 
     @property
     def params(self) -> TopDriveControllerParams:
-        """TopDriveControllerParams: current parameters; assigning keeps the state."""
+        """The current parameters (:attr:`PARAMS`); assigning keeps the state."""
         return self._params
 
     @params.setter
     def params(self, params: TopDriveControllerParams) -> None:
-        if not isinstance(params, TopDriveControllerParams):
-            raise TypeError(f"params must be a TopDriveControllerParams, got "
+        if not isinstance(params, self.PARAMS):
+            raise TypeError(f"params must be a {self.PARAMS.__name__}, got "
                             f"{type(params).__name__}")
         self._params = params
 
     def reset(self) -> None:
-        """Integral and motor torque back to zero."""
+        """The state (integral, motor torque, ...) back to zero."""
         self._state[:] = 0.0
 
     def get_state(self) -> np.ndarray:
-        """numpy.ndarray, shape (2,): a copy of ``[x [rad], T_m [N m]]``."""
+        """numpy.ndarray: a copy of the state (:attr:`STATE`; here ``[x [rad], T_m [N m]]``)."""
         return self._state.copy()
 
     def set_state(self, state: np.ndarray) -> None:
-        """Restore a state of :meth:`get_state` (shape (2,), finite; else ValueError)."""
+        """Restore a state of :meth:`get_state` (its shape, finite; else ValueError)."""
         arr = np.asarray(state, dtype=float)
-        if arr.shape != (2,) or not np.all(np.isfinite(arr)):
-            raise ValueError(f"state must be 2 finite numbers [x, T_m], got {arr.tolist()}")
+        if arr.shape != self._state.shape or not np.all(np.isfinite(arr)):
+            raise ValueError(f"state must be {self._state.size} finite numbers "
+                             f"[{', '.join(self.STATE)}], got {arr.tolist()}")
         self._state[:] = arr
 
     @property
@@ -202,8 +225,17 @@ class TopDriveController:
         self._state[:] = (x, motor)
         return float(motor)
 
+    def initial_outputs(self) -> np.ndarray:
+        """The motor torque [N m]."""
+        return np.array([self.torque])
+
+    def advance(self, t: float, h: float, inputs: np.ndarray, outputs: np.ndarray) -> None:
+        """:meth:`step` with ``inputs = [speed, torque]``, the motor torque into ``outputs``."""
+        outputs[0] = self.step(t, h, float(inputs[0]), float(inputs[1]))
+
     def compiled_step(self, inputs: np.ndarray, outputs: np.ndarray) -> Any:
-        """This law's compiled step (:class:`controller.compiled.CompiledLaw`) reading
+        """This law's compiled step (:class:`controller.compiled.CompiledLaw`, core
+        :func:`top_drive_core`) reading
         ``[speed, torque]`` from ``inputs`` (shape (2,)) and writing the motor torque into
         ``outputs`` (shape (1,)); None without numba or with compiled steps switched off."""
         def pack() -> tuple[object, list[np.ndarray]]:
@@ -212,4 +244,36 @@ class TopDriveController:
                                p.ramp_time, float(p.enabled)])
             return p, [params, self._state, inputs, outputs]
 
-        return compiled_law("top_drive_step", pack)
+        return compiled_law(self.KIND, pack)
+
+
+# ------------------------------------------------------------------------ compiled core
+# slots of the params array
+T_TARGET, T_P, T_I, T_KT, T_RAMP, T_ENABLED = range(6)
+
+
+def top_drive_core(t, dt, params, state, inputs, outputs):
+    """:meth:`controller.TopDriveController.step` on the buffers (see the module docstring)."""
+    if not (math.isfinite(t) and math.isfinite(dt) and dt >= 0.0):
+        return REFUSED
+    speed = inputs[0]
+    torque = inputs[1]
+    if not (math.isfinite(speed) and math.isfinite(torque)):
+        return REFUSED
+    if params[T_ENABLED] == 0.0:
+        state[1] = 0.0
+        outputs[0] = 0.0
+        return OK
+    ramp = params[T_RAMP]
+    target = params[T_TARGET]
+    if ramp == 0.0 or t >= ramp:
+        reference = target
+    else:
+        reference = target * (0.0 if 0.0 > t else t) / ramp  # Python's max(t, 0.0)
+    error = reference - speed
+    x = state[0] + dt * error
+    motor = params[T_P] * error + params[T_I] * x + params[T_KT] * torque
+    state[0] = x
+    state[1] = motor
+    outputs[0] = motor
+    return OK

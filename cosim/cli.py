@@ -123,6 +123,7 @@ def _cmd_build(args: argparse.Namespace) -> int:
     from drillcosim.api import build_fmus, load_scene
     from drillcosim.cosim.master.errors import UserError
     from drillcosim.cosim.scenario.build import scene_recipes
+    from drillcosim.cosim.scenario.scene_fmus import built_for_scene
     from drillcosim.fmu_src.platforms import select
 
     try:
@@ -135,7 +136,8 @@ def _cmd_build(args: argparse.Namespace) -> int:
         built = build_fmus(args.out, scene=args.scene, platforms=args.platforms,
                            standalone=args.standalone)
         for instance, path in built.items():
-            kind = "built for the scene" if recipes[instance].base else "the default build"
+            kind = ("built for the scene" if built_for_scene(recipes[instance])
+                    else "the default build")
             print(f"built {path} ({instance}: {kind}{_self_contained(path)})")
         return EXIT_OK
     try:
@@ -216,7 +218,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
             baseline = _baseline(config, cached_only=True) if want_baseline else None
             feed = workers.feed(plot_settings(config, baseline), config.cosim.stop_time)
             result = simulate(built, progress=_progress(args), csv_path=out / "results.csv",
-                              observers=[feed] if feed is not None else ())
+                              observers=[feed] if feed is not None else (),
+                              save_state=args.save_state, from_state=args.from_state)
         except CosimError as exc:  # failed before the first step: earlier files are kept
             if exc.call == "fmi2ExitInitializationMode" and exc.status == FMI2_ERROR:
                 # the FMU rejected its parameters (its message names them): bad input
@@ -229,6 +232,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
         files = result.save(out, plots=not args.no_plots, workers=workers, baseline=baseline)
     message = result.message(out, files)
     print(message, file=sys.stdout if result.completed else sys.stderr)
+    if args.save_state is not None:
+        print(f"checkpoint at {result.end_time:g} s: {args.save_state}" if result.completed
+              else "no checkpoint written: the run did not reach its stop time",
+              file=sys.stdout if result.completed else sys.stderr)
     if args.profile:
         print(result.profile_table())
     return EXIT_OK if result.completed else EXIT_FAILED
@@ -267,25 +274,42 @@ def _cmd_ssp(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _vary(items: Sequence[str]) -> dict[str, list[float]]:
+    """``--vary KEY=LIST`` items -> ``{key path: values}`` (LIST as for --gain)."""
+    from drillcosim.cosim.master.errors import UserError
+    from drillcosim.cosim.scenario.config import split_assignment
+    from drillcosim.cosim.study.grid import parse_list
+
+    out: dict[str, list[float]] = {}
+    for item in items:
+        key, text = split_assignment(item, "--vary", "KEY=LIST",
+                                     "controller.parameters.kd=0,1e4,1e5")
+        if key in out:
+            raise UserError(f"--vary {key}: given twice")
+        out[key] = parse_list(text, f"--vary {key}")
+    return out
+
+
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from drillcosim.api import sweep
     from drillcosim.cosim.study.grid import parse_list
     from drillcosim.cosim.study.sweep import judging_note, sweep_spec
 
-    over = _parse_set(args.set)
-    lists = {"gains": parse_list(args.gain, "--gain", minimum=0.0),
-             "delays": parse_list(args.delay, "--delay", minimum=0.0),
-             "steps": parse_list(args.step, "--step", positive=True)}
+    lists = {what: None if text is None else parse_list(text, flag)
+             for what, flag, text in (("gains", "--gain", args.gain),
+                                      ("delays", "--delay", args.delay),
+                                      ("steps", "--step", args.step))}
     spec = sweep_spec(args.scene, **lists, stop_time=args.stop_time, engine=args.engine,
-                      overrides=over, gain_key=args.gain_key)
+                      overrides=_parse_set(args.set), gain_key=args.gain_key,
+                      vary=_vary(args.vary), plant_fmu=args.plant_fmu,
+                      controller_fmu=args.controller_fmu)
     note = judging_note(spec)
     if note:
         print(f"drillcosim sweep: note: {note}", file=sys.stderr)
     out = args.out or f"out/sweep_{Path(args.scene).stem}"
-    frame = sweep(args.scene, **lists, stop_time=spec.stop_time, gain_key=spec.gain_key,
-                  overrides=over, engine=args.engine, out=out, workers=args.workers,
-                  scheduler=args.scheduler, progress=_progress(args),
-                  retry_errors=args.retry_errors)
+    frame = sweep(spec, out=out, workers=args.workers, scheduler=args.scheduler,
+                  progress=_progress(args), retry_errors=args.retry_errors,
+                  branch=not args.no_branch)
     res = frame.attrs["outcome"]
     print(f"ran {res.n_run} of {res.n_points} points ({res.n_skipped} already done) in "
           f"{res.wall_time:.1f} s")
@@ -298,6 +322,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         for path in plot_maps(res.folder, predict=not args.no_prediction,
                               progress=_progress(args)):
             print(path)
+    if res.n_errors:
+        first = next(r for r in frame.to_dict("records") if r["status"] == "error")
+        print(f"drillcosim sweep: {res.n_errors} point(s) failed; the first ({first['key']}): "
+              f"{first['reason']}", file=sys.stderr)
+        return EXIT_FAILED
     return EXIT_OK
 
 
@@ -381,9 +410,11 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return mod.main((["--quick"] if args.quick else []) + (["--out", args.out] if args.out else []))
 
 
-def _add_fmu_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--fmu-dir", metavar="DIR", help="folder of DrillstringPlant.fmu and "
-                   "StrainController.fmu, used as is (default build/fmus, rebuilt when stale)")
+def _add_fmu_options(p: argparse.ArgumentParser, fmu_dir: bool = True) -> None:
+    if fmu_dir:
+        p.add_argument("--fmu-dir", metavar="DIR", help="folder of DrillstringPlant.fmu and "
+                       "StrainController.fmu, used as is (default build/fmus, rebuilt when "
+                       "stale)")
     p.add_argument("--plant-fmu", metavar="FMU", help="a plant FMU file (any maker) instead "
                    "of DrillstringPlant.fmu; checked against the controller by name")
     p.add_argument("--controller-fmu", metavar="FMU", help="a controller FMU file (any maker) "
@@ -470,6 +501,13 @@ def _parser() -> argparse.ArgumentParser:
                    help="print where the stepping loop's time went: per component its mean "
                         "and longest step and share, the master's own share, the real-time "
                         "factor (also in summary.json's telemetry)")
+    p.add_argument("--save-state", metavar="FILE",
+                   help="write a checkpoint of the whole system at the stop time (every FMU's "
+                        "state and the master's: ticks, delay lines, held values)")
+    p.add_argument("--from-state", metavar="FILE",
+                   help="continue from a checkpoint (--save-state of the same scene, settings, "
+                        "engine and build) to --stop-time; the same outputs, bit for bit, as "
+                        "the run that was never interrupted")
     p.add_argument("--no-baseline", action="store_true",
                    help="figures without the open-loop baseline (a closed-loop run's figures "
                         "draw the scene with the controller off behind it; run once, cached)")
@@ -486,23 +524,33 @@ def _parser() -> argparse.ArgumentParser:
                    help="write a system with delays, linear coupling or Gauss-Seidel stepping "
                         "without them (SSP 1.0 cannot hold them; listed as a warning)")
     p.set_defaults(func=_cmd_ssp)
-    p = sub.add_parser("sweep", help="stability/benefit sweep over gain x delay x step",
+    p = sub.add_parser("sweep", help="stability/benefit sweep over gain x delay x step x any "
+                       "scene key (--vary)",
                        description="LIST: comma-separated values, start:stop:count, or "
-                                   "log:start:stop:count (e.g. log:1e6:1e10:5).")
+                                   "log:start:stop:count (e.g. log:1e6:1e10:5). A point that "
+                                   "the user must fix (FMUs that do not fit, an unknown "
+                                   "parameter) stops the sweep before any point runs (exit "
+                                   "2); a sweep with failed points exits 1 naming the first.")
     p.add_argument("scene", nargs="?", default="paper_closed_loop",
                    help="scene name from scenes/ or a path (default: paper_closed_loop)")
-    p.add_argument("--gain", default="1e9", metavar="LIST",
-                   help="controller gains (default 1e9): values of --gain-key")
+    p.add_argument("--vary", action="append", default=[], metavar="KEY=LIST",
+                   help="vary any scene key by its key path (repeatable; full factorial), "
+                        "e.g. controller.parameters.kd=0,1e4,1e5 (a foreign FMU's own "
+                        "parameter) or cosim.controller_sample_period=1e-3,2e-3")
+    p.add_argument("--gain", metavar="LIST",
+                   help="values of --gain-key (default: the scene's gain, not varied)")
     p.add_argument("--gain-key", metavar="TABLE.KEY",
                    help="the scene key the gains set: controller.gain [N per unit strain] "
                         "(default), or top_drive_controller.p_gain [N m s/rad] (the default "
                         "for a scene with a top-drive controller and no strain controller)")
-    p.add_argument("--delay", default="0", metavar="LIST", help="actuator delays [s] (default 0)")
-    p.add_argument("--step", default="2.5e-4", metavar="LIST",
-                   help="communication steps [s] (default 2.5e-4)")
+    p.add_argument("--delay", metavar="LIST",
+                   help="actuator delays [s] (cosim.actuator_delay; default: the scene's)")
+    p.add_argument("--step", metavar="LIST",
+                   help="communication steps [s] (cosim.step; default: the scene's)")
     p.add_argument("--stop-time", type=float, metavar="S",
                    help="stop time [s] (default: the scene's)")
     _add_engine_option(p)
+    _add_fmu_options(p, fmu_dir=False)
     p.add_argument("--workers", type=int, metavar="N",
                    help="local worker processes (default: all cores; 0: in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS",
@@ -512,6 +560,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", help="results folder (default out/sweep_<scene>); "
                    "re-running into it skips finished points")
     p.add_argument("--retry-errors", action="store_true", help="re-run points recorded as errors")
+    p.add_argument("--no-branch", action="store_true",
+                   help="run every closed-loop point from 0 s instead of continuing the points "
+                        "identical up to the controller's switch-on from one checkpoint of "
+                        "that prefix (the same table)")
     p.add_argument("--maps", action="store_true", help="also write the stability/benefit maps")
     p.add_argument("--no-prediction", action="store_true",
                    help="maps without the linear prediction overlay")

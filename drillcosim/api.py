@@ -24,6 +24,7 @@ from drillcosim.cosim.scenario.build import ENGINES, build_system, scene_recipes
 from drillcosim.cosim.scenario.config import SceneConfig, key_paths, load_config
 from drillcosim.cosim.scenario.result import Result
 from drillcosim.cosim.scenario.simulate import simulate as simulate_built
+from drillcosim.cosim.study.grid import SweepSpec
 from drillcosim.fmu_src.build import build_all, build_one, default_out
 from drillcosim.fmu_src.build_c import build_c_controller
 from drillcosim.plant import scene as _scene
@@ -99,7 +100,8 @@ def simulate(scene: str | Path = "paper_closed_loop", *, stop_time: float | None
              outputs: Sequence[str] | None = None, progress: bool | None = False,
              fmu_dir: str | Path | None = None, plant_fmu: str | Path | None = None,
              controller_fmu: str | Path | None = None,
-             csv_path: str | Path | None = None) -> Result:
+             csv_path: str | Path | None = None, save_state: str | Path | None = None,
+             from_state: str | Path | None = None) -> Result:
     """Co-simulate a scene: plant and controllers through the master.
 
     Parameters
@@ -131,6 +133,13 @@ def simulate(scene: str | Path = "paper_closed_loop", *, stop_time: float | None
         FMU files (any maker) instead of the project's; checked against the others by name.
     csv_path : path-like, optional
         Also stream the recorded rows to this CSV while running (``drillcosim run`` does).
+    save_state : path-like, optional
+        Write a checkpoint of the whole system (every component's state and the master's) at
+        the stop time to this file.
+    from_state : path-like, optional
+        Continue from this checkpoint to ``stop_time`` instead of starting at 0 s: the same
+        outputs, bit for bit, as the run that was never interrupted. A checkpoint of another
+        scene, settings, build, FMU or version, or a damaged one, is refused (one line).
 
     Returns
     -------
@@ -149,26 +158,38 @@ def simulate(scene: str | Path = "paper_closed_loop", *, stop_time: float | None
     config = load_scene(scene, stop_time=stop_time, step=step, delay=delay, gain=gain,
                         overrides=overrides, plant_fmu=plant_fmu, controller_fmu=controller_fmu)
     built = build_system(config, engine, fmu_dir=fmu_dir)
-    return simulate_built(built, outputs=outputs, progress=progress, csv_path=csv_path)
+    return simulate_built(built, outputs=outputs, progress=progress, csv_path=csv_path,
+                          save_state=save_state, from_state=from_state)
 
 
-def sweep(scene: str | Path = "paper_closed_loop", *, gains: Sequence[float] = (1e9,),
-          delays: Sequence[float] = (0.0,), steps: Sequence[float] = (2.5e-4,),
+def sweep(scene: str | Path | SweepSpec = "paper_closed_loop", *,
+          gains: Sequence[float] | None = None, delays: Sequence[float] | None = None,
+          steps: Sequence[float] | None = None, vary: Mapping[str, Sequence[Any]] | None = None,
           stop_time: float | None = None, gain_key: str | None = None,
           overrides: Mapping[str, Any] | None = None, engine: str = "fmu",
+          plant_fmu: str | Path | None = None, controller_fmu: str | Path | None = None,
           out: str | Path | None = None, workers: int | None = 0, scheduler: Any = None,
-          progress: bool | None = False, retry_errors: bool = False, **options: float):
-    """Stability and benefit sweep over gain x delay x step, one co-simulation per point.
+          progress: bool | None = False, retry_errors: bool = False, branch: bool = True,
+          **options: float):
+    """Stability and benefit sweep, one co-simulation per point: gain x delay x step x any
+    other scene keys (``vary``), full factorial, plus open-loop references.
 
     Parameters
     ----------
-    scene : str or path
-    gains : sequence of float
-        Values of ``gain_key`` (default the strain controller's gain [N per unit strain]).
-    delays : sequence of float
-        Actuator delays [s].
-    steps : sequence of float
-        Communication steps [s] (the controllers sample at them).
+    scene : str, path or SweepSpec
+        The scene; or a sweep planned already (:func:`cosim.study.sweep.sweep_spec`, as
+        ``drillcosim sweep`` does), then only the run's arguments (``out``, ``workers``, ...)
+        apply.
+    gains : sequence of float, optional
+        Values of ``gain_key`` (default: the scene's gain, not varied).
+    delays : sequence of float, optional
+        Actuator delays [s] (default: the scene's).
+    steps : sequence of float, optional
+        Communication steps [s] (the controllers sample at them; default: the scene's).
+    vary : mapping of str -> sequence, optional
+        Any other scene keys by key path and their values, e.g.
+        ``{"controller.parameters.kd": [0.0, 1e4, 1e5]}`` (a foreign controller FMU's own
+        parameter) or ``{"cosim.controller_sample_period": [1e-3, 2e-3]}``.
     stop_time : float, optional
         [s]; default the scene's.
     gain_key : str, optional
@@ -177,9 +198,12 @@ def sweep(scene: str | Path = "paper_closed_loop", *, gains: Sequence[float] = (
     overrides : mapping, optional
         Scene keys by key path for every point.
     engine : {"fmu", "inprocess"}
+    plant_fmu, controller_fmu : path-like, optional
+        FMU files (any maker) instead of the project's.
     out : path-like, optional
-        Results folder (``results.csv``, ``results.parquet``; re-running into it skips finished
-        points). Default: a temporary folder, removed afterwards.
+        Results folder (``results.csv``, ``results.parquet``, ``sweep.json``: the sweep and
+        what ran each instance; re-running into it skips finished points). Default: a
+        temporary folder, removed afterwards.
     workers : int or None
         Local worker processes (0: in this process; None: all cores).
     scheduler : str or distributed.Client, optional
@@ -187,6 +211,10 @@ def sweep(scene: str | Path = "paper_closed_loop", *, gains: Sequence[float] = (
     progress : bool or None
     retry_errors : bool
         Re-run points recorded as errors.
+    branch : bool
+        Closed-loop points identical up to the controller's switch-on (e.g.
+        ``paper_switch_on_25s``) continue from one checkpoint of that prefix instead of each
+        running it (the same table; ``branch_time`` says where a point branched).
     **options
         Point metric options (:class:`cosim.study.point.PointOptions`: ``fit_fraction``,
         ``envelope_window`` [s], ``rms_fraction``, ``force_cap`` [N], ``highpass`` [rad/s]).
@@ -195,9 +223,16 @@ def sweep(scene: str | Path = "paper_closed_loop", *, gains: Sequence[float] = (
     -------
     pandas.DataFrame
         One row per point (open-loop references first): identity columns (``kind``, ``gain``,
-        ``delay`` [s], ``step`` [s], ...), metrics (``growth_rate`` [1/s], ``rms_long`` [m], ...)
-        and the ``verdict`` (stable / unstable / undecided / error). ``.attrs["outcome"]`` holds
-        the run's counts (:class:`cosim.study.sweep.SweepOutcome`).
+        ``delay`` [s], ``step`` [s], ``varied``: the other axes' values, JSON), metrics
+        (``growth_rate`` [1/s], ``rms_long`` [m], ...) and the ``verdict`` (stable / unstable /
+        undecided / error). ``.attrs["outcome"]`` holds the run's counts
+        (:class:`cosim.study.sweep.SweepOutcome`).
+
+    Raises
+    ------
+    UserError
+        A bad value, or a point the user must fix (FMUs that do not fit, an unknown or
+        out-of-range parameter), before any point runs.
     """
     import pandas as pd  # an optional heavy import: only here
 
@@ -205,12 +240,15 @@ def sweep(scene: str | Path = "paper_closed_loop", *, gains: Sequence[float] = (
     from drillcosim.cosim.study.sweep import execute_sweep, sweep_spec
     from drillcosim.cosim.study.table import read_table
 
-    spec = sweep_spec(str(scene), gains, delays, steps, stop_time, engine,
-                      key_paths(overrides), options, gain_key)
+    if isinstance(scene, SweepSpec):
+        spec = scene
+    else:
+        spec = sweep_spec(scene, gains, delays, steps, stop_time, engine, overrides, options,
+                          gain_key, vary, plant_fmu=plant_fmu, controller_fmu=controller_fmu)
     with tempfile.TemporaryDirectory(prefix="drillcosim_sweep_") as tmp:
         folder = Path(out) if out is not None else Path(tmp)
         outcome = execute_sweep(spec, folder, workers=workers, scheduler=scheduler,
-                                progress=progress, retry_errors=retry_errors)
+                                progress=progress, retry_errors=retry_errors, branch=branch)
         keys = {p.key for p in spec.points()}
         rows = [r for r in read_table(folder) if r["key"] in keys]
     frame = pd.DataFrame(rows)

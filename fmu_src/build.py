@@ -55,16 +55,20 @@ of :func:`fmu_src.platforms.select`: ``binaries/linux64/<name>.so`` (``$CC`` or 
 compiler is found (:func:`build_all` prints one line naming a skipped one and why). Without any
 C compiler the build stops with a one-line message.
 
-Registering the plant FMU
--------------------------
-Add (or edit) one entry in :data:`REGISTRY`, e.g.::
+The registry
+------------
+:data:`REGISTRY` is the plant's recipe (:data:`PLANT_RECIPE`) and one recipe per registered
+controller law (``controller/registry.py``; :func:`law_recipe`: the generic adapter
+``fmu_src/law_fmu.py`` as the variant ``<law.FMU>`` for the law's default layout): a new law
+needs no edit here. A recipe of another FMU, e.g.::
 
     FmuRecipe(name="DrillstringPlant", script="fmu_src/drillstring_plant_fmu.py",
-              vendored=(("plant", "_dcs_plant_0_1_0"),), extra_files=("scenes/x.toml",),
+              vendored=(vendored("plant"),), extra_files=("scenes/x.toml",),
               requires=("numpy", "scipy", "numba"))
 
 ``name`` must equal the adapter class name (= modelIdentifier = file stem of
-the ``.fmu``); the adapter imports ``_dcs_plant_0_1_0``; ``extra_files`` (paths
+the ``.fmu``); the adapter imports the vendored package by its canonical name
+(:func:`vendored`: ``_dcs_<folder>_0_1_0``); ``extra_files`` (paths
 relative to the repository root, files or folders) land in ``resources/`` under
 their own base name.
 
@@ -88,6 +92,7 @@ import argparse
 import fnmatch
 import hashlib
 import json
+import math
 import os
 import pprint
 import re
@@ -99,9 +104,11 @@ import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 from xml.etree import ElementTree as ET
 
 from drillcosim._toolchain import user_cache
+from drillcosim.controller.registry import LAWS
 from drillcosim.fmu_src.platforms import Selection, select
 
 __all__ = [
@@ -109,6 +116,7 @@ __all__ = [
     "REGISTRY",
     "ROOT",
     "UNIT_DEFINITIONS",
+    "base_units",
     "FmuRecipe",
     "build_all",
     "build_one",
@@ -168,7 +176,36 @@ BUILD_HASH_LENGTH = 12
 #: The record of a build's hash and module names inside the FMU.
 BUILD_INFO = "resources/dcs_build.json"
 
-#: SI base-unit exponents of the units the FMUs may declare (FMI 2.0 BaseUnit).
+#: SI base-unit exponents of the unit symbols an FMU unit is made of (FMI 2.0 BaseUnit).
+UNIT_SYMBOLS: dict[str, dict[str, int]] = {
+    "s": {"s": 1}, "m": {"m": 1}, "kg": {"kg": 1}, "rad": {"rad": 1},
+    "N": {"kg": 1, "m": 1, "s": -2}, "Pa": {"kg": 1, "m": -1, "s": -2},
+    "J": {"kg": 1, "m": 2, "s": -2}, "W": {"kg": 1, "m": 2, "s": -3},
+}
+
+
+def base_units(unit: str) -> dict[str, int]:
+    """SI base-unit exponents of an FMU unit name: factors of :data:`UNIT_SYMBOLS` joined by
+    ``.``, each with an optional integer power (``m2``, ``s2``), a denominator after one ``/``
+    (``"N.m.s/rad"``); ``"1"`` is dimensionless. ValueError for anything else."""
+    num, _, den = unit.partition("/")
+    out: dict[str, int] = {}
+    for part, sign in ((num, 1), (den, -1)):
+        if part in ("1", "") and (sign == 1 or not part and not den):
+            continue
+        for factor in part.split("."):
+            match = re.fullmatch(r"([A-Za-z]+)(\d*)", factor)
+            if match is None or match.group(1) not in UNIT_SYMBOLS:
+                raise ValueError(f"unit {unit!r}: {factor!r} is not one of "
+                                 f"{', '.join(UNIT_SYMBOLS)} with an optional power")
+            power = sign * int(match.group(2) or 1)
+            for base, exp in UNIT_SYMBOLS[match.group(1)].items():
+                out[base] = out.get(base, 0) + power * exp
+    return {k: v for k, v in out.items() if v}
+
+
+#: SI base-unit exponents of the units the project's FMUs declare, written out (a cross-check
+#: of :func:`base_units`, which the build uses for any unit).
 UNIT_DEFINITIONS: dict[str, dict[str, int]] = {
     "1": {},
     "s": {"s": 1},
@@ -341,44 +378,51 @@ class FmuRecipe:
         return "\n".join(lines) + "\n"
 
 
-#: The FMUs of the project.
-REGISTRY: tuple[FmuRecipe, ...] = (
-    FmuRecipe(
-        name="StrainController",
-        script="fmu_src/strain_controller_fmu.py",
-        vendored=(("controller", "_dcs_controller_0_1_0"),
-                  ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
-        requires=("numpy",),
-    ),
-    FmuRecipe(
-        name="DrillstringPlant",
-        script="fmu_src/drillstring_plant_fmu.py",
-        vendored=(("plant", "_dcs_plant_0_1_0"),
-                  ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
-        extra_files=("scenes",),
-        requires=("numpy", "scipy", "numba"),
-        # the numpy reference rhs (tests, benchmarks), the linear/modal analysis and the
-        # continuous-time closed loop (study layer): the FMU never imports them (tested)
-        exclude=("plant/numpy_rhs.py", "plant/linearize.py", "plant/modal.py",
-                 "plant/equilibrium.py", "plant/closed_loop.py",
-                 "scenes/*.json"),   # controller matrices (the plant reads only the TOML)
-    ),
-    FmuRecipe(
-        name="StateSpaceController",
-        script="fmu_src/state_space_controller_fmu.py",
-        vendored=(("controller", "_dcs_controller_0_1_0"),
-                  ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
-        resource_files=(("fmu_src/state_space_default.json", "state_space.json"),),
-        requires=("numpy",),
-    ),
-    FmuRecipe(
-        name="TopDriveController",
-        script="fmu_src/top_drive_controller_fmu.py",
-        vendored=(("controller", "_dcs_controller_0_1_0"),
-                  ("fmu_src/slave_support", "_dcs_slave_support_0_1_0")),
-        requires=("numpy",),
-    ),
+#: The version part of the canonical names the adapters import the vendored packages under.
+PACKAGES_VERSION = "0_1_0"
+#: The adapter of every controller law (``controller/registry.py``): a variant per law and layout.
+LAW_ADAPTER = "fmu_src/law_fmu.py"
+
+
+def vendored(folder: str) -> tuple[str, str]:
+    """``(folder, canonical name)`` of a vendored package: ``_dcs_<folder's name>_0_1_0``."""
+    return folder, f"_dcs_{Path(folder).name}_{PACKAGES_VERSION}"
+
+
+def law_recipe(law: type, layout: Mapping[str, Any] | None = None, name: str = "",
+               resource: str | Path = "") -> FmuRecipe:
+    """The recipe of a registered law's FMU (``controller/registry.py``): the generic adapter
+    :data:`LAW_ADAPTER` as the variant ``name`` (default the law's ``FMU``) with the class
+    attributes ``KIND`` and ``LAYOUT`` (default the law's default layout); a law with a
+    resource file carries ``resource`` (default its ``DEFAULT_RESOURCE``)."""
+    layout = law.default_layout() if layout is None else dict(layout)
+    files: tuple[tuple[str, str], ...] = ()
+    if law.RESOURCE:
+        src = Path(resource) if resource else Path("controller") / law.DEFAULT_RESOURCE
+        files = ((str(src), law.RESOURCE),)
+    return FmuRecipe(
+        name=name or law.FMU, script=LAW_ADAPTER,
+        vendored=(vendored("controller"), vendored("fmu_src/slave_support")),
+        requires=("numpy",), base="LawController",
+        class_attributes=json.dumps({"KIND": law.KIND, "LAYOUT": layout}), resource_files=files)
+
+
+#: The plant's FMU.
+PLANT_RECIPE = FmuRecipe(
+    name="DrillstringPlant",
+    script="fmu_src/drillstring_plant_fmu.py",
+    vendored=(vendored("plant"), vendored("fmu_src/slave_support")),
+    extra_files=("scenes",),
+    requires=("numpy", "scipy", "numba"),
+    # the numpy reference rhs (tests, benchmarks), the linear/modal analysis and the
+    # continuous-time closed loop (study layer): the FMU never imports them (tested)
+    exclude=("plant/numpy_rhs.py", "plant/linearize.py", "plant/modal.py",
+             "plant/equilibrium.py", "plant/closed_loop.py",
+             "scenes/*.json"),   # controller matrices (the plant reads only the TOML)
 )
+
+#: The FMUs of the project: the plant, and the default FMU of every registered controller law.
+REGISTRY: tuple[FmuRecipe, ...] = (PLANT_RECIPE, *(law_recipe(law) for law in LAWS))
 
 
 # ------------------------------------------------------------------ modelDescription
@@ -387,6 +431,7 @@ def finalize_model_description(
     units: Mapping[str, str],
     direct_feedthrough: Mapping[str, Sequence[str]] | None = None,
     runtime_note: str = "",
+    ranges: Mapping[str, tuple[float, float]] | None = None,
 ) -> bytes:
     """Add units, unit definitions and output dependencies to a modelDescription.
 
@@ -395,12 +440,15 @@ def finalize_model_description(
     xml : bytes
         modelDescription.xml as written by pythonfmu.
     units : mapping of str to str
-        Variable name -> unit (keys of :data:`UNIT_DEFINITIONS`); Real variables only.
+        Variable name -> unit (:func:`base_units` knows it); Real variables only.
     direct_feedthrough : mapping of str to sequence of str, optional
         Output name -> names of the inputs it depends on directly. Outputs not
         in the mapping (or all, if None) get no ``dependencies`` attribute.
     runtime_note : str
         Appended to the model's ``description`` (e.g. the Python versions it runs in).
+    ranges : mapping of str to (float, float), optional
+        Variable name -> declared ``(min, max)`` (Real or Integer; an infinite bound is not
+        written).
 
     Returns
     -------
@@ -427,14 +475,25 @@ def finalize_model_description(
     for name, unit in units.items():
         if name not in by_name:
             raise ValueError(f"VARIABLE_UNITS names unknown variable {name!r}")
-        if unit not in UNIT_DEFINITIONS:
-            raise ValueError(f"unit {unit!r} of {name!r} is not in UNIT_DEFINITIONS; add it")
+        base_units(unit)  # ValueError naming it
         real = by_name[name].find("Real")
         if real is None:
             raise ValueError(f"variable {name!r} has a unit but is not a Real")
         real.set("unit", unit)
         if unit not in used_units:
             used_units.append(unit)
+
+    for name, bounds in (ranges or {}).items():
+        if name not in by_name:
+            raise ValueError(f"VARIABLE_RANGES names unknown variable {name!r}")
+        node = by_name[name].find("Real")
+        if node is None:
+            node = by_name[name].find("Integer")
+        if node is None:
+            raise ValueError(f"variable {name!r} has a range but is not a Real or an Integer")
+        for attr, bound in zip(("min", "max"), bounds):
+            if math.isfinite(bound):
+                node.set(attr, repr(float(bound)) if node.tag == "Real" else str(int(bound)))
 
     for old in root.findall("UnitDefinitions"):
         root.remove(old)
@@ -443,7 +502,7 @@ def finalize_model_description(
         for unit in sorted(used_units):
             node = ET.SubElement(unit_defs, "Unit", name=unit)
             ET.SubElement(node, "BaseUnit",
-                          {k: str(v) for k, v in UNIT_DEFINITIONS[unit].items()})
+                          {k: str(v) for k, v in base_units(unit).items()})
         position = 0
         for i, child in enumerate(list(root)):
             if child.tag in ("ModelExchange", "CoSimulation"):
@@ -731,6 +790,7 @@ def _build_in_this_process(recipe: FmuRecipe, workdir: Path, platforms: Sequence
         xml = zf.read("modelDescription.xml")
     xml = finalize_model_description(
         xml, getattr(cls, "VARIABLE_UNITS", {}), getattr(cls, "DIRECT_FEEDTHROUGH", None),
+        ranges=getattr(cls, "VARIABLE_RANGES", None),
         runtime_note=f"[Runs in CPython 3.{low} to 3.{high}: one binary, see "
                      f"{BUILD_INFO} and drillcosim's docs/interop.md.]")
     _rewrite_zip_member(fmu, "modelDescription.xml", xml)

@@ -42,7 +42,7 @@ inputs (Real, N, continuous, start 0):
 outputs (Real, continuous, initial calculated):
     the outputs of the full 3D model with the default scene (2 contact bodies,
     2 actuator sites) in the model's order: ``body11_X`` ... ``strain1_C`` ...
-    ``total_energy`` (:data:`OUTPUTS`), units from ``DrillstringModel.output_units``.
+    ``total_energy`` (the class's port table ``PORTS``, from ``plant.signals``).
     Values at the communication point reached by the last ``doStep``; no direct
     feedthrough (an input changes the outputs only through the next ``doStep``;
     ``actuatorK_power`` uses the force held over the last step).
@@ -132,48 +132,23 @@ import importlib
 import math
 import sys
 import traceback
-from dataclasses import MISSING, fields
 from pathlib import Path
 from typing import Any, ClassVar, NamedTuple
-from xml.etree.ElementTree import Element
 
+import _dcs_slave_support_0_1_0 as support
 import numpy as np
-from _dcs_pythonfmu_0_7_0 import (
-    Boolean,
-    DefaultExperiment,
-    Fmi2Causality,
-    Fmi2Initial,
-    Fmi2Variability,
-    Integer,
-    Real,
-    String,
-)
-from _dcs_pythonfmu_0_7_0.enums import Fmi2Status
-from _dcs_slave_support_0_1_0 import DcsSlave
-from _dcs_slave_support_0_1_0.native import provide
-from _dcs_slave_support_0_1_0.state import number_problem, numbers_problem
-from _dcs_slave_support_0_1_0.vendored import cache_file, import_vendored, read_memo, write_memo
 
-#: Name under which the build vendors ``plant/`` into this FMU's resources.
-VENDORED_PLANT = "_dcs_plant_0_1_0"
 #: Scene loaded unless the ``scene`` parameter names another one.
 DEFAULT_SCENE = "paper_open_loop"
-MODEL_CHOICES: tuple[str, ...] = ("auto", "full3d", "axial_torsional")
-INPUTS: tuple[str, ...] = (
-    "actuator1_force_C", "actuator1_force_E", "actuator2_force_C", "actuator2_force_E")
-
-_SIM_KEY = "__dcs_plant_sim__"
-_MODE_KEY = "__dcs_mode__"
-_ERRORS_KEY = "__dcs_errors__"
 
 
-_PLANT, _IMPORT_WARNING = import_vendored(
-    VENDORED_PLANT, __file__, ("params", "scene", "model", "simulator", "signals"))
-_params_mod = sys.modules[f"{VENDORED_PLANT}.params"]
-_scene_mod = sys.modules[f"{VENDORED_PLANT}.scene"]
-_model_mod = sys.modules[f"{VENDORED_PLANT}.model"]
-_sim_mod = sys.modules[f"{VENDORED_PLANT}.simulator"]
-_signals_mod = sys.modules[f"{VENDORED_PLANT}.signals"]
+#: The plant package, from its stable copy (numba's cache needs a fixed path).
+_PLANT, _IMPORT_WARNING = support.vendored.import_vendored(
+    "_dcs_plant_0_1_0", __file__, ("params", "scene", "model", "simulator", "signals"))
+_scene_mod, _model_mod, _sim_mod = _PLANT.scene, _PLANT.model, _PLANT.simulator
+MODEL_CHOICES: tuple[str, ...] = _scene_mod.MODEL_CHOICES
+#: The scalar parameters: (port, section, key) rows of ``plant.scene.parameter_table``.
+PARAMETERS = _scene_mod.parameter_table()
 
 
 #: The spectral radii of the models built (``plant.model.SPECTRAL_RADII``), kept beside the
@@ -186,12 +161,12 @@ _RADII_FILE = (f"spectral-radii-py{sys.version_info[0]}{sys.version_info[1]}"
 def _with_spectral_memo(make: Any) -> Any:
     """``make()`` with the spectral radii memo filled from, and new ones saved to, its file."""
     radii = _model_mod.SPECTRAL_RADII
-    path = cache_file(_PLANT, _RADII_FILE)
-    radii.update({k: v for k, v in read_memo(path).items() if k not in radii})
+    path = support.vendored.cache_file(_PLANT, _RADII_FILE)
+    radii.update({k: v for k, v in support.vendored.read_memo(path).items() if k not in radii})
     known = set(radii)
     made = make()
     if set(radii) - known:
-        write_memo(path, radii)
+        support.vendored.write_memo(path, radii)
     return made
 
 
@@ -199,10 +174,10 @@ def _compiled_entries() -> bool:
     """Whether compiled steps are on; the first call in the process gives the plant's compiled
     entry points their addresses: from the native image beside the stable copy when there is
     one (no numba set-up), else from numba (which writes the image; ``slave_support.native``)."""
-    cs = importlib.import_module(f"{VENDORED_PLANT}.compiled_step")
+    cs = importlib.import_module(".compiled_step", _PLANT.__name__)
     if not cs.enabled():
         return False
-    provide(_PLANT, cs)
+    support.provide(_PLANT, cs)
     return True
 
 
@@ -223,102 +198,10 @@ def scenes_folder(resources: str | None = None) -> Path:
     return here / "scenes"
 
 
-def fmi_unit(unit: str) -> str | None:
-    """FMI unit name of a ``plant`` metadata unit ("N m/rad" -> "N.m/rad"); None for "-"."""
-    if unit in ("-", ""):
-        return None
-    return unit.replace("^", "").replace(" ", ".")
+_INPUT_ROWS, _OUTPUT_ROWS = _scene_mod.default_io_rows()
 
 
-def _parameter_table() -> list[tuple[str, str, str, Any, str, str, bool]]:
-    """Rows (fmu name, section, field, default, unit, doc, integer) of the scalar parameters."""
-    rows = []
-    for section, cls in _scene_mod.SECTIONS.items():
-        for f in fields(cls):
-            if "unit" not in f.metadata or f.default is MISSING:
-                continue
-            if isinstance(f.default, (tuple, str)):  # scene-only
-                continue
-            rows.append((f"{section}.{f.name}", section, f.name, f.default,
-                         f.metadata["unit"], f.metadata["doc"], bool(f.metadata.get("integer"))))
-    for name, default, unit, doc in _params_mod.describe(_params_mod.PlantParams):
-        rows.append((name, "", name, default, unit, doc, False))
-    return rows
-
-
-def _default_inputs() -> list[tuple[str, str, str]]:
-    """(name, unit, doc) of the default build's inputs: the two sites' actuator forces."""
-    sites = {"1": "site 1 (long span)", "2": "site 2 (short span)"}
-    rows = []
-    for name in INPUTS:
-        site, axis = name[8], name[-1]
-        other = {"C": "D", "E": "F"}[axis]
-        rows.append((name, "N", f"Actuator force at {sites[site]}, axis {axis}; > 0 opposes "
-                                f"positive strain (compressive at {other}, tensile at {axis})"))
-    return rows
-
-
-def _declared_outputs() -> list[tuple[str, str, str]]:
-    """(name, unit, doc) of the outputs of the full 3D model with the default scene.
-
-    The default scene's contact bodies (11, 26) and actuator sites (2) are the
-    ``PlantParams`` defaults (a test checks), so no scene file is read here.
-    """
-    plant = _params_mod.PlantParams()
-    return _signals_mod.plant_outputs(True, list(plant.contact_bodies),
-                                      len(plant.actuator_joints))
-
-
-PARAMETERS = _parameter_table()
-_OUTPUT_ROWS = _declared_outputs()
-OUTPUTS: tuple[str, ...] = tuple(r[0] for r in _OUTPUT_ROWS)
-
-
-def _xml_double(value: float) -> str:
-    """Shortest round-trip text of a float in XML Schema form (INF, -INF, NaN)."""
-    if math.isnan(value):
-        return "NaN"
-    if math.isinf(value):
-        return "INF" if value > 0 else "-INF"
-    return repr(float(value))
-
-
-def _variable_units(input_rows: Any, output_rows: Any) -> dict[str, str]:
-    """Unit of every Real variable that has one (FMI unit names)."""
-    units = {name: fmi_unit(unit) or "1" for name, unit, _doc in input_rows}
-    for name, unit, _doc in output_rows:
-        units[name] = fmi_unit(unit) or "1"
-    for name, _sec, _field, default, unit, _doc, integer in PARAMETERS:
-        fmi = fmi_unit(unit)
-        if fmi and not isinstance(default, bool) and not integer:
-            units[name] = fmi
-    units["max_internal_step"] = "s"
-    return units
-
-
-def _accessors(values: dict[str, Any], name: str) -> tuple[Any, Any]:
-    """Getter and setter of one flattened parameter kept in ``values``."""
-    def getter() -> Any:
-        return values[name]
-
-    def setter(value: Any) -> None:
-        values[name] = value
-
-    return getter, setter
-
-
-class _Real(Real):
-    """A Real whose start is written round-trip exact and XML-Schema valid (``INF``)."""
-
-    def to_xml(self) -> Element:
-        node = super().to_xml()
-        real = node.find("Real")
-        if real is not None and self.start is not None:
-            real.set("start", _xml_double(float(self.start)))
-        return node
-
-
-class DrillstringPlant(DcsSlave):
+class DrillstringPlant(support.DcsSlave):
     """FMI 2.0 co-simulation adapter of :class:`plant.simulator.PlantSimulator`."""
 
     author = "drillcosim"
@@ -335,14 +218,10 @@ class DrillstringPlant(DcsSlave):
     SCENE: ClassVar[str] = DEFAULT_SCENE
     MODEL: ClassVar[str] = "full3d"
     EXTENDED: ClassVar[bool] = False
-    INPUT_ROWS: ClassVar[tuple[tuple[str, str, str], ...]] = tuple(_default_inputs())
-    OUTPUT_ROWS: ClassVar[tuple[tuple[str, str, str], ...]] = tuple(_OUTPUT_ROWS)
-    REAL_INPUTS = INPUTS
-    REAL_OUTPUTS = OUTPUTS
-    #: Units of the Real variables, written into modelDescription.xml by the build.
-    VARIABLE_UNITS: ClassVar[dict[str, str]] = _variable_units(INPUT_ROWS, OUTPUT_ROWS)
-    #: Outputs change only in doStep: no output depends directly on an input.
-    DIRECT_FEEDTHROUGH: ClassVar[dict[str, tuple[str, ...]]] = dict.fromkeys(OUTPUTS, ())
+    #: The port table: the inputs and outputs of the layout, then the run parameters and the
+    #: scalar parameters (``plant.signals.io_ports``, ``plant.scene.run_ports``,
+    #: ``plant.scene.parameter_table``); a variant's from its ``LAYOUT``.
+    PORTS: ClassVar[tuple[Any, ...]] = ()
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         """A variant: the class tables from its ``LAYOUT`` (see "Built for a scene")."""
@@ -355,22 +234,28 @@ class DrillstringPlant(DcsSlave):
             raise ValueError(f"{cls.__name__}: LAYOUT model {cls.MODEL!r} is not one of "
                              f"{MODEL_CHOICES}")
         cls.EXTENDED = bool(layout["extended"])
-        cls.INPUT_ROWS = tuple((str(n), str(u), str(d)) for n, u, d in layout["inputs"])
-        cls.OUTPUT_ROWS = tuple((str(n), str(u), str(d)) for n, u, d in layout["outputs"])
-        cls.REAL_INPUTS = tuple(r[0] for r in cls.INPUT_ROWS)
-        cls.REAL_OUTPUTS = tuple(r[0] for r in cls.OUTPUT_ROWS)
-        cls.VARIABLE_UNITS = _variable_units(cls.INPUT_ROWS, cls.OUTPUT_ROWS)
-        cls.DIRECT_FEEDTHROUGH = dict.fromkeys(cls.REAL_OUTPUTS, ())
+        cls._tables(layout["inputs"], layout["outputs"])
         cls.description = str(layout["description"])
+
+    @classmethod
+    def _tables(cls, inputs: Any, outputs: Any) -> None:
+        """The port table and what the build and the buffers take from it."""
+        signals = _PLANT.signals
+        cls.PORTS = (*signals.io_ports(inputs, outputs),
+                     *_scene_mod.run_ports(cls.SCENE, cls.MODEL),
+                     *(port for port, _s, _k in PARAMETERS))
+        cls.REAL_INPUTS = tuple(p.name for p in cls.PORTS if p.causality == "input")
+        cls.REAL_OUTPUTS = tuple(p.name for p in cls.PORTS if p.causality == "output")
+        #: units and output dependencies (none: outputs change only in doStep), for the build
+        cls.VARIABLE_UNITS = support.units_of(cls.PORTS)
+        cls.DIRECT_FEEDTHROUGH = dict.fromkeys(cls.REAL_OUTPUTS, ())
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
-        self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=30.0,
-                                                    step_size=1e-3)
-        self.scene = self.SCENE
-        self.model = self.MODEL
-        self.max_internal_step = 0.0
-        self._values: dict[str, Any] = {row[0]: row[3] for row in PARAMETERS}
+        self.default_experiment = support.DefaultExperiment(start_time=0.0, stop_time=30.0,
+                                                            step_size=1e-3)
+        #: every parameter's value by name (the run parameters, then the scalar ones)
+        self._values: dict[str, Any] = {}
 
         self._mode = "instantiated"  # -> "initialization" -> "step"
         self._start_time = 0.0
@@ -385,44 +270,29 @@ class DrillstringPlant(DcsSlave):
         self._step: Any = None  # the compiled step of self._step_sim (None: none)
         self._step_sim: Any = None
         self._scenes = scenes_folder(self.resources)
-
-        cont, fixed = Fmi2Variability.continuous, Fmi2Variability.fixed
-        for name, _unit, doc in self.INPUT_ROWS:
-            self.register_real_io(_Real(
-                name, causality=Fmi2Causality.input, variability=cont, description=doc))
-        for name, _unit, doc in self.OUTPUT_ROWS:
-            self.register_real_io(_Real(
-                name, causality=Fmi2Causality.output, variability=cont,
-                initial=Fmi2Initial.calculated, description=doc))
-        param = Fmi2Causality.parameter
-        self.register_variable(String(
-            "scene", causality=param, variability=fixed,
-            description=("Shipped scene name (paper_open_loop, paper_closed_loop, "
-                         "table1_axial_pulse, ...) or path to a scene TOML file")))
-        self.register_variable(String(
-            "model", causality=param, variability=fixed,
-            description=("full3d (default: every output exists), axial_torsional, or auto "
-                         "(the scene's choice)")))
-        self.register_variable(_Real(
-            "max_internal_step", causality=param, variability=fixed,
-            description=("Upper bound of the internal step; 0 = automatic (per communication "
-                         "step the method with the fewest right-hand sides at its stable step, "
-                         "RK4 or Kutta's 3rd order, or one exact exponential step for a linear "
-                         "time-invariant axial-torsional scene)")))
-        for name, _sec, _field, default, unit, doc, integer in PARAMETERS:
-            getter, setter = _accessors(self._values, name)
-            kind = Boolean if isinstance(default, bool) else Integer if integer else _Real
-            text = doc if fmi_unit(unit) or kind is not _Real else f"{doc} [{unit}]"
-            self.register_variable(kind(
-                name, causality=param, variability=fixed, description=text,
-                getter=getter, setter=setter), nested=False)
+        self.register_ports(self.PORTS, self._values)
         if _IMPORT_WARNING:
-            self.log(f"{self.instance_name}: {_IMPORT_WARNING}", status=Fmi2Status.warning)
+            self.log(f"{self.instance_name}: {_IMPORT_WARNING}",
+                     status=support.Fmi2Status.warning)
+
+    @property
+    def scene(self) -> str:
+        """The ``scene`` parameter."""
+        return self._values["scene"]
+
+    @property
+    def model(self) -> str:
+        """The ``model`` parameter."""
+        return self._values["model"]
+
+    @property
+    def max_internal_step(self) -> float:
+        """The ``max_internal_step`` parameter [s]."""
+        return self._values["max_internal_step"]
 
     # ------------------------------------------------------------------ helpers
     def _key(self) -> tuple[Any, ...]:
-        return (self.scene, self.model, self.max_internal_step,
-                *(self._values[row[0]] for row in PARAMETERS))
+        return tuple(self._values.values())
 
     def _set_through_fmi(self) -> list[tuple[str, str, str, Any]]:
         """(FMU name, section, field, value) of every parameter that differs from its start.
@@ -431,11 +301,11 @@ class DrillstringPlant(DcsSlave):
         does, so an importer writing every start value changes nothing.
         """
         changed = []
-        for name, section, field_, default, _unit, _doc, _int in PARAMETERS:
-            value = self._values[name]
-            if value == default and isinstance(value, bool) == isinstance(default, bool):
+        for port, section, key in PARAMETERS:
+            value, start = self._values[port.name], port.start
+            if value == start and isinstance(value, bool) == isinstance(start, bool):
                 continue  # at its start value (NaN never is): the scene decides
-            changed.append((name, section, field_, value))
+            changed.append((port.name, section, key, value))
         return changed
 
     def _checked_overrides(self, scene: Any) -> dict[str, Any]:
@@ -561,7 +431,7 @@ class DrillstringPlant(DcsSlave):
         if self._halted is not None:
             return self._error(f"step rejected at t = {t!r} s: the simulation diverged earlier "
                                f"({self._halted}); restore an FMU state saved before "
-                               f"(fmi2SetFMUstate) or reset", Fmi2Status.discard)
+                               f"(fmi2SetFMUstate) or reset", support.Fmi2Status.discard)
         sim = self._sim
         if self._all_inputs:  # the default build: no copy per step
             sim.set_inputs(self.inputs)
@@ -578,7 +448,7 @@ class DrillstringPlant(DcsSlave):
             self._halted = (f"{result.message} (time {result.time!r} s, quantity "
                             f"{result.quantity}, value {result.value!r})")
             return self._error(f"doStep(t = {t!r} s, h = {h!r} s) discarded: {self._halted}",
-                               Fmi2Status.discard)
+                               support.Fmi2Status.discard)
         self._write_outputs()
         return None
 
@@ -619,7 +489,7 @@ class DrillstringPlant(DcsSlave):
     def _accessible(self, vr: int, kind: type, call: str) -> bool:
         ok = super()._accessible(vr, kind, call)
         if ok and (call.startswith("get") and self._mode == "initialization"
-                   and self.vars[vr].causality == Fmi2Causality.output):
+                   and self.vars[vr].causality == support.Fmi2Causality.output):
             self._build()  # initial unknowns: computed from the parameters set so far
         return ok
 
@@ -640,7 +510,7 @@ class DrillstringPlant(DcsSlave):
         if set(internal) != {"sim", "halted", "start_time"} or not (
                 halted is None or isinstance(halted, str)):
             return f"not a state of this FMU (internal part {sorted(internal)})"
-        problem = number_problem("start_time", start_time)
+        problem = support.state.number_problem("start_time", start_time)
         if problem is None and sim is None and self._mode == "step":
             problem = "a state of a running plant without its simulator state"
         if problem is None and sim is not None:
@@ -690,6 +560,9 @@ def _sim_problem(sim: Any, finite: bool) -> str | None:
     if not (isinstance(sim, list) and len(sim) == 3 and isinstance(sim[1], list)
             and isinstance(sim[2], list)):
         return "its simulator state is not [time, state vector, inputs]"
-    return (numbers_problem("its state vector", sim[1], finite)
-            or numbers_problem("its held inputs", sim[2], finite)
-            or number_problem("its time", sim[0]))
+    return (support.state.numbers_problem("its state vector", sim[1], finite)
+            or support.state.numbers_problem("its held inputs", sim[2], finite)
+            or support.state.number_problem("its time", sim[0]))
+
+
+DrillstringPlant._tables(_INPUT_ROWS, _OUTPUT_ROWS)

@@ -30,7 +30,7 @@ import difflib
 import math
 import os
 import sys
-from dataclasses import dataclass, fields
+from dataclasses import MISSING, dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -51,7 +51,7 @@ from .params import (
     UnbalanceParams,
     describe,
 )
-from .signals import plant_outputs
+from .signals import Port, actuator_input_rows, fmi_unit, parameter_name, plant_outputs
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -59,8 +59,9 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 __all__ = ["COSIM_TABLES", "PLANT_KEYS", "SECTIONS", "Scene", "SceneError", "list_scenes",
-           "load_scene", "read_scene_tables", "scene_files", "scene_from_dict", "scenes_dir",
-           "schema_markdown"]
+           "default_io_rows", "load_scene", "parameter_table", "read_scene_tables", "run_ports",
+           "scene_files",
+           "scene_from_dict", "scenes_dir", "schema_markdown"]
 
 SECTIONS: dict[str, type] = {
     "pipe": PipeParams,
@@ -113,6 +114,55 @@ class Scene:
     description: str = ""
     outputs: tuple = ()
     source: str = "<dict>"
+
+
+def default_io_rows() -> tuple[list[tuple[str, str, str]], list[tuple[str, str, str]]]:
+    """(inputs, outputs) rows (name, plant unit, description) of the default plant FMU: the
+    full 3D model with the default parameters' contact bodies (11, 26) and two actuator sites
+    (those of ``paper_open_loop``, a test checks; no scene file is read)."""
+    plant = PlantParams()
+    n = len(plant.actuator_joints)
+    return (actuator_input_rows(n, {1: "site 1 (long span)", 2: "site 2 (short span)"}),
+            [tuple(r) for r in plant_outputs(True, list(plant.contact_bodies), n)])
+
+
+def run_ports(scene: str, model: str) -> tuple[Port, ...]:
+    """The plant FMU's run parameters (fixed): the ``scene`` it loads (start ``scene``), the
+    ``model`` kind (start ``model``) and ``max_internal_step`` [s]."""
+    return (
+        Port("scene", "parameter", "fixed", "", "Shipped scene name (paper_open_loop, "
+             "paper_closed_loop, table1_axial_pulse, ...) or path to a scene TOML file", scene,
+             type="String"),
+        Port("model", "parameter", "fixed", "", "full3d (default: every output exists), "
+             "axial_torsional, or auto (the scene's choice)", model, type="String"),
+        Port("max_internal_step", "parameter", "fixed", "s", "Upper bound of the internal "
+             "step; 0 = automatic (per communication step the method with the fewest "
+             "right-hand sides at its stable step, RK4 or Kutta's 3rd order, or one exact "
+             "exponential step for a linear time-invariant axial-torsional scene)", 0.0),
+    )
+
+
+def parameter_table() -> tuple[tuple[Port, str, str], ...]:
+    """The plant FMU's scalar parameters: ``(port, section, key)`` per scene key it takes (every
+    scalar field of the plant sections, then the top-level ones such as ``gravity``), named by
+    the key path (:func:`plant.signals.parameter_name`), fixed, start = the default; units as
+    FMI names (a unit FMI cannot name is written into the description). Tuple-valued keys
+    (``stabilizers.heights``, ...) and arrays of tables are scene-only."""
+    rows = [(section, f.name, f.default, f.metadata["unit"], f.metadata["doc"],
+             bool(f.metadata.get("integer")))
+            for section, cls in SECTIONS.items() for f in fields(cls)
+            if "unit" in f.metadata and f.default is not MISSING
+            and not isinstance(f.default, (tuple, str))]
+    rows += [("", name, default, unit, doc, False)
+             for name, default, unit, doc in describe(PlantParams)]
+    out = []
+    for section, key, default, unit, doc, integer in rows:
+        kind = "Boolean" if isinstance(default, bool) else "Integer" if integer else "Real"
+        fmi = fmi_unit(unit) if kind == "Real" else None
+        text = doc if fmi or kind != "Real" else f"{doc} [{unit}]"
+        out.append((Port(parameter_name(section, key), "parameter", "fixed", fmi or "", text,
+                         default, type=kind), section, key))
+    return tuple(out)
 
 
 def scenes_dir() -> Path:

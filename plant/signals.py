@@ -1,11 +1,14 @@
-"""Signal names: every plant output, plant input, controller variable and wiring name.
+"""The plant's port table: every plant output, plant input and parameter, and the wiring names.
 
-The one place a signal name is spelled. Everything else asks this module: the kernels fill
-their output vector in the order of :func:`plant_outputs`, the FMU adapters declare these
-names as FMI variables, the co-simulation wires them by name (``"<instance>.<name>"``,
-:func:`ref`) and the studies read recorded columns by them. A name is never parsed back:
-whoever needs a site or a body number builds the candidate names and looks them up
-(:func:`sites_in`).
+The one place the plant side spells a signal name. Everything else asks this module: the
+kernels fill their output vector in the order of :func:`plant_outputs`, the plant FMU registers
+its variables from :class:`Port` rows (:func:`io_ports`, :func:`plant.scene.parameter_table`),
+the co-simulation wires them by name (``"<instance>.<name>"``, :func:`ref`) and the studies,
+plots and summaries read recorded columns by them. A name is never parsed back: whoever needs a
+site or a body number builds the candidate names and looks them up (:func:`sites_in`,
+:func:`bodies_in`). The controllers spell their side in ``controller/ports.py`` (the same
+names: the two connect by name, as any two FMUs do; each package is vendored alone, so the
+row type :class:`Port` is declared in both, a test keeps them the same).
 
 Names
 -----
@@ -22,14 +25,15 @@ Instances of a drillstring system: :data:`PLANT`, :data:`CONTROLLER`, :data:`TOP
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterable
+from collections.abc import Collection, Iterable, Sequence
+from typing import Any, NamedTuple
 
 __all__ = ["AXES", "CONTACT_QUANTITIES", "CONTROLLER", "EXTENDED_SCALAR_OUTPUTS",
-           "FIELD_SCALAR_OUTPUTS", "INSTANCES",
-           "PLANT", "SCALAR_OUTPUTS", "TOP_DRIVE", "TOP_DRIVE_SPEED_COMMAND",
-           "TOP_DRIVE_TORQUE", "WHIRL_MIN_RADIUS", "actuator_force", "actuator_inputs", "fmi_unit",
-           "actuator_power", "body_signal", "plant_outputs", "ref", "site_channels",
-           "site_signals", "sites_in", "strain"]
+           "FIELD_SCALAR_OUTPUTS", "INSTANCES", "PLANT", "SCALAR_OUTPUTS", "TOP_DRIVE",
+           "TOP_DRIVE_SPEED_COMMAND", "TOP_DRIVE_TORQUE", "WHIRL_MIN_RADIUS", "Port",
+           "actuator_force", "actuator_input_rows", "actuator_inputs", "actuator_power",
+           "bodies_in", "body_signal", "fmi_unit", "io_ports", "parameter_name",
+           "plant_outputs", "ref", "site_channels", "site_signals", "sites_in", "strain"]
 
 PLANT = "plant"                       #: instance name of the plant
 CONTROLLER = "controller"             #: instance name of the strain controller
@@ -72,6 +76,50 @@ FIELD_SCALAR_OUTPUTS = (
 )
 
 
+class Port(NamedTuple):
+    """One variable of the plant FMU (the row of ``controller/ports.py``, the same fields).
+
+    Attributes
+    ----------
+    name : str
+    causality : {"input", "output", "parameter"}
+    variability : {"continuous", "fixed"}
+    unit : str
+        FMI unit name (``"N.m"``); ``""`` for none.
+    description : str
+    start : float, int, bool, str or None
+        Start value; None for an output computed at initialization (``initial="calculated"``).
+    range : (float, float) or None
+        Declared ``[min, max]``.
+    type : {"Real", "Integer", "Boolean", "String"}
+    """
+
+    name: str
+    causality: str
+    variability: str
+    unit: str
+    description: str
+    start: Any = 0.0
+    range: tuple[float, float] | None = None
+    type: str = "Real"
+
+
+def io_ports(inputs: Sequence[Sequence[str]], outputs: Sequence[Sequence[str]]
+             ) -> tuple[Port, ...]:
+    """The plant's input and output ports from ``(name, plant unit, description)`` rows (a
+    model's, :func:`plant_outputs`): inputs start at 0, outputs are computed at
+    initialization; units as FMI names (:func:`fmi_unit`, ``"1"`` for none)."""
+    return (*(Port(n, "input", "continuous", fmi_unit(u) or "1", d) for n, u, d in inputs),
+            *(Port(n, "output", "continuous", fmi_unit(u) or "1", d, None)
+              for n, u, d in outputs))
+
+
+def parameter_name(section: str, key: str) -> str:
+    """The plant FMU's parameter of scene key ``key`` of table ``section``: its key path
+    ``<section>.<key>`` (``key`` alone for a top-level key, ``section`` ``""``)."""
+    return f"{section}.{key}" if section else key
+
+
 def fmi_unit(unit: str) -> str | None:
     """The FMI unit name of a unit as the plant states it ("N m/rad" -> "N.m/rad", "m/s^2" ->
     "m/s2"); None for none ("-" or "")."""
@@ -111,6 +159,17 @@ def site_channels(sites: Iterable[int]) -> list[tuple[int, str]]:
     return [(s, a) for s in sites for a in AXES]
 
 
+def actuator_input_rows(n_sites: int, site_names: dict[int, str] | None = None
+                        ) -> list[tuple[str, str, str]]:
+    """``(name, unit, description)`` of the actuator force inputs of ``n_sites`` sites
+    (``site_names``: site -> words, default ``"site <s>"``)."""
+    pair = {"C": "D", "E": "F"}
+    return [(actuator_force(s, a), "N",
+             f"Actuator force at {(site_names or {}).get(s, f'site {s}')}, axis {a}; > 0 "
+             f"opposes positive strain (compressive at {pair[a]}, tensile at {a})")
+            for s, a in site_channels(range(1, n_sites + 1))]
+
+
 def actuator_inputs(n_sites: int) -> list[str]:
     """The plant's actuator force inputs, two per site (C, E), sites 1 .. ``n_sites``."""
     return [actuator_force(s, a) for s, a in site_channels(range(1, n_sites + 1))]
@@ -135,6 +194,17 @@ def sites_in(names: Collection[str], signal=None) -> list[int]:
         return site_signals(s) if signal is None else tuple(signal(s, a) for a in AXES)
 
     return [s for s in range(1, len(have) + 1) if have.intersection(named(s))]
+
+
+def bodies_in(names: Collection[str], quantity: str = "radial_deflection",
+              instance: str | None = None, most: int = 10000) -> list[int]:
+    """Bodies ``b`` with ``body<b>_<quantity>`` among ``names`` (recorded names
+    ``"<instance>.body<b>_<quantity>"`` with ``instance``), found by building the names, not
+    parsing them; bodies 1 .. ``most``."""
+    have = set(names)
+    return [b for b in range(1, most + 1)
+            if (ref(instance, body_signal(b, quantity)) if instance else
+                body_signal(b, quantity)) in have]
 
 
 def plant_outputs(full3d: bool, contact_bodies: Iterable[int], n_sites: int,

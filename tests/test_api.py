@@ -73,5 +73,5 @@ def test_modes_and_scenes() -> None:
     assert axial["frequency_rad_s"] == pytest.approx(axial["analytic_rad_s"], rel=0.03)
     config = drillcosim.load_scene("stick_slip_soft_torque",
                                    overrides={"top_drive_controller.p_gain": 150.0})
-    assert config.top_drive.p_gain == 150.0 and config.instances == ("plant",
+    assert config.top_drive.params.p_gain == 150.0 and config.instances == ("plant",
                                                                      "top_drive_controller")

@@ -24,7 +24,8 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 
-from drillcosim.cosim.scenario.scene_fmus import controller_recipe, plant_recipe
+from drillcosim.cosim.scenario.config import load_config
+from drillcosim.cosim.scenario.scene_fmus import built_for_scene, controller_recipe, plant_recipe
 from drillcosim.fmu_src.build import build_one
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.scene import load_scene
@@ -200,10 +201,12 @@ def variant_fmus(tmp_path_factory) -> dict[str, Path]:
     for key, scene in (("stick_slip_soft_torque", "stick_slip_soft_torque"),
                        ("pulse_chain", pulse), ("field", "field_deviated_3km_bha_control")):
         recipe = plant_recipe(load_scene(scene))
-        assert recipe.base  # a variant
+        assert built_for_scene(recipe)  # a variant
         fmus[key] = build_one(recipe, out)
     fmus["pulse_chain_scene"] = pulse
-    recipe = controller_recipe(load_scene("paper_closed_loop"), 2, ((1.0, -0.4), (0.3, 0.8)))
+    mimo = load_config("paper_closed_loop",
+                       {"controller.gain_matrix": [[1.0, -0.4], [0.3, 0.8]]})
+    recipe = controller_recipe(mimo.controller, mimo.scene, 2)
     fmus["mimo"] = build_one(recipe, out)
     return fmus
 
@@ -254,7 +257,7 @@ def test_strain_controller_siso_lag_saturation_switch_on(project_fmus, monkeypat
     script += _steps(names, 50, 1e-5, 11, t0=0.2, h=1e-3)
     fast = assert_same(fmu, script, monkeypatch, max_python=8)
     assert [st for st, _ in fast["steps"]].count(3) == 1
-    assert "non-finite strain in channel(s) site2_C" in fast["messages"][0][1]
+    assert "non-finite strain in channel(s) strain2_C" in fast["messages"][0][1]
 
 
 def test_strain_controller_compressive_only(project_fmus, monkeypatch) -> None:
@@ -288,3 +291,33 @@ def test_top_drive_controller(project_fmus, monkeypatch) -> None:
     script += [("restore",)] + _steps(names, 50, np.array([2.0, 1e3]), 17, t0=0.15, h=1e-3)
     fast = assert_same(fmu, script, monkeypatch, max_python=4)
     assert "non-finite input: top_rotary_speed = nan" in fast["messages"][0][1]
+
+
+def test_pd_strain_controller(project_fmus, monkeypatch) -> None:
+    fmu = project_fmus["PDStrainController"]
+    names = _inputs(fmu)
+    script = [("set", {"gain": 2e8, "derivative_gain": 3e5, "derivative_time_constant": 2e-3,
+                       "lag_time_constant": 1e-3, "symmetric_force_limit": 4e3}), ("init",)]
+    script += _steps(names, 200, 1e-5, 18, h=1e-3)
+    script += [("save",), ("set", {"derivative_gain": 1e5})]
+    script += _steps(names, 100, 1e-5, 19, t0=0.2, h=1e-3)
+    script += [("set", {names[1]: math.inf}), ("step", 0.3, 1e-3)]
+    script += [("restore",)] + _steps(names, 50, 1e-5, 20, t0=0.2, h=5e-4)
+    fast = assert_same(fmu, script, monkeypatch, max_python=6)
+    assert "non-finite strain in channel(s) strain1_E" in fast["messages"][0][1]
+
+
+def test_ztorque_controller(project_fmus, monkeypatch) -> None:
+    fmu = project_fmus["ZTorqueController"]
+    names = _inputs(fmu)
+    script = [("set", {"ramp_time": 0.1, "torque_factor": 0.5, "highpass_time_constant": 0.5}),
+              ("init",)]
+    script += _steps(names, 150, np.array([2.0, 1e3]), 21, h=1e-3)
+    script += [("save",), ("set", {"impedance": 600.0})]
+    script += _steps(names, 100, np.array([2.0, 1e3]), 22, t0=0.15, h=1e-3)
+    script += [("set", {names[1]: math.nan}), ("step", 0.25, 1e-3)]
+    script += [("restore",)] + _steps(names, 50, np.array([2.0, 1e3]), 23, t0=0.15, h=1e-3)
+    # in Python: the first step (a new high-pass decay), the step after the parameter change,
+    # the refused one and the first after the restore
+    fast = assert_same(fmu, script, monkeypatch, max_python=6)
+    assert "non-finite input: top_rotary_speed" in fast["messages"][0][1]

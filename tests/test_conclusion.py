@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drillcosim.controller import ControllerParams
+from drillcosim.controller import ControllerParams, StrainController
 from drillcosim.cosim.scenario.config import load_config
-from drillcosim.cosim.scenario.inprocess import ControllerSlave
+from drillcosim.cosim.scenario.inprocess import LawSlave
 from drillcosim.cosim.study.paper.calibration import PlantChoice, best_set, objective
 from drillcosim.cosim.study.paper.conclusion import site_config, site_joints
 from drillcosim.cosim.study.point import PointOptions, simulate_point
@@ -44,7 +44,9 @@ def test_site_joints_spread_over_each_span(per_span):
 
 def test_controller_slave_serves_any_number_of_sites():
     params = ControllerParams(gain=1e9, mode="compressive_only", force_limit=5000.0)
-    slave = ControllerSlave("controller", params, (1, 2, 3))   # 6 channels
+    layout = StrainController.layout_for(params, 3)
+    slave = LawSlave("controller", StrainController.create(params, layout),
+                     StrainController.ports(layout))   # 6 channels
     assert slave.inputs == [f"strain{s}_{a}" for s in (1, 2, 3) for a in "CE"]
     assert slave.outputs == [f"actuator{s}_force_{a}" for s in (1, 2, 3) for a in "CE"]
     slave.instantiate(0.0, None)

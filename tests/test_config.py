@@ -116,7 +116,7 @@ def test_plant_overrides_become_the_plant_fmus_parameters_and_nothing_else() -> 
 
 def test_top_drive_controller_keys_go_to_the_top_drive_controller() -> None:
     config = load_config("stick_slip_soft_torque", {"top_drive_controller.p_gain": 150.0})
-    assert config.top_drive.p_gain == 150.0 and config.top_drive.enabled
+    assert config.top_drive.params.p_gain == 150.0 and config.top_drive.enabled
     ss = build_system(config, "inprocess")
     assert [f.name for f in ss.system.fmus] == ["plant", "top_drive_controller"]
     assert ss.slaves["top_drive_controller"].law.params.p_gain == 150.0
@@ -201,5 +201,5 @@ def test_one_override_mechanism_nested_and_flat_agree() -> None:
                                                "cosim": {"step": 5e-4},
                                                "bit": {"weight_on_bit": 1e4}})
     assert flat == nested
-    assert (flat.controller.gain, flat.cosim.step, flat.scene.plant.bit.weight_on_bit) == (
+    assert (flat.controller.params.gain, flat.cosim.step, flat.scene.plant.bit.weight_on_bit) == (
         2e8, 5e-4, 1e4)

@@ -40,7 +40,7 @@ def test_shipped_designs_are_stable_with_the_full_linearized_plant(scene):
     model) with its controller at its delay has every eigenvalue inside the unit circle, and
     the growth rate the scene's description states."""
     config = load_config(scene)
-    ss = config.state_space
+    ss = config.controller
     assert ss is not None and ss.params.n_states == 120
     assert config.controller.enabled and config.cosim.actuator_delay == 5e-4
     plant = LoopPlant.from_scene(config)
@@ -66,7 +66,7 @@ def test_predictor_cosimulation_agrees_with_the_linear_model(project_fmus, predi
     config = load_config("control_predictor", {"cosim.actuator_delay": 1e-3,
                                                "cosim.stop_time": 1.5,
                                                "top_drive.ramp_time": 0.0})
-    predicted = growth_rate(predictor_plant, config.state_space.params, 1e-3)
+    predicted = growth_rate(predictor_plant, config.controller.params, 1e-3)
     # the value docs/control_design.md reports (the predictor's row at 1 ms of delay)
     table = (ROOT / "docs" / "control_design.md").read_text().split(
         "predictor and LQG designed for 0.5 ms, run at the delay shown", 1)[1]
@@ -92,7 +92,7 @@ def test_design_delay_decays_as_predicted(scene):
     """At the delay designed for (0.5 ms) the linear model is stable and so is the
     co-simulation: the high-passed strain envelope decays."""
     config = load_config(scene, {"cosim.stop_time": 1.5, "top_drive.ramp_time": 0.0})
-    assert growth_rate(LoopPlant.from_scene(config), config.state_space.params, 5e-4) < 0
+    assert growth_rate(LoopPlant.from_scene(config), config.controller.params, 5e-4) < 0
     _data, reason, m = _run(config, "inprocess")
     assert reason == "" and m["growth_rate"] < -0.5
 
@@ -115,9 +115,9 @@ def matrices() -> dict:
 
 def test_state_space_scene_runs_and_reports_its_controller(tmp_path, matrices):
     config = load_config(_scene(tmp_path, matrices))
-    assert config.state_space.params.n_states == 120
+    assert config.controller.params.n_states == 120
     # the P law's keys of the scene it extends are not read; its enabled flag is
-    assert config.controller.enabled and config.set_keys["controller"] == ()
+    assert config.controller.enabled and config.controller.set_keys == ()
     built = build_system(config, "inprocess")
     assert "controller.actuator1_force_C" in built.outputs
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import ast
 import json
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -16,10 +17,12 @@ import pytest
 from fmpy import read_model_description, simulate_fmu
 from fmpy.validation import validate_fmu
 
+from drillcosim.controller import LAWS
 from drillcosim.fmu_src.build import (
     REGISTRY,
     UNIT_DEFINITIONS,
     FmuRecipe,
+    base_units,
     build_all,
     build_one,
     finalize_model_description,
@@ -32,30 +35,36 @@ pytestmark = [pytest.mark.needs_cc]
 
 
 # ------------------------------------------------------------------------- registry
+STRAIN = next(r for r in REGISTRY if r.name == "StrainController")
+PLANT = next(r for r in REGISTRY if r.name == "DrillstringPlant")
+
+
 def test_registry_entries() -> None:
+    """The plant and one FMU per registered law (the generic adapter, one variant each)."""
     names = [s.name for s in REGISTRY]
-    assert names[:2] == ["StrainController", "DrillstringPlant"]
-    assert len(set(names)) == len(names)
-    scripts = [Path(s.script).name for s in REGISTRY]
-    assert len(set(scripts)) == len(scripts)  # pythonfmu: one module name per process
-    plant = REGISTRY[1]
-    assert plant.script == "fmu_src/drillstring_plant_fmu.py"
-    assert dict(plant.vendored)["plant"].startswith("_dcs_plant_")
+    assert names == ["DrillstringPlant", *(law.FMU for law in LAWS)]
+    modules = [s.slave_module for s in REGISTRY]
+    assert len(set(modules)) == len(modules)  # pythonfmu: one module name per process
+    assert PLANT.script == "fmu_src/drillstring_plant_fmu.py"
+    assert dict(PLANT.vendored)["plant"] == "_dcs_plant_0_1_0"
+    assert {r.script for r in REGISTRY if r is not PLANT} == {"fmu_src/law_fmu.py"}
 
 
-def test_adapter_imports_the_registered_vendored_name() -> None:
-    spec = REGISTRY[0]
-    tree = ast.parse(spec.script_path.read_text())
+@pytest.mark.parametrize("recipe", [STRAIN, PLANT], ids=lambda r: r.name)
+def test_adapter_imports_the_registered_vendored_names_once(recipe) -> None:
+    """Each canonical name an adapter imports is spelled once in it, and it is the recipe's
+    (the build rewrites exactly those names to the shipped ones)."""
+    text = recipe.script_path.read_text()
+    tree = ast.parse(text)
     imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
-    vendored = dict(spec.vendored)["controller"]
-    assert vendored in imported
-    assert "controller" not in imported
-    constants = {
-        t.id: n.value.value
-        for n in tree.body if isinstance(n, ast.Assign) and isinstance(n.value, ast.Constant)
-        for t in n.targets if isinstance(t, ast.Name)
-    }
-    assert constants["VENDORED_CONTROLLER"] == vendored
+    imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    strings = {n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)
+               and isinstance(n.value, str) and n.value.startswith("_dcs_")}
+    for package, name in recipe.vendored:
+        assert name in imported | strings, name
+        assert Path(package).name not in imported
+        code = "\n".join(line for line in text.splitlines() if not line.lstrip().startswith("#"))
+        assert len(re.findall(rf"\b{name}\b", code.split('"""', 2)[-1])) == 1, name
 
 
 def test_recipe_rejects_requirements_that_are_no_import_names() -> None:
@@ -73,7 +82,7 @@ def test_recipe_rejects_unversioned_or_invalid_vendored_names(bad: str) -> None:
 def test_build_all_builds_existing_and_skips_missing_scripts(
         tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     missing = FmuRecipe(name="NotYet", script="fmu_src/not_yet_written_fmu.py")
-    built = build_all(tmp_path, recipes=(REGISTRY[0], missing))
+    built = build_all(tmp_path, recipes=(STRAIN, missing))
     assert built == [tmp_path.resolve() / "StrainController.fmu"]
     out = capsys.readouterr().out
     assert "skipping NotYet" in out and "not_yet_written_fmu.py" in out
@@ -82,9 +91,9 @@ def test_build_all_builds_existing_and_skips_missing_scripts(
 
 
 def test_build_replaces_atomically_and_keeps_old_fmu_on_failure(tmp_path: Path) -> None:
-    first = build_one(REGISTRY[0], tmp_path)
+    first = build_one(STRAIN, tmp_path)
     guid1 = read_model_description(str(first)).guid
-    second = build_one(REGISTRY[0], tmp_path)
+    second = build_one(STRAIN, tmp_path)
     assert second == first
     assert read_model_description(str(second)).guid != guid1  # replaced
 
@@ -102,7 +111,7 @@ def test_build_replaces_atomically_and_keeps_old_fmu_on_failure(tmp_path: Path) 
 def test_build_leaves_the_calling_process_untouched(tmp_path: Path) -> None:
     path_before = list(sys.path)
     modules_before = set(sys.modules)
-    build_one(REGISTRY[0], tmp_path)
+    build_one(STRAIN, tmp_path)
     assert sys.path == path_before
     new = set(sys.modules) - modules_before
     assert not {m for m in new if m.startswith(("_dcs_", "strain_controller_fmu", "pythonfmu"))}
@@ -134,7 +143,7 @@ def test_build_without_a_compiler_fails_in_one_line(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("CC", "no-such-compiler-dcs")
     with pytest.raises(RuntimeError, match="no-such-compiler-dcs"):
-        build_one(REGISTRY[0], tmp_path)
+        build_one(STRAIN, tmp_path)
     proc = subprocess.run([sys.executable, "-m", "drillcosim.fmu_src.build", "--out",
                            str(tmp_path), "--only", "StrainController"], cwd=tmp_path,
                           capture_output=True, text=True, timeout=300)
@@ -146,7 +155,7 @@ def test_build_without_a_compiler_fails_in_one_line(
 
 def test_stale_knows_what_an_fmu_is_made_of(tmp_path: Path,
                                             project_fmus: dict[str, Path]) -> None:
-    plant = REGISTRY[1]
+    plant = PLANT
     names = {p.name for p in plant.sources()}
     assert {"drillstring_plant_fmu.py", "kernels.py", "fmi2_functions.c", "dcs_wrapper.h",
             "build.py", "paper_open_loop.toml"} <= names
@@ -286,6 +295,11 @@ def test_unit_definitions_are_dimensionally_consistent() -> None:
     assert UNIT_DEFINITIONS["1"] == {}
     for name, exps in UNIT_DEFINITIONS.items():
         assert set(exps) <= {"kg", "m", "s", "A", "K", "mol", "cd", "rad"}, name
+        assert base_units(name) == exps, name  # the parser agrees with the written-out table
+    assert base_units("N.s") == {"kg": 1, "m": 1, "s": -1}
+    for bad in ("furlong", "N.m/s/rad", "m^2", "N..m"):
+        with pytest.raises(ValueError, match="unit"):
+            base_units(bad)
 
 
 def test_an_adapter_importing_generic_pythonfmu_is_refused(tmp_path: Path) -> None:

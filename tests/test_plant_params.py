@@ -83,8 +83,8 @@ def test_scene_inheritance_and_overrides():
     from drillcosim.cosim.scenario.config import load_config
 
     config = load_config("paper_restricted_actuator")
-    assert config.controller.mode == "compressive_only"
-    assert config.controller.force_limit == 5000.0
+    assert config.controller.params.mode == "compressive_only"
+    assert config.controller.params.force_limit == 5000.0
     sc = load_scene("paper_restricted_actuator")
     assert sc == config.scene
     assert sc.plant.bit.displacement_amplitude == 0.003  # from paper_open_loop

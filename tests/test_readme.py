@@ -4,22 +4,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pytest
-
 from drillcosim.fmu_src.interface_doc import END, START, interface_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture(scope="module")
-def fmu_dir(project_fmus) -> Path:
-    return project_fmus["DrillstringPlant"].parent
-
-
-def test_readme_fmu_tables_match_the_built_fmus(fmu_dir):
+def test_readme_fmu_tables_are_the_port_tables():
+    """The tables are generated from the port tables (the built FMUs are checked against those
+    in tests/test_port_tables.py and tests/test_law_plugins.py)."""
     readme = (ROOT / "README.md").read_text()
     block = readme[readme.index(START): readme.index(END) + len(END)]
-    assert block == interface_markdown(fmu_dir), "regenerate: python -m drillcosim.fmu_src.interface_doc"
+    assert block == interface_markdown(), "regenerate: python -m drillcosim.fmu_src.interface_doc"
 
 
 def test_readme_quick_start_is_the_two_make_commands():

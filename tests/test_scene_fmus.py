@@ -23,7 +23,12 @@ from drillcosim.controller import ControllerParams, StrainController, check_gain
 from drillcosim.cosim.cli import main
 from drillcosim.cosim.scenario.build import scene_recipes
 from drillcosim.cosim.scenario.config import load_config
-from drillcosim.cosim.scenario.scene_fmus import controller_recipe, plant_layout, plant_recipe
+from drillcosim.cosim.scenario.scene_fmus import (
+    built_for_scene,
+    controller_recipe,
+    plant_layout,
+    plant_recipe,
+)
 from drillcosim.cosim.study.point import measure_point
 from drillcosim.fmu_src.build import build_one
 from drillcosim.plant.model import DrillstringModel
@@ -77,7 +82,7 @@ def test_the_paper_scenes_keep_the_default_fmus() -> None:
         config = load_config(name)
         assert plant_layout(config.scene) is None
         assert [r.name for r in scene_recipes(config).values()][:1] == ["DrillstringPlant"]
-        assert all(not r.base for r in scene_recipes(config).values())
+        assert not any(built_for_scene(r) for r in scene_recipes(config).values())
 
 
 def test_other_layouts_get_variants_named_after_the_scene(scene_dir) -> None:
@@ -95,9 +100,11 @@ def test_other_layouts_get_variants_named_after_the_scene(scene_dir) -> None:
             ("four_sites", "stick_slip", "paper_open_loop", scene_dir / "four_sites_mimo.toml")}
     assert len(mods) == 4
     # a two-site controller with a matrix is a variant too
-    sc = load_scene("paper_closed_loop")
-    assert controller_recipe(sc, 2, ((1.0, 0.1), (0.1, 1.0))).base == "StrainController"
-    assert controller_recipe(sc, 2, ()).base == ""
+    mimo = load_config("paper_closed_loop", {"controller.gain_matrix": [[1.0, 0.1], [0.1, 1.0]]})
+    recipe = controller_recipe(mimo.controller, mimo.scene, 2)
+    assert recipe.name == "StrainController_paper_closed_loop" and built_for_scene(recipe)
+    siso = load_config("paper_closed_loop")
+    assert not built_for_scene(controller_recipe(siso.controller, siso.scene, 2))
 
 
 def test_speed_command_input_when_the_scene_asks(scene_dir) -> None:

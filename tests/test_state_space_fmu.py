@@ -12,8 +12,8 @@ import pytest
 import scipy.signal
 from fmpy import extract, read_model_description
 
-from drillcosim.controller.state_space import Signal, StateSpaceParams
-from drillcosim.fmu_src.build import REGISTRY, FmuRecipe, build_one
+from drillcosim.controller.state_space import Signal, StateSpaceController, StateSpaceParams
+from drillcosim.fmu_src.build import REGISTRY, build_one, law_recipe
 from support.fmi_logging import RecordingCallbacks, RecordingInstance, fmu_fixtures
 
 SPEC = next(r for r in REGISTRY if r.name == "StateSpaceController")
@@ -42,10 +42,7 @@ def variant(name: str, prm: StateSpaceParams, folder, resource: StateSpaceParams
               "upper": [None if np.isinf(s.upper) else s.upper for s in prm.outputs],
               "n_states": prm.n_states, "sample_period": prm.sample_period,
               "description": f"test variant {name}"}
-    recipe = FmuRecipe(name=name, script=SPEC.script, vendored=SPEC.vendored,
-                       requires=SPEC.requires, base=SPEC.name,
-                       class_attributes=json.dumps({"LAYOUT": layout}),
-                       resource_files=((str(src), "state_space.json"),))
+    recipe = law_recipe(StateSpaceController, layout, name=name, resource=src)
     path = build_one(recipe, folder)
     return path, recipe
 

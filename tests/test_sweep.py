@@ -242,7 +242,7 @@ def _table(folder: Path) -> list[dict]:
 
     lines = list(csv.reader(open(folder / "results.csv")))
     assert lines[0] == list(COLUMNS)
-    text = {"key", "scene", "engine", "kind", "status", "verdict", "prediction_note",
+    text = {"key", "scene", "engine", "kind", "varied", "status", "verdict", "prediction_note",
             "benefit_note", "reason"}
     from_csv = [{c: (v if c in text else (float(v) if v else math.nan))
                  for c, v in zip(COLUMNS, line)} for line in lines[1:]]

@@ -138,7 +138,7 @@ def test_soft_torque_scene_fmus_equal_the_in_process_slaves(project_fmus) -> Non
 def _reference(p_gain: float, stop: float) -> tuple[np.ndarray, np.ndarray]:
     """Bit speed [rad/s] of the two-DOF model of stick_slip_soft_torque at ``p_gain``."""
     config = load_config("stick_slip_soft_torque")
-    plant, tc = config.scene.plant, dataclasses.asdict(config.top_drive)
+    plant, tc = config.scene.plant, dataclasses.asdict(config.top_drive.params)
     m = two_dof(plant)
     minv = np.linalg.inv(m.mass)
     weight = plant.bit.weight_on_bit
@@ -199,7 +199,7 @@ def test_linearized_two_dof_loop_threshold_brackets_the_sweep() -> None:
     transient reaches the stuck bit): P = 150 < P_c sticks (previous test), P_c itself is
     between 150 and 1000."""
     config = load_config("stick_slip_soft_torque")
-    plant, tc = config.scene.plant, dataclasses.asdict(config.top_drive)
+    plant, tc = config.scene.plant, dataclasses.asdict(config.top_drive.params)
     m = two_dof(plant)
     minv = np.linalg.inv(m.mass)
     d = 1e-6
@@ -241,7 +241,7 @@ def test_actuator_delay_map_follows_the_sampled_linear_loop(tmp_path) -> None:
     1500; at 0.8 s unstable for every P. The co-simulation (sweep tool) sticks where the loop
     is unstable, keeps turning where it is stable, and diverges at 0.8 s."""
     config = load_config("stick_slip_soft_torque")
-    plant, tc = config.scene.plant, dataclasses.asdict(config.top_drive)
+    plant, tc = config.scene.plant, dataclasses.asdict(config.top_drive.params)
     spec = SweepSpec("stick_slip_soft_torque", (600.0, 1000.0, 1500.0), (0.4, 0.8), (1e-3,),
                      60.0, "inprocess", open_loop=False, gain_key=KEY)
     pts = [p for p in spec.points() if p.delay == 0.4 or p.gain == 1000.0]

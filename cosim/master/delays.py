@@ -27,9 +27,7 @@ Coupling (applied to the delayed signal):
 
 from __future__ import annotations
 
-import math
-
-_EPS = 1e-9
+from .timegrid import split_ticks
 
 
 class DelayLine:
@@ -48,11 +46,7 @@ class DelayLine:
     __slots__ = ("n", "f", "depth", "buf", "pos", "linear", "delay", "sample_period")
 
     def __init__(self, delay: float, sample_period: float, linear: bool = False):
-        ratio = delay / sample_period
-        n = math.floor(ratio + _EPS)
-        f = ratio - n
-        if f < _EPS:
-            f = 0.0
+        n, f = split_ticks(delay, sample_period)
         self.delay = delay
         self.sample_period = sample_period
         self.n = n
@@ -97,6 +91,19 @@ class DelayLine:
         if not self.linear:
             return v0
         return v0 + (v0 - self.delayed(1)) * horizon
+
+    def history(self) -> tuple[float, ...]:
+        """The samples held, oldest first, newest last (:attr:`depth` of them)."""
+        buf, pos = self.buf, self.pos
+        return tuple(buf[pos + 1:] + buf[:pos + 1])
+
+    def restore_history(self, samples) -> None:
+        """Hold the newest :attr:`depth` of ``samples`` (oldest first): a line of any delay
+        continues from the history of a line of the same source with a larger or equal one."""
+        if len(samples) < self.depth:
+            raise ValueError(f"{len(samples)} samples; this line holds {self.depth}")
+        self.buf = [float(v) for v in samples[len(samples) - self.depth:]]
+        self.pos = self.depth - 1
 
     def get_state(self) -> tuple[tuple[float, ...], int]:
         """Snapshot of the buffer (immutable)."""

@@ -10,7 +10,8 @@ Works on any FMI 2.0 FMUs (nothing here knows the drillstring). For every connec
 * no input is the target of more than one connection, and no FMU declares a name twice;
 
 and for every start value a system sets (:attr:`FmuSpec.parameters`) that the variable
-exists, may be set (causality ``parameter`` or ``input``) and has a matching type. Inputs
+exists, may be set (causality ``parameter`` or ``input``), has a matching type and lies in the
+range the variable declares (``min`` / ``max``). Inputs
 that no connection feeds are listed (they keep their start value); whether that is
 acceptable is the caller's decision.
 
@@ -30,7 +31,7 @@ from pathlib import Path
 from fmpy import read_model_description
 
 from .errors import UserError
-from .system import Connection, FmuSpec, split_variable
+from .system import Connection, FmuSpec, _did_you_mean, split_variable
 
 __all__ = ["FmuInterface", "InterfaceError", "InterfaceReport", "Port", "check_system",
            "pair_by_name", "read_interface"]
@@ -53,12 +54,16 @@ class Port:
         ``Real``, ``Integer``, ``Enumeration``, ``Boolean`` or ``String``.
     unit : str or None
         The unit, directly or from its declared type; None if it has none.
+    low, high : float or None
+        The declared ``min`` / ``max`` (directly or from its declared type); None: none.
     """
 
     name: str
     causality: str
     type: str
     unit: str | None
+    low: float | None = None
+    high: float | None = None
 
 
 @dataclass(frozen=True)
@@ -120,7 +125,8 @@ def read_interface(instance: str, path: str | Path) -> FmuInterface:
         if v.name in ports:
             continue
         unit = v.unit or (getattr(v.declaredType, "unit", None) if v.declaredType else None)
-        ports[v.name] = Port(v.name, v.causality, v.type, unit or None)
+        low, high = (_bound(v, side) for side in ("min", "max"))
+        ports[v.name] = Port(v.name, v.causality, v.type, unit or None, low, high)
     counts = Counter(v.name for v in md.modelVariables)
     return FmuInterface(instance, path, ports, tuple(n for n, k in counts.items() if k > 1))
 
@@ -170,6 +176,29 @@ def pair_by_name(a: FmuInterface, b: FmuInterface) -> list[tuple[str, str]]:
             if name in src.ports:
                 pairs.append((f"{src.instance}.{name}", f"{dst.instance}.{name}"))
     return pairs
+
+
+def _bound(v, side: str) -> float | None:
+    """A variable's declared ``min`` or ``max`` (its own, else its declared type's)."""
+    value = getattr(v, side, None)
+    if value is None and v.declaredType is not None:
+        value = getattr(v.declaredType, side, None)
+    try:
+        return None if value is None else float(value)
+    except (TypeError, ValueError):
+        return None
+
+
+def _outside(port: Port, value) -> str:
+    """Why ``value`` lies outside the range ``port`` declares ("" if inside or none)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
+        return ""
+    if (port.low is not None and value < port.low) or (port.high is not None
+                                                        and value > port.high):
+        lo = "-inf" if port.low is None else f"{port.low:g}"
+        hi = "inf" if port.high is None else f"{port.high:g}"
+        return f"outside its declared range [{lo}, {hi}]"
+    return ""
 
 
 def _value_fits(port: Port, value) -> bool:
@@ -256,13 +285,15 @@ def check_system(fmus: Sequence[FmuSpec], connections: Iterable[Connection | tup
             port = face.ports.get(key)
             if port is None:
                 problems.append(f"{face.label} has no variable '{key}' to set (start value "
-                                f"{value!r})")
+                                f"{value!r}){_did_you_mean(key, list(face.ports))}")
             elif port.causality not in _SETTABLE:
                 problems.append(f"{face.label} '{key}' is declared '{port.causality}'; only "
                                 f"parameters and inputs can be given start values")
             elif not _value_fits(port, value):
                 problems.append(f"{face.label} '{key}' is {port.type}; got "
                                 f"{type(value).__name__} {value!r}")
+            elif why := _outside(port, value):
+                problems.append(f"{face.label} '{key}' = {value!r} is {why}")
         missing = [n for n in face.inputs() if f"{spec.name}.{n}" not in fed]
         if missing:
             report.unconnected[spec.name] = missing

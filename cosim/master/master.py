@@ -23,6 +23,7 @@ from .execution import Execution
 from .recorder import Recorder
 from .slave import Slave
 from .system import SystemSpec
+from .timegrid import integer_multiple
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,8 @@ class Result:
         Where the stepping loop's wall time went: per component (by name) ``steps``,
         ``step_total_s``, ``step_max_s`` (its step calls) and ``exchange_s`` (its set-inputs
         and get-outputs calls) [s]; :meth:`profile` summarizes it.
+    checkpoint : Checkpoint or None
+        The state at the stop time (:mod:`.checkpoint`), if asked for and the run completed.
     """
 
     data: np.ndarray
@@ -65,6 +68,7 @@ class Result:
     diverged: Divergence | None = None
     csv_path: Path | None = None
     timings: dict[str, dict[str, float]] = field(default_factory=dict)
+    checkpoint: Any = None
 
     def profile(self) -> dict[str, Any]:
         """The run's telemetry: per component the mean and longest step [s], its calls' total
@@ -112,7 +116,8 @@ class Master:
             output_interval: float | None = None, progress: bool | None = False,
             csv_path: str | Path | None = None, flush_every: int = 1000,
             observers: Sequence[Any] = (), manipulators: Sequence[Any] = (),
-            output_ticks: int | None = None) -> Result:
+            output_ticks: int | None = None, from_checkpoint: Any = None,
+            checkpoint_identity: Mapping[str, Any] | None = None) -> Result:
         """Simulate from the start time to ``stop_time``.
 
         Parameters
@@ -138,6 +143,12 @@ class Master:
             before the recorder.
         manipulators : sequence
             Manipulators (``before_step(execution)``): scenario events, fault injection.
+        from_checkpoint : Checkpoint, optional
+            Start from it (:func:`.resume.restore`) instead of the start time: the recorded
+            rows begin at its time.
+        checkpoint_identity : mapping, optional
+            Take a checkpoint at the stop time carrying this identity
+            (:attr:`Result.checkpoint`).
 
         Returns
         -------
@@ -160,16 +171,18 @@ class Master:
         if output_interval is not None and output_ticks is not None:
             raise ValueError("output_interval and output_ticks: give one of them")
         if output_interval is not None:
-            interval = round(output_interval / H)
-            if interval < 1 or abs(interval * H - output_interval) > 1e-9 * output_interval:
+            interval = integer_multiple(output_interval, H)
+            if interval is None:
                 raise ValueError(f"output_interval: a positive integer multiple of "
                                  f"base_step = {H} s, got {output_interval} s")
         recorder = Recorder(outputs, interval, csv_path, flush_every)
         execution = None
         wall0 = time.perf_counter()
-        diverged = None
+        diverged = checkpoint = None
         try:
             execution = Execution(system, read_outputs=outputs, slaves=self.slaves)
+            if from_checkpoint is not None:
+                execution.resume_from(from_checkpoint)
             for obs in observers:
                 execution.add_observer(obs)
             for man in manipulators:
@@ -185,6 +198,10 @@ class Master:
                 execution.algorithm.reset_timing()
             wall0 = time.perf_counter()
             execution.simulate_until(stop)
+            if checkpoint_identity is not None:
+                from .resume import capture
+
+                checkpoint = capture(execution, checkpoint_identity)
         except DivergenceError as err:
             diverged = Divergence(err.time, err.quantity, err.value)
         except CosimError as err:
@@ -193,14 +210,15 @@ class Master:
         except BaseException:
             self._finish(recorder, execution, wall0, None)
             raise
-        return self._finish(recorder, execution, wall0, diverged)
+        return self._finish(recorder, execution, wall0, diverged, checkpoint)
 
     @staticmethod
     def _finish(recorder: Recorder, execution: Execution | None, wall0: float,
-                diverged: Divergence | None) -> Result:
+                diverged: Divergence | None, checkpoint: Any = None) -> Result:
         wall = time.perf_counter() - wall0
         end = execution.time if execution is not None else float("nan")
-        sim = (execution.time - execution.start_time) if execution is not None else 0.0
+        sim = (execution.time - (execution.start_time if execution._resume is None
+                                 else execution._resume.time)) if execution is not None else 0.0
         stepped = execution is not None and execution.tick > 0
 
         timings = {}
@@ -210,7 +228,7 @@ class Master:
 
         def result() -> Result:
             return Result(recorder.data, wall, sim / wall if wall > 0 else float("inf"), end,
-                          diverged, recorder.csv_path, timings)
+                          diverged, recorder.csv_path, timings, checkpoint)
 
         try:
             if execution is not None:

@@ -23,7 +23,7 @@ import numpy as np
 from drillcosim.plant.signals import CONTROLLER, PLANT
 
 from .cache import cached_file, is_cached, load_arrays, source_hash
-from .config import SceneConfig, load_config
+from .config import SceneConfig, derive_config
 
 __all__ = ["baseline_cached", "baseline_config", "baseline_path", "load_baseline"]
 
@@ -32,8 +32,7 @@ def baseline_config(config: SceneConfig) -> SceneConfig | None:
     """``config`` with the strain controller off; None when it is off already."""
     if not config.controller.enabled:
         return None
-    return load_config(config.source, {**config.overrides, f"{CONTROLLER}.enabled": False},
-                       plant_fmu=config.fmu_files.get(PLANT))
+    return derive_config(config, {f"{CONTROLLER}.enabled": False}, controller_fmu=False)
 
 
 def _code(config: SceneConfig) -> str:

@@ -21,7 +21,12 @@ Two engines, one system:
     from ``build/fmus/`` (or ``fmu_dir``) and built there if missing or stale
     (:mod:`.scene_fmus`). The plant FMU gets the scene (``scene``: the shipped name, or the
     file's absolute path) and the plant-parameter overrides as its parameters (scalars only);
-    the controller FMUs get their typed parameters encoded for FMI (:func:`controller_start_values`).
+    the controller FMUs get their law's parameters encoded for FMI (``Law.encode``).
+
+    A foreign FMU (any maker) gets those of the law's values it declares a parameter of that
+    name for, and its own parameters (``[<table>.parameters]``, ``[plant.parameters]``); a law
+    key the scene file sets that the FMU does not have is not required of it (a warning names
+    it), one set by an override is an error (it would change nothing).
 ``"inprocess"``
     The same models as in-process slaves (:mod:`.inprocess`), built from the configuration: no
     FMU file is read, the FMI boundary is saved, the numbers are the FMUs' bit for bit.
@@ -33,15 +38,14 @@ connected twice, start values; every problem one line, :class:`InterfaceError`),
 
 from __future__ import annotations
 
-import dataclasses
-import math
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from drillcosim.controller import MODES, ControllerParams
+from fmpy import read_model_description
+
 from drillcosim.cosim.master.interface import FmuInterface, Port, read_interface
 from drillcosim.cosim.master.slave import Slave
 from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec
@@ -51,34 +55,27 @@ from drillcosim.plant.signals import (
     CONTACT_QUANTITIES,
     CONTROLLER,
     PLANT,
-    TOP_DRIVE,
-    actuator_force,
     actuator_power,
     body_signal,
     fmi_unit,
     ref,
-    site_channels,
     strain,
 )
 
 from .config import ConfigError, SceneConfig, plant_parameter_paths
 from .interface import InterfaceWarning, wire_system
 from .scene_fmus import (
-    TOP_DRIVE_CONTROLLER,
+    built_for_scene,
     controller_recipe,
     embedded_scene_name,
     ensure_recipes,
     plant_recipe,
-    recipe_named,
-    state_space_recipe,
 )
 
-__all__ = ["ENGINES", "NO_LIMIT", "BuiltSystem", "build_system", "controller_start_values",
-           "scene_recipes", "scene_reference"]
+__all__ = ["ENGINES", "BuiltSystem", "build_system", "scene_recipes", "scene_reference"]
 
 #: How the instances run: FMU files, or the same models in process.
 ENGINES = ("fmu", "inprocess")
-NO_LIMIT = 1e30            #: the controller FMU's "no symmetric force limit"
 
 
 @dataclass(frozen=True)
@@ -110,6 +107,33 @@ class BuiltSystem:
     outputs: tuple[str, ...]
     units: dict[str, str]
 
+    def components(self) -> dict[str, dict[str, Any]]:
+        """What runs each instance (``summary.json``, a sweep's ``sweep.json``): engine
+        ``fmu``: the FMU file, its GUID, model name and generation tool, and the parameters
+        the system sets on it; ``inprocess``: the plant's scene and model kind, or the law's
+        kind and its parameters (as its FMU would get them). Both: the drillcosim version
+        that runs it."""
+        from drillcosim import __version__
+
+        out: dict[str, dict[str, Any]] = {}
+        for spec in self.system.fmus:
+            rec: dict[str, Any] = {"engine": self.engine}
+            if self.engine == "fmu":
+                md = read_model_description(str(spec.path), validate=False)
+                rec.update({"fmu": str(Path(spec.path).resolve()), "guid": md.guid,
+                            "model_name": md.modelName, "generation_tool": md.generationTool,
+                            "parameters": dict(spec.parameters)})
+            elif spec.name == PLANT:
+                rec.update({"scene": self.config.source, "model": self.slaves[PLANT].sim.model.kind})
+            else:
+                setting = self.config.controllers[spec.name]
+                layout = setting.layout(self.config.n_sites)
+                rec.update({"law": setting.kind,
+                            "parameters": setting.law.encode(setting.params, layout)})
+            rec["drillcosim"] = __version__
+            out[spec.name] = rec
+        return out
+
 
 def scene_reference(scene: Scene) -> str:
     """Value of the plant FMU's ``scene`` parameter: the name if shipped, else the absolute path."""
@@ -127,35 +151,10 @@ def scene_recipes(config: SceneConfig) -> dict[str, Any]:
     ``{"plant": FmuRecipe, "controller": ..., "top_drive_controller": ...}`` (controllers only
     when enabled). Building them ahead: :func:`.scene_fmus.ensure_recipes`."""
     recipes: dict[str, Any] = {PLANT: plant_recipe(config.scene)}
-    if config.state_space is not None:
-        recipes[CONTROLLER] = state_space_recipe(config.scene, config.state_space.params,
-                                                 config.state_space.file)
-    elif config.controller.enabled:
-        recipes[CONTROLLER] = controller_recipe(config.scene, config.n_sites,
-                                                config.controller.gain_matrix)
-    if config.top_drive.enabled:
-        recipes[TOP_DRIVE] = recipe_named(TOP_DRIVE_CONTROLLER)
+    for instance in config.instances[1:]:
+        recipes[instance] = controller_recipe(config.controllers[instance], config.scene,
+                                              config.n_sites)
     return recipes
-
-
-def controller_start_values(params: ControllerParams, n_sites: int) -> dict[str, Any]:
-    """The strain controller's parameters encoded for its FMU (the one place that happens):
-    ``gain`` [N], ``mode`` (Integer: index in :data:`controller.MODES`), ``force_limit`` [N],
-    ``symmetric_force_limit`` [N] (inf -> :data:`NO_LIMIT`), ``switch_on_time`` [s],
-    ``lag_time_constant`` [s], ``enabled``, and the relative gains ``gain_matrix_<i>_<j>`` [1]
-    (the identity when there is no matrix)."""
-    sym = params.symmetric_force_limit
-    out: dict[str, Any] = {
-        "gain": params.gain, "mode": MODES.index(params.mode), "force_limit": params.force_limit,
-        "symmetric_force_limit": NO_LIMIT if math.isinf(sym) else sym,
-        "switch_on_time": params.switch_on_time, "lag_time_constant": params.lag_time_constant,
-        "enabled": params.enabled}
-    n = n_sites
-    matrix = params.gain_matrix or tuple(tuple(float(i == j) for j in range(n)) for i in range(n))
-    for i, row in enumerate(matrix, start=1):
-        for j, value in enumerate(row, start=1):
-            out[f"gain_matrix_{i}_{j}"] = value
-    return out
 
 
 def _recorded(config: SceneConfig, declared: list[str]) -> list[str]:
@@ -188,22 +187,11 @@ def _inprocess_faces(config: SceneConfig, slaves: Mapping[str, Slave]) -> dict[s
     model = slaves[PLANT].sim.model
     faces = {PLANT: _slave_interface(PLANT, slaves[PLANT], list(model.acting_inputs),
                                      {**model.output_units, **model.input_units})}
-    if CONTROLLER in slaves and config.state_space is not None:
-        ss = config.state_space.params
-        units = {s.name: s.unit for s in (*ss.inputs, *ss.outputs)}
-        faces[CONTROLLER] = _slave_interface(CONTROLLER, slaves[CONTROLLER],
-                                             slaves[CONTROLLER].inputs, units)
-    elif CONTROLLER in slaves:
-        units = {}
-        for s, a in site_channels(range(1, config.n_sites + 1)):
-            units[strain(s, a)], units[actuator_force(s, a)] = "1", "N"
-        faces[CONTROLLER] = _slave_interface(CONTROLLER, slaves[CONTROLLER],
-                                             slaves[CONTROLLER].inputs, units)
-    if TOP_DRIVE in slaves:
-        faces[TOP_DRIVE] = _slave_interface(
-            TOP_DRIVE, slaves[TOP_DRIVE], slaves[TOP_DRIVE].inputs,
-            {n: model.output_units.get(n, model.input_units.get(n))
-             for n in (*slaves[TOP_DRIVE].inputs, *slaves[TOP_DRIVE].outputs)})
+    for instance in config.instances[1:]:
+        setting = config.controllers[instance]
+        ports = setting.law.ports(setting.layout(config.n_sites))
+        faces[instance] = _slave_interface(instance, slaves[instance], slaves[instance].inputs,
+                                           {p.name: p.unit for p in ports})
     return faces
 
 
@@ -228,23 +216,43 @@ def _plant_fmu_parameters(config: SceneConfig, face: FmuInterface, built_for_sce
     return params
 
 
-def _lacking(config: SceneConfig, face: FmuInterface) -> list[str]:
-    """Keys of the instance's scene table set explicitly that its FMU does not declare
-    (``gain_matrix``: its entries ``gain_matrix_1_1`` ...)."""
-    table = {CONTROLLER: "controller", TOP_DRIVE: "top_drive_controller"}[face.instance]
-    port = {"gain_matrix": "gain_matrix_1_1"}
-    return [f"{face.label} has no parameter '{key}' for [{table}] {key} of {config.source}"
-            for key in config.set_keys.get(face.instance, ()) if port.get(key, key) not in face.ports]
+def _controller_parameters(config: SceneConfig, face: FmuInterface, foreign: bool
+                           ) -> tuple[dict[str, Any], list[str]]:
+    """The start values an instance's controller FMU gets, and the problems (one line each).
+
+    The project's FMU gets the law's parameters (``Law.encode``). A foreign FMU gets those of
+    them it declares (by name), then its own parameters (``[<table>.parameters]``); the law keys
+    the scene sets that it does not declare are not required of it (an :class:`InterfaceWarning`
+    names the file's; an override of one is a problem: it would change nothing).
+    """
+    setting = config.controllers[face.instance]
+    values = setting.law.encode(setting.params, setting.layout(config.n_sites))
+    if not foreign:
+        return {k: v for k, v in values.items() if k in face.ports}, []
+    params = {k: v for k, v in values.items() if k in face.ports}
+    missing = [k for k in setting.set_keys if k not in values or k not in face.ports]
+    overridden = [k for k in missing if f"{face.instance}.{k}" in config.overrides]
+    problems = [f"override {face.instance}.{k} = {config.overrides[f'{face.instance}.{k}']!r}: "
+                f"{face.label} has no parameter '{k}' (its own parameters are set with "
+                f"{face.instance}.parameters.NAME)" for k in overridden]
+    unused = [k for k in missing if k not in overridden]
+    if unused:
+        warnings.warn(InterfaceWarning(
+            f"{face.label} has no parameter {', '.join(map(repr, unused))}: [{face.instance}] "
+            f"{', '.join(unused)} of {config.source} not applied"), stacklevel=4)
+    params.update(setting.parameters)
+    return params, problems
 
 
 def _unfit_state_space(config: SceneConfig, faces: Mapping[str, FmuInterface]) -> list[str]:
     """A state-space controller's inputs that are no output of the plant and outputs that are
     no input of it (a linear law fed by nothing, or feeding nothing, is a wrong matrices file;
     the P law's rule for sites one side does not serve does not apply)."""
-    if config.state_space is None or CONTROLLER not in faces:
+    setting = config.controllers[CONTROLLER]
+    if setting.matrices is None or CONTROLLER not in faces:
         return []
     plant, face = faces[PLANT], faces[CONTROLLER]
-    src = f"[controller] matrices {config.state_space.file.name}"
+    src = f"[controller] matrices {setting.matrices.name}"
     return ([f"{face.label} input '{n}' ({src}) is no output of {plant.label}"
              for n in face.inputs() if n not in plant.outputs()]
             + [f"{face.label} output '{n}' ({src}) is no input of {plant.label}"
@@ -295,7 +303,7 @@ def build_system(config: SceneConfig, engine: str = "fmu", *,
         slaves = inprocess_slaves(config)
         faces = _inprocess_faces(config, slaves)
         params: dict[str, dict[str, Any]] = {i: {} for i in instances}
-        lacking: list[str] = []
+        problems: list[str] = []
     else:
         slaves = {}
         recipes = scene_recipes(config)
@@ -303,18 +311,17 @@ def build_system(config: SceneConfig, engine: str = "fmu", *,
         built = ensure_recipes(need, fmu_dir) if need else {}
         paths = {i: config.fmu_files.get(i) or built[recipes[i].name] for i in instances}
         faces = {i: read_interface(i, paths[i]) for i in instances}
-        built_for_scene = PLANT not in config.fmu_files and bool(recipes[PLANT].base)
-        params = {PLANT: _plant_fmu_parameters(config, faces[PLANT], built_for_scene)}
-        start = {CONTROLLER: {} if config.state_space is not None else  # limits: in its layout
-                 controller_start_values(config.controller, config.n_sites),
-                 TOP_DRIVE: dataclasses.asdict(config.top_drive)}
+        for_scene = PLANT not in config.fmu_files and built_for_scene(recipes[PLANT])
+        params = {PLANT: {**_plant_fmu_parameters(config, faces[PLANT], for_scene),
+                          **config.plant_parameters}}
+        problems = []
         for i in controllers:
-            params[i] = {k: v for k, v in start[i].items() if k in faces[i].ports}
-        lacking = [p for i in controllers for p in _lacking(config, faces[i])]
-    lacking += _unfit_state_space(config, faces)
+            params[i], found = _controller_parameters(config, faces[i], i in config.fmu_files)
+            problems += found
+    problems += _unfit_state_space(config, faces)
     fmus = [FmuSpec(PLANT, faces[PLANT].path, params[PLANT])]
     fmus += [FmuSpec(i, faces[i].path, params[i], cosim.controller_ticks) for i in controllers]
-    wiring = wire_system(faces[PLANT], [faces[i] for i in controllers], fmus, lacking)
+    wiring = wire_system(faces[PLANT], [faces[i] for i in controllers], fmus, problems)
     # what the plant receives (forces, torque) is delayed by actuator_delay, what the
     # controllers receive (strains, speeds) by sensor_delay
     delay = {PLANT: cosim.actuator_delay, **dict.fromkeys(controllers, cosim.sensor_delay)}

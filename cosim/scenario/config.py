@@ -4,16 +4,15 @@
 and validates everything, once, into a :class:`SceneConfig`:
 
 * ``scene`` - the plant's data (:class:`plant.scene.Scene`: parameters, model kind, outputs);
-* ``controller`` / ``top_drive`` - the controllers' typed parameters
-  (:class:`controller.ControllerParams`, :class:`controller.TopDriveControllerParams`;
-  ``enabled`` false when the scene has none);
-* ``state_space`` - with ``[controller] kind = "state_space"``, the strain controller is a
-  discrete state-space law (:class:`StateSpaceSetting`: the matrices file, validated into
-  :class:`controller.StateSpaceParams`) instead of the P law;
+* ``controllers`` - per law table (``[controller]``, ``[top_drive_controller]``) the law's
+  kind and typed parameters (:class:`.controllers.ControllerSetting`: ``[controller] kind =
+  "..."`` picks a registered law, :mod:`controller.registry`; ``enabled`` false when the scene
+  has none);
 * ``cosim`` - the co-simulation settings (:class:`CosimSettings`): the base step [s], and the
   stop time, the controllers' period and the recording interval as integer numbers of base
-  steps (decided here, by one rule: :func:`cosim.master.system.integer_multiple`);
-* ``fmu_files`` - FMU files a user chose for an instance (``[plant] fmu``, ...).
+  steps (decided here, by one rule: :func:`cosim.master.timegrid.grid_ticks`);
+* ``fmu_files`` - FMU files a user chose for an instance (``[plant] fmu``, ...), and
+  ``plant_parameters`` - a foreign plant FMU's own parameters (``[plant.parameters]``).
 
 Below this module nothing reads a raw table: the builder (:mod:`.build`), the studies and the
 API take a :class:`SceneConfig`.
@@ -27,8 +26,10 @@ flattened: ``{"cosim": {"step": 1e-4}}`` is ``{"cosim.step": 1e-4}``). A key pat
 top-level scene key (``gravity``, ``model``, ``outputs``, ``description``, ``loads``) or
 ``<table>.<key>`` of a plant section (``pipe``, ``bit``, ...; :data:`plant.scene.SECTIONS`),
 ``plant.fmu``, ``controller.<key>``, ``top_drive_controller.<key>`` or ``cosim.<key>``
-(:data:`COSIM_KEYS`). An unknown key path, or a bad value, is a :class:`ConfigError`: one line
-naming the key and what is allowed.
+(:data:`COSIM_KEYS`), or ``<table>.parameters.<NAME>`` (``plant``, ``controller``,
+``top_drive_controller``): a parameter of a foreign FMU of that instance, by its variable name.
+An unknown key path, or a bad value, is a :class:`ConfigError`: one line naming the key and what
+is allowed.
 """
 
 from __future__ import annotations
@@ -39,19 +40,14 @@ import re
 import sys
 import zipfile
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, fields
-from fractions import Fraction
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-from drillcosim.controller import ControllerParams, TopDriveControllerParams
-from drillcosim.controller.state_space import (
-    MULTIPLE_RTOL,
-    StateSpaceParams,
-    load_state_space,
-)
+from drillcosim.controller import TABLES
 from drillcosim.cosim.master.errors import UserError
-from drillcosim.cosim.master.system import ALGORITHMS, COUPLINGS, integer_multiple
+from drillcosim.cosim.master.system import ALGORITHMS, COUPLINGS
+from drillcosim.cosim.master.timegrid import grid_ticks, integer_multiple, seconds
 from drillcosim.plant.scene import (
     PLANT_KEYS,
     SECTIONS,
@@ -62,14 +58,16 @@ from drillcosim.plant.scene import (
 )
 from drillcosim.plant.signals import CONTROLLER, PLANT, TOP_DRIVE
 
+from .controllers import ControllerSetting, check_fmu_parameters, parse_controller, table_keys
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
 
-__all__ = ["CONTROLLER_KINDS", "COSIM_KEYS", "ConfigError", "CosimSettings", "SceneConfig",
-           "StateSpaceSetting", "key_paths", "load_config", "parse_set",
-           "plant_parameter_paths"]
+__all__ = ["COSIM_KEYS", "ConfigError", "ControllerSetting", "CosimSettings", "SceneConfig",
+           "derive_config", "key_paths", "load_config", "parse_set", "plant_parameter_paths",
+           "split_assignment"]
 
 #: ``[cosim]`` keys: (default, unit, meaning). ``None`` defaults are derived.
 COSIM_KEYS: dict[str, tuple[Any, str, str]] = {
@@ -89,16 +87,6 @@ COSIM_KEYS: dict[str, tuple[Any, str, str]] = {
                         "(default: the smallest multiple of step >= 1 ms)"),
 }
 
-#: The controller tables: scene table -> (instance, typed parameters).
-CONTROLLER_TABLES: dict[str, tuple[str, type]] = {
-    "controller": (CONTROLLER, ControllerParams),
-    "top_drive_controller": (TOP_DRIVE, TopDriveControllerParams),
-}
-#: ``[controller] kind``: the P law (:class:`controller.ControllerParams`), or a discrete
-#: state-space law from a matrices file (``matrices``; :class:`StateSpaceSetting`).
-CONTROLLER_KINDS = ("proportional", "state_space")
-#: ``[controller]`` keys besides the P law's parameters.
-_CONTROLLER_EXTRA = ("kind", "matrices", "fmu")
 #: Top-level scene keys that are plain values (the others are tables).
 TOP_VALUES = tuple(k for k in PLANT_KEYS if k not in SECTIONS)
 
@@ -134,28 +122,31 @@ def _table_keys(table: str) -> list[str] | None:
     """Keys of scene table ``table`` (None: not a table)."""
     if table in SECTIONS:
         return [f.name for f in fields(SECTIONS[table])]
-    if table in CONTROLLER_TABLES:
-        extra = _CONTROLLER_EXTRA if table == "controller" else ("fmu",)
-        return [f.name for f in fields(CONTROLLER_TABLES[table][1])] + list(extra)
+    if table in TABLES:
+        return table_keys(table)
     if table == "cosim":
         return list(COSIM_KEYS)
     if table == "plant":
-        return ["fmu"]
+        return ["fmu", "parameters"]
     return None
 
 
 def _tables() -> list[str]:
-    return [*SECTIONS, "plant", *CONTROLLER_TABLES, "cosim"]
+    return [*SECTIONS, "plant", *TABLES, "cosim"]
 
 
 def check_key_path(path: str, where: str = "override") -> tuple[str, ...]:
-    """``path`` split at its dot, if it names a scene key (module docstring), else
+    """``path`` split at its dots, if it names a scene key (module docstring), else
     :class:`ConfigError` naming it and what is allowed."""
-    parts = tuple(path.split(".")) if isinstance(path, str) else ()
+    parts = tuple(path.split(".", 2)) if isinstance(path, str) else ()
     if len(parts) == 1 and parts[0] in TOP_VALUES:
         return parts
+    if len(parts) == 3 and parts[0] in ("plant", *TABLES) and parts[1] == "parameters" \
+            and parts[2]:
+        return parts
     if len(parts) != 2 or not all(parts):
-        allowed = [*TOP_VALUES, *(f"{t}.KEY" for t in _tables())]
+        allowed = [*TOP_VALUES, *(f"{t}.KEY" for t in _tables()),
+                   *(f"{t}.parameters.NAME" for t in ("plant", *TABLES))]
         raise ConfigError(f"{where} {path!r}: not a key path; allowed: {', '.join(allowed)}")
     table, key = parts
     keys = _table_keys(table)
@@ -181,7 +172,7 @@ def key_paths(overrides: Mapping[str, Any] | None) -> dict[str, Any]:
     def walk(prefix: str, node: Mapping[str, Any]) -> None:
         for key, value in node.items():
             path = f"{prefix}.{key}" if prefix else str(key)
-            if isinstance(value, Mapping):
+            if isinstance(value, Mapping) and path.count(".") < 2:
                 walk(path, value)
             else:
                 flat[path] = value
@@ -210,14 +201,21 @@ def parse_set(items: Sequence[str]) -> dict[str, Any]:
     """
     out: dict[str, Any] = {}
     for item in items:
-        key, sep, text = item.partition("=")
-        key = key.strip()
-        if not sep or not key:
-            raise ConfigError(f"--set {item!r}: expected KEY=VALUE, e.g. "
-                              "cosim.actuator_delay=0.002 (value in TOML syntax)")
-        check_key_path(key, "--set")
-        out[key] = _toml_value(text.strip())
+        key, text = split_assignment(item, "--set", "KEY=VALUE",
+                                     "cosim.actuator_delay=0.002 (value in TOML syntax)")
+        out[key] = _toml_value(text)
     return out
+
+
+def split_assignment(item: str, flag: str, form: str, example: str) -> tuple[str, str]:
+    """``"key.path=text"`` of a command-line option -> (checked key path, text), else
+    :class:`ConfigError` naming the option, the form and an example."""
+    key, sep, text = item.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise ConfigError(f"{flag} {item!r}: expected {form}, e.g. {example}")
+    check_key_path(key, flag)
+    return key, text.strip()
 
 
 def plant_parameter_paths(overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -230,14 +228,16 @@ def plant_parameter_paths(overrides: Mapping[str, Any]) -> dict[str, Any]:
 def _apply(data: dict[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
     out = {k: dict(v) if isinstance(v, dict) else v for k, v in data.items()}
     for path, value in overrides.items():
-        parts = path.split(".")
-        if len(parts) == 1:
-            out[path] = value
-        else:
-            table = out.setdefault(parts[0], {})
-            if not isinstance(table, dict):
-                raise ConfigError(f"override '{path}': [{parts[0]}] of the scene is not a table")
-            table[parts[1]] = value
+        parts = path.split(".", 2)
+        node = out
+        for depth, key in enumerate(parts[:-1]):
+            inner = node.setdefault(key, {})
+            if not isinstance(inner, dict):
+                raise ConfigError(f"override '{path}': "
+                                  f"[{'.'.join(parts[:depth + 1])}] of the scene is not a table")
+            node[key] = inner = dict(inner)
+            node = inner
+        node[parts[-1]] = value
     return out
 
 
@@ -280,10 +280,7 @@ class CosimSettings:
     def seconds(self, ticks: int) -> float:
         """``ticks`` base steps in seconds, as the master counts time (an exact rational
         product, rounded once: 120000 steps of 0.25 ms are 30.0 s)."""
-        frac = Fraction(self.step).limit_denominator(10**12)
-        if float(frac) != self.step:
-            frac = Fraction(self.step)
-        return float(frac * ticks)
+        return seconds(ticks, self.step)
 
     @property
     def stop_time(self) -> float:
@@ -324,22 +321,16 @@ def _finite_positive(x: Any) -> bool:
 
 
 @dataclass(frozen=True)
-class StateSpaceSetting:
-    """The strain controller as a discrete state-space law (``[controller] kind =
-    "state_space"``).
+class _Source:
+    """What a configuration was made of: the scene's tables (file and the files it extends,
+    merged; before overrides), its file, and the FMU files given as arguments."""
 
-    Attributes
-    ----------
-    file : Path
-        The matrices file (``[controller] matrices``, :mod:`controller.state_space` JSON).
-    params : StateSpaceParams
-        Its matrices, signals (names and units: checked against the plant when the system is
-        built), output limits and sample period (the controllers' period is a whole number of
-        them).
-    """
-
-    file: Path
-    params: StateSpaceParams
+    tables: dict[str, Any]
+    path: Path
+    plant_fmu: Path | None = None
+    controller_fmu: Path | None = None
+    #: how each override was given (key path -> name, :func:`load_config`'s ``given_as``)
+    given: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -350,10 +341,9 @@ class SceneConfig:
     ----------
     scene : plant.scene.Scene
         The plant's data.
-    controller : controller.ControllerParams
-        The strain controller (``enabled`` false: none).
-    top_drive : controller.TopDriveControllerParams
-        The top-drive speed controller (``enabled`` false: none).
+    controllers : dict of str -> ControllerSetting
+        Per law table (= instance, in the system's order: ``controller``,
+        ``top_drive_controller``) the law and its parameters (``enabled`` false: none).
     cosim : CosimSettings
     fmu_files : dict of str -> Path
         FMU files a user chose, by instance (``[plant] fmu``, ``[controller] fmu``,
@@ -361,22 +351,20 @@ class SceneConfig:
         the others run the project's FMUs.
     overrides : dict of str -> value
         The key-path overrides applied on top of the scene file (:func:`key_paths`).
-    set_keys : dict of str -> tuple of str
-        Per controller instance, the keys its table sets explicitly (file and overrides): a
-        foreign FMU must take those.
-    state_space : StateSpaceSetting or None
-        The strain controller's state-space law (``[controller] kind = "state_space"``); None:
-        the P law of ``controller``.
+    plant_parameters : dict of str -> scalar
+        A foreign plant FMU's own parameters (``[plant.parameters]``), by variable name.
+    origin : object
+        What it was made of (the scene's tables before overrides, its file, the FMU files
+        given as arguments): :func:`derive_config` makes another configuration from it.
     """
 
     scene: Scene
-    controller: ControllerParams
-    top_drive: TopDriveControllerParams
+    controllers: dict[str, ControllerSetting]
     cosim: CosimSettings
     fmu_files: dict[str, Path] = field(default_factory=dict)
     overrides: dict[str, Any] = field(default_factory=dict)
-    set_keys: dict[str, tuple[str, ...]] = field(default_factory=dict)
-    state_space: StateSpaceSetting | None = None
+    plant_parameters: dict[str, Any] = field(default_factory=dict)
+    origin: _Source | None = field(default=None, repr=False, compare=False)
 
     @property
     def name(self) -> str:
@@ -389,15 +377,30 @@ class SceneConfig:
         return self.scene.source
 
     @property
+    def controller(self) -> ControllerSetting:
+        """The strain controller's setting (``[controller]``)."""
+        return self.controllers[CONTROLLER]
+
+    @property
+    def top_drive(self) -> ControllerSetting:
+        """The top-drive controller's setting (``[top_drive_controller]``)."""
+        return self.controllers[TOP_DRIVE]
+
+    @property
     def instances(self) -> tuple[str, ...]:
         """The system's instances: the plant, then each enabled controller."""
-        return (PLANT, *((CONTROLLER,) if self.controller.enabled else ()),
-                *((TOP_DRIVE,) if self.top_drive.enabled else ()))
+        return (PLANT, *(i for i, c in self.controllers.items() if c.enabled))
 
     @property
     def n_sites(self) -> int:
         """Actuator sites of the plant."""
         return len(self.scene.plant.actuator_joints)
+
+    @property
+    def switch_on_time(self) -> float | None:
+        """When the enabled strain controller switches on [s] (None: none, or a law without a
+        switch-on time)."""
+        return self.controller.switch_on_time
 
 
 def _number(where: str, value: Any, *, positive: bool) -> float:
@@ -439,25 +442,11 @@ def _cosim(table: Mapping[str, Any], instances: Sequence[str], source: str) -> C
         interval = _number(f"{where} output_interval", table["output_interval"], positive=True)
         output_ticks = partial.ticks(interval, f"{where} output_interval")
     else:
-        output_ticks = max(1, math.ceil(1e-3 / step - 1e-9))
+        # the fewest steps that span 1 ms (exactly 1 ms where it is on the grid)
+        output_ticks = max(1, grid_ticks(1e-3, step) or math.ceil(1e-3 / step))
     return CosimSettings(step, stop_ticks, partial.algorithm, partial.order, partial.coupling,
                          partial.actuator_delay, partial.sensor_delay, controller_ticks,
                          output_ticks)
-
-
-def _params(table_name: str, table: Mapping[str, Any], source: str) -> Any:
-    cls = CONTROLLER_TABLES[table_name][1]
-    names = [f.name for f in fields(cls)]
-    for key in table:
-        extra = _CONTROLLER_EXTRA if table_name == "controller" else ("fmu",)
-        if key not in names and key not in extra:
-            raise ConfigError(f"{source}: [{table_name}] unknown key '{key}'"
-                              f"{_suggest(key, [*names, *extra])}")
-    raw = {"enabled": False, **{k: v for k, v in table.items() if k not in _CONTROLLER_EXTRA}}
-    try:
-        return cls(**raw)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{source}: [{table_name}] {exc}") from None
 
 
 def _not_an_fmu(path: Path) -> str | None:
@@ -487,50 +476,6 @@ def _fmu_file(table_name: str, table: Mapping[str, Any], source: str) -> Path | 
     if (why := _not_an_fmu(path)) is not None:
         raise ConfigError(f"{source}: [{table_name}] fmu = {value!r}: {why}")
     return path
-
-
-def _state_space(table: Mapping[str, Any], cosim: CosimSettings, source: str,
-                 overrides: Mapping[str, Any]) -> StateSpaceSetting | None:
-    """The ``[controller]`` table's state-space law (None: ``kind = "proportional"``).
-
-    With ``kind = "state_space"`` the P law's keys are not read: a scene may extend a P-law
-    scene (its inherited ``gain``, ``mode`` ... do not apply); set as overrides they are an
-    error (a sweep of ``controller.gain`` over a state-space scene changes nothing)."""
-    where = f"{source}: [controller]"
-    kind = table.get("kind", CONTROLLER_KINDS[0])
-    if kind not in CONTROLLER_KINDS:
-        raise ConfigError(f"{where} kind = {kind!r} is not allowed"
-                          f"{_suggest(str(kind), CONTROLLER_KINDS)}")
-    if kind == "proportional":
-        if "matrices" in table:
-            raise ConfigError(f"{where} matrices applies to kind = \"state_space\" only")
-        return None
-    p_law = sorted(p for p in overrides if p.startswith("controller.")
-                   and p.split(".", 1)[1] not in ("enabled", *_CONTROLLER_EXTRA))
-    if p_law:
-        raise ConfigError(f"override {', '.join(p_law)}: not a key of a controller of kind = "
-                          "\"state_space\"; allowed: controller.enabled, controller.kind, "
-                          "controller.matrices (limits and sample period are in the matrices "
-                          "file)")
-    value = table.get("matrices")
-    if not isinstance(value, str) or not value:
-        raise ConfigError(f"{where} kind = \"state_space\" needs matrices = \"FILE.json\" (a "
-                          f"controller.state_space JSON file, relative to the scene file), "
-                          f"got {value!r}")
-    path = Path(value).expanduser()
-    if not path.is_absolute() and Path(source).is_file():
-        path = Path(source).resolve().parent / path
-    try:
-        params = load_state_space(path)
-    except ValueError as exc:
-        raise ConfigError(f"{where} matrices: {exc}") from None
-    period, ts = cosim.controller_sample_period, params.sample_period
-    k = period / ts
-    if abs(k - round(k)) > MULTIPLE_RTOL * max(1.0, k) or round(k) < 1:
-        raise ConfigError(f"{where} matrices {path.name}: sample period {ts!r} s does not "
-                          f"divide the controllers' period {period!r} s (cosim.step or "
-                          "cosim.controller_sample_period): allowed a whole number of samples")
-    return StateSpaceSetting(path, params)
 
 
 def load_config(scene: str | Path = "paper_closed_loop",
@@ -569,13 +514,55 @@ def load_config(scene: str | Path = "paper_closed_loop",
     over = key_paths(overrides)
     given = {"plant.fmu": "plant_fmu", "controller.fmu": "controller_fmu",
              **{p: "override" for p in over}, **(given_as or {})}
-    source = str(scene)
     try:
         data, path = read_scene_tables(scene, folder)
-        source = str(path)
-        data = _apply(data, over)
-        return _validate(data, scene_from_dict(data, name=path.stem, source=source), over,
-                         plant_fmu, controller_fmu, given)
+    except SceneError as exc:
+        raise ConfigError(str(exc)) from None
+    return _from_tables(_Source(data, path, _fmu_arg(plant_fmu), _fmu_arg(controller_fmu),
+                                given), over)
+
+
+def derive_config(base: SceneConfig, overrides: Mapping[str, Any], *,
+                  controller_fmu: bool = True) -> SceneConfig:
+    """``base`` with more key-path overrides (they win over ``base.overrides``): the typed
+    configuration of a sweep point, made from the scene tables ``base`` was made of (no file
+    is read again), every new value validated here, once. Where the overrides touch only the
+    co-simulation and the law tables (and leave the strain controller on or off as in
+    ``base``, which the plant model's choice reads), the point keeps ``base.scene``, the plant
+    validated once for the whole sweep; the loop settings and laws are made anew and checked
+    against it. ``controller_fmu=False`` leaves out the controller FMU given as an argument
+    (an open-loop reference runs without it).
+
+    Raises
+    ------
+    ConfigError
+        An unknown key path or a bad value (one line).
+    """
+    origin = base.origin if controller_fmu else replace(base.origin, controller_fmu=None)
+    new = key_paths(overrides)
+    over = {**base.overrides, **new}
+    loop_only = all(p.split(".", 1)[0] in ("cosim", *TABLES) for p in new)
+    enabled = new.get(f"{CONTROLLER}.enabled", base.controller.enabled)
+    if loop_only and enabled is base.controller.enabled:
+        return _from_tables(origin, over, scene=base.scene)
+    return _from_tables(origin, over)
+
+
+def _fmu_arg(path: str | Path | None) -> Path | None:
+    return None if not path else Path(path)
+
+
+def _from_tables(origin: _Source, over: dict[str, Any], scene: Scene | None = None
+                 ) -> SceneConfig:
+    """The configuration of the scene tables ``origin.tables`` with the overrides ``over``
+    (``scene``: the plant of these tables, made already)."""
+    source = str(origin.path)
+    given = {**{p: "override" for p in over}, **origin.given}
+    try:
+        data = _apply(origin.tables, over)
+        if scene is None:
+            scene = scene_from_dict(data, name=origin.path.stem, source=source)
+        return _validate(data, scene, over, origin, given)
     except ConfigError as exc:
         if exc.given_as:  # named already
             raise
@@ -602,65 +589,65 @@ def _name_override(message: str, source: str, over: Mapping[str, Any],
     return ConfigError(f"{path}{message[match.end(2 if match[1] else 3):]}", given[path])
 
 
-def _validate(data: dict[str, Any], sc: Scene, over: Mapping[str, Any],
-              plant_fmu: str | Path | None, controller_fmu: str | Path | None,
+def _validate(data: dict[str, Any], sc: Scene, over: Mapping[str, Any], origin: _Source,
               given: Mapping[str, str]) -> SceneConfig:
     """The typed configuration of the scene ``sc`` (its tables ``data``, overrides applied)."""
     source = sc.source
-    tables = {}
-    for key in ("plant", *CONTROLLER_TABLES, "cosim"):
-        tables[key] = data.get(key, {})
+    plant_fmu, controller_fmu = origin.plant_fmu, origin.controller_fmu
+    tables = {key: data.get(key, {}) for key in ("plant", *TABLES, "cosim")}
     for key in tables["plant"]:
-        if key != "fmu":
-            raise ConfigError(f"{source}: [plant] unknown key '{key}'; allowed: fmu (the "
-                              "plant's own parameters are top-level tables)")
-    ctrl_table = tables["controller"]
-    if ctrl_table.get("kind") == "state_space":  # the P law's keys are not read (_state_space)
-        ctrl_table = {k: v for k, v in ctrl_table.items() if k in ("enabled", "fmu")}
-    controller = _params("controller", ctrl_table, source)
-    top_drive = _params("top_drive_controller", tables["top_drive_controller"], source)
+        if key not in ("fmu", "parameters"):
+            raise ConfigError(f"{source}: [plant] unknown key '{key}'; allowed: fmu, parameters "
+                              "(a foreign plant FMU's own parameters; the plant's parameters are "
+                              "top-level tables)")
+    enabled = [t for t in TABLES if tables[t].get("enabled", False) is True]
+    cosim = _cosim(tables["cosim"], (PLANT, *enabled), source)
+    try:
+        plant_parameters = check_fmu_parameters(f"{source}: [plant] parameters",
+                                                tables["plant"].get("parameters", {}))
+        controllers = {t: parse_controller(t, tables[t], source, over,
+                                           cosim.controller_sample_period) for t in TABLES}
+    except UserError as exc:
+        raise ConfigError(str(exc)) from None
+    ctrl, drive = controllers[CONTROLLER], controllers[TOP_DRIVE]
     n_sites = len(sc.plant.actuator_joints)
-    if controller.gain_matrix and len(controller.gain_matrix) != n_sites:
-        size = len(controller.gain_matrix)
+    matrix = getattr(ctrl.params, "gain_matrix", ())
+    if matrix and len(matrix) != n_sites:
+        size = len(matrix)
         raise ConfigError(f"{source}: [controller] gain_matrix is {size} x {size}; the scene "
                           f"has {n_sites} actuator sites: allowed an {n_sites} x {n_sites} matrix")
-    if controller.enabled and sc.model != "full3d":
+    if ctrl.enabled and sc.model != "full3d":
         raise ConfigError(f"{source}: the controller needs model = 'full3d', got '{sc.model}'")
     mode = sc.plant.top_drive.mode
-    if top_drive.enabled and mode != "torque":
+    if drive.enabled and mode != "torque":
         raise ConfigError(f"{source}: [top_drive_controller] drives the motor torque of a top "
                           f"drive in mode 'torque', but top_drive.mode = {mode!r}: set "
                           "[top_drive] mode = \"torque\" and inertia")
-    instances = (PLANT, *((CONTROLLER,) if controller.enabled else ()),
-                 *((TOP_DRIVE,) if top_drive.enabled else ()))
-    cosim = _cosim(tables["cosim"], instances, source)
-    state_space = _state_space(tables["controller"], cosim, source, over)
-    if state_space is not None and (controller_fmu or "fmu" in tables["controller"]):
+    if ctrl.matrices is not None and (controller_fmu or "fmu" in tables[CONTROLLER]):
         raise ConfigError(f"{source}: [controller] kind = \"state_space\" runs the matrices in "
                           "a StateSpaceController FMU built for the scene: a controller FMU "
                           "file cannot be given too")
-    if controller_fmu and not controller.enabled:
+    if controller_fmu and not ctrl.enabled:
         raise ConfigError(f"{source}: a controller FMU was given ({controller_fmu}) but the "
                           "scene's controller is off: set controller.enabled=true")
+    instances = (PLANT, *enabled)
     files: dict[str, Path] = {}
-    for instance, table_name, fmu in ((PLANT, "plant", plant_fmu),
-                                      (CONTROLLER, "controller", controller_fmu),
-                                      (TOP_DRIVE, "top_drive_controller", None)):
+    for instance, fmu in ((PLANT, plant_fmu), (CONTROLLER, controller_fmu), (TOP_DRIVE, None)):
         if instance not in instances:
             continue
         if fmu:
-            name = given[f"{table_name}.fmu"]
+            name = given[f"{instance}.fmu"]
             if not Path(fmu).is_file():
                 raise ConfigError(f"no file '{fmu}'", name)
             if (why := _not_an_fmu(Path(fmu))) is not None:
                 raise ConfigError(f"'{fmu}' is {why}", name)
             files[instance] = Path(fmu)
-        elif (chosen := _fmu_file(table_name, tables[table_name], source)) is not None:
+        elif (chosen := _fmu_file(instance, tables[instance], source)) is not None:
             files[instance] = chosen
-    set_keys = {CONTROLLER_TABLES[t][0]: tuple(k for k in tables[t]
-                                               if k not in ("enabled", *_CONTROLLER_EXTRA))
-                for t in CONTROLLER_TABLES}
-    if state_space is not None:
-        set_keys[CONTROLLER] = ()
-        state_space = state_space if controller.enabled else None
-    return SceneConfig(sc, controller, top_drive, cosim, files, over, set_keys, state_space)
+    for instance, setting in ((PLANT, plant_parameters), *((t, c.parameters)
+                                                          for t, c in controllers.items())):
+        if setting and instance in instances and instance not in files:
+            raise ConfigError(f"{source}: [{instance}.parameters] sets a foreign FMU's own "
+                              f"parameters, but [{instance}] names no fmu: give one ([{instance}] "
+                              f"fmu or --{'plant' if instance == PLANT else 'controller'}-fmu)")
+    return SceneConfig(sc, controllers, cosim, files, over, plant_parameters, origin)

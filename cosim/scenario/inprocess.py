@@ -2,11 +2,9 @@
 protocol (:class:`cosim.master.slave.Slave`), without FMI.
 
 The FMUs wrap the same objects (``fmu_src/``): :class:`PlantSlave` steps a
-:class:`plant.simulator.PlantSimulator`, :class:`ControllerSlave` a
-:class:`controller.StrainController` (any number of sites, SISO or with a gain matrix),
-:class:`StateSpaceSlave` a :class:`controller.StateSpaceController` (``[controller] kind =
-"state_space"``) and
-:class:`TopDriveSlave` a :class:`controller.TopDriveController` exactly as the FMU adapters do
+:class:`plant.simulator.PlantSimulator`, :class:`LawSlave` any registered controller law
+(:mod:`controller.registry`; its inputs and outputs from the law's port table) exactly as the
+FMU adapters do
 (same times, same step sizes, outputs taken after each step, a failed plant step discarded with
 the plant's own message; the plant is the model the plant FMU builds: the scene's, or the 3D
 model for a scene the default plant FMU runs) and through the same compiled steps
@@ -14,7 +12,7 @@ model for a scene the default plant FMU runs) and through the same compiled step
 (:class:`cosim.master.execution.Execution`, its algorithms, delay lines and observers) gives
 the same numbers with either, bit for bit (``tests/test_sweep.py``), while the in-process
 slaves save the FMI boundary. Parameters stay typed (:class:`plant.model.DrillstringModel`,
-:class:`controller.ControllerParams`).
+the laws' parameters).
 
 :func:`inprocess_slaves` makes the slaves that stand in for the FMUs of a configuration
 (:func:`.build.build_system` with ``engine="inprocess"`` wires them as it wires the FMUs).
@@ -27,34 +25,20 @@ from typing import Any
 
 import numpy as np
 
-from drillcosim.controller import (
-    ControllerParams,
-    StateSpaceController,
-    StateSpaceParams,
-    StrainController,
-    TopDriveController,
-    TopDriveControllerParams,
-)
+from drillcosim.controller import Law
+from drillcosim.controller.ports import inputs, names, outputs
+from drillcosim.cosim.master import state_codec
 from drillcosim.cosim.master.errors import FMI2_DISCARD, FMI2_ERROR, CosimError
 from drillcosim.cosim.master.slave import CompiledCalls, Slave
 from drillcosim.cosim.master.system import ParameterValue, _did_you_mean
 from drillcosim.plant.model import DrillstringModel
-from drillcosim.plant.signals import (
-    CONTROLLER,
-    PLANT,
-    TOP_DRIVE,
-    TOP_DRIVE_TORQUE,
-    actuator_force,
-    site_channels,
-    strain,
-)
+from drillcosim.plant.signals import PLANT
 from drillcosim.plant.simulator import PlantSimulator
 
 from .config import SceneConfig
 from .scene_fmus import plant_layout
 
-__all__ = ["ControllerSlave", "PlantSlave", "StateSpaceSlave", "TopDriveSlave",
-           "inprocess_slaves"]
+__all__ = ["LawSlave", "PlantSlave", "inprocess_slaves"]
 
 
 class _ArraySlave(Slave):
@@ -132,6 +116,28 @@ class _ArraySlave(Slave):
         """Restore a state from :meth:`get_state`."""
         model, u, y = state
         self._restore(model)
+        self.u[:], self.y[:] = u, y
+        self.errored = False
+
+    def serialize_state(self, time: float) -> bytes:
+        """:meth:`get_state` as bytes (:mod:`cosim.master.state_codec`: JSON, no code)."""
+        return state_codec.encode(self.get_state(time))
+
+    def deserialize_state(self, data: bytes, time: float) -> None:
+        """Restore :meth:`serialize_state`'s bytes, all or (CosimError) nothing."""
+        try:
+            model, u, y = state_codec.decode(data)
+            if np.shape(u) != self.u.shape or np.shape(y) != self.y.shape:
+                raise ValueError(f"{np.size(u)} inputs and {np.size(y)} outputs; this "
+                                 f"component has {self.u.size} and {self.y.size}")
+            saved = self._save()
+            try:
+                self._restore(model)
+            except BaseException:
+                self._restore(saved)
+                raise
+        except (ValueError, TypeError) as exc:
+            raise CosimError(self.name, "restore state", time, str(exc)) from None
         self.u[:], self.y[:] = u, y
         self.errored = False
 
@@ -221,17 +227,31 @@ class PlantSlave(_ArraySlave):
         self.sim.set_state(sim_state)
 
 
-class _LawSlave(_ArraySlave):
-    """A controller law as a slave: ``law`` (``reset``, ``get_state``, ``set_state``) stepped
-    by its compiled step on this slave's arrays, as in the controller FMUs, else (or for a step
-    the compiled law leaves to Python) by :meth:`_advance`; a ``ValueError`` of the law is the
-    step's error, state unchanged."""
+class LawSlave(_ArraySlave):
+    """A controller law as a slave (``controller/law.py``): stepped by its compiled step on
+    this slave's arrays, as in the controller FMUs, else (or for a step the compiled law leaves
+    to Python) by :meth:`Law.advance <controller.law.Law.advance>`; a ``ValueError`` of the law
+    is the step's error, state unchanged.
 
-    law: Any
-    _step: Any = None
+    Parameters
+    ----------
+    name : str
+        Instance name.
+    law : controller.law.Law
+        The law (made for its layout: ``Law.create``).
+    ports : sequence of controller.ports.Port
+        Its port table for that layout (the inputs and outputs, in the law's array order).
+    """
 
-    def _advance(self, t: float, h: float) -> None:  # pragma: no cover - each law its own
-        raise NotImplementedError
+    def __init__(self, name: str, law: Law, ports: Sequence[Any]):
+        super().__init__(name, names(inputs(ports)), names(outputs(ports)))
+        self.law = law
+        self._step = law.compiled_step(self.u, self.y)
+
+    def instantiate(self, start_time: float, stop_time: float | None) -> None:
+        """The law's state back to its start (zero force, integral, state), its outputs."""
+        self.law.reset()
+        self.y[:] = self.law.initial_outputs()
 
     def do_step(self, t: float, h: float) -> int:
         """The outputs at ``t + h`` from the inputs held over the step."""
@@ -244,7 +264,7 @@ class _LawSlave(_ArraySlave):
 
     def _python_step(self, t: float, h: float) -> int:
         try:
-            self._advance(t, h)
+            self.law.advance(t, h, self.u, self.y)
         except ValueError as exc:
             self._problem = f"at t = {t!r}: {exc}"
             return FMI2_ERROR
@@ -267,87 +287,6 @@ class _LawSlave(_ArraySlave):
         self.law.set_state(state)
 
 
-class ControllerSlave(_LawSlave):
-    """:class:`controller.StrainController` as a slave (inputs: the strains, outputs: the
-    actuator forces [N] of sites 1 .. n_sites, gauges C and E).
-
-    Parameters
-    ----------
-    name : str
-        Instance name.
-    params : ControllerParams
-    sites : sequence of int
-        Actuator site numbers served, in channel order (default (1, 2), the default controller
-        FMU's); one :class:`StrainController` of ``len(sites)`` sites (a ``gain_matrix`` of
-        ``params`` is ``len(sites)`` square).
-    """
-
-    def __init__(self, name: str, params: ControllerParams, sites: Sequence[int] = (1, 2)):
-        pairs = site_channels(sites)
-        super().__init__(name, [strain(s, a) for s, a in pairs],
-                         [actuator_force(s, a) for s, a in pairs])
-        self.law = StrainController(params, len(sites))
-        self._step = self.law.compiled_step(self.u, self.y)
-
-    def instantiate(self, start_time: float, stop_time: float | None) -> None:
-        """Zero force (the lag state) at the start."""
-        self.law.reset()
-        self.y[:] = self.law.forces
-
-    def _advance(self, t: float, h: float) -> None:
-        self.y[:] = self.law.step(t, h, self.u)
-
-
-class StateSpaceSlave(_LawSlave):
-    """:class:`controller.StateSpaceController` as a slave (inputs and outputs: the law's
-    signals, by name), as ``StateSpaceController.fmu`` runs it.
-
-    Parameters
-    ----------
-    name : str
-        Instance name.
-    params : StateSpaceParams
-    """
-
-    def __init__(self, name: str, params: StateSpaceParams):
-        super().__init__(name, params.input_names, params.output_names)
-        self.law = StateSpaceController(params)
-        self._step = self.law.compiled_step(self.u, self.y)
-
-    def instantiate(self, start_time: float, stop_time: float | None) -> None:
-        """Zero state and outputs at the start."""
-        self.law.reset()
-        self.y[:] = self.law.workspace.outputs
-
-    def _advance(self, t: float, h: float) -> None:
-        self.y[:] = self.law.step(t, h, self.u)
-
-
-class TopDriveSlave(_LawSlave):
-    """:class:`controller.TopDriveController` as a slave (inputs: ``top_rotary_speed``
-    [rad/s], ``top_torque`` [N m]; output: ``top_drive_torque`` [N m]).
-
-    Parameters
-    ----------
-    name : str
-        Instance name.
-    params : TopDriveControllerParams
-    """
-
-    def __init__(self, name: str, params: TopDriveControllerParams):
-        super().__init__(name, ["top_rotary_speed", "top_torque"], [TOP_DRIVE_TORQUE])
-        self.law = TopDriveController(params)
-        self._step = self.law.compiled_step(self.u, self.y)
-
-    def instantiate(self, start_time: float, stop_time: float | None) -> None:
-        """Zero integral and torque at the start."""
-        self.law.reset()
-        self.y[0] = self.law.torque
-
-    def _advance(self, t: float, h: float) -> None:
-        self.y[0] = self.law.step(t, h, float(self.u[0]), float(self.u[1]))
-
-
 def inprocess_slaves(config: SceneConfig) -> dict[str, Slave]:
     """In-process slaves standing in for the FMUs of a configuration's system.
 
@@ -358,19 +297,17 @@ def inprocess_slaves(config: SceneConfig) -> dict[str, Slave]:
     Returns
     -------
     dict
-        ``{"plant": PlantSlave, "controller": ControllerSlave (or StateSpaceSlave),
-        "top_drive_controller": TopDriveSlave}`` (the enabled controllers), for
-        ``Master(system, slaves)``.
+        ``{"plant": PlantSlave, "controller": LawSlave, "top_drive_controller": LawSlave}``
+        (the enabled controllers), for ``Master(system, slaves)``.
     """
     scene = config.scene
     kind = "full3d" if plant_layout(scene) is None else scene.model
     slaves: dict[str, Slave] = {
         PLANT: PlantSlave(PLANT, PlantSimulator(DrillstringModel(scene.plant, kind)))}
-    if config.state_space is not None:
-        slaves[CONTROLLER] = StateSpaceSlave(CONTROLLER, config.state_space.params)
-    elif config.controller.enabled:
-        slaves[CONTROLLER] = ControllerSlave(CONTROLLER, config.controller,
-                                             tuple(range(1, config.n_sites + 1)))
-    if config.top_drive.enabled:
-        slaves[TOP_DRIVE] = TopDriveSlave(TOP_DRIVE, config.top_drive)
+    for instance in config.instances[1:]:
+        setting = config.controllers[instance]
+        layout = setting.layout(config.n_sites)
+        law = setting.law
+        slaves[instance] = LawSlave(instance, law.create(setting.params, layout),
+                                    law.ports(layout))
     return slaves

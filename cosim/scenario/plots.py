@@ -25,7 +25,15 @@ from typing import Any
 
 import numpy as np
 
-from drillcosim.plant.signals import AXES, CONTROLLER, PLANT, TOP_DRIVE
+from drillcosim.plant.signals import (
+    AXES,
+    CONTROLLER,
+    PLANT,
+    TOP_DRIVE,
+    actuator_force,
+    actuator_power,
+    body_signal,
+)
 
 from .plot_base import (
     BASELINE_COLOR,
@@ -41,8 +49,7 @@ from .summary import column, contact_bodies
 
 __all__ = ["DPI", "REVOLUTIONS", "SHOW_DPI", "ActuatorsFigure", "AxialTorsionalFigure",
            "DeflectionContactFigure", "OrbitFigure", "RunFigure", "envelope", "last_revolutions",
-           "plot_axial_torsional", "plot_run", "run_figures", "save_figure", "signal_name",
-           "thin_path"]
+           "plot_axial_torsional", "plot_run", "run_figures", "save_figure", "thin_path"]
 
 MM = 1e3  # m -> mm
 KN = 1e-3  # N -> kN
@@ -50,18 +57,6 @@ KN = 1e-3  # N -> kN
 REVOLUTIONS = 5
 #: Label of the run's traces when a baseline is drawn / of the baseline's.
 RUN_LABEL, BASELINE_LABEL = "closed loop", "open loop (controller off)"
-
-
-def signal_name(kind: str, index: int, what: str = "") -> str:
-    """A plant output's name: ``body<index>_<what>``, ``actuator<index>_power`` or the strain
-    controller's ``actuator<index>_force_<what>`` (the one place the figures spell them)."""
-    from drillcosim.plant import signals
-
-    if kind == "body":
-        return signals.body_signal(index, what)
-    if kind == "force":
-        return signals.actuator_force(index, what)
-    return signals.actuator_power(index)
 
 
 def _span_label(body: int, spans: Mapping[int, Mapping] | None) -> str:
@@ -122,7 +117,7 @@ class OrbitFigure(RunFigure):
               baseline: np.ndarray | None = None) -> OrbitFigure | None:
         """The figure for ``data``'s columns (None: no orbit recorded)."""
         body = _long_body(data, spans)
-        names = [signal_name("body", body, a) for a in "XY"] if body is not None else []
+        names = [body_signal(body, a) for a in "XY"] if body is not None else []
         if body is None or any(column(data, PLANT, n) is None for n in names):
             return None
         if baseline is not None and any(column(baseline, PLANT, n) is None for n in names):
@@ -135,7 +130,7 @@ class OrbitFigure(RunFigure):
         fig, axes = figure_grid(5.5, 6.1, 1, 1, top=1.0, left=0.7, bottom=0.55)
         super().__init__(fig, baseline)
         self.body, self.clearance, self.window = body, clearance, window
-        self.names = [signal_name("body", body, a) for a in "XY"]
+        self.names = [body_signal(body, a) for a in "XY"]
         self._headed(axes, None, title, f"lateral orbit, {_span_label(body, spans)}")
         ax = self.ax = axes[0, 0]
         self.base_path = None
@@ -211,7 +206,7 @@ class DeflectionContactFigure(RunFigure):
         self.quiet: list[tuple[Any, Any, int]] = []     # (axes, text, body) of contact panels
         for j, b in enumerate(bodies):
             ax = axes[0, j]
-            deflection = signal_name("body", b, "radial_deflection")
+            deflection = body_signal(b, "radial_deflection")
             self._series(ax, data, PLANT, deflection, MM, baseline=True, lw=0.7)
             self._series(ax, data, PLANT, deflection, MM, lw=0.7, color="tab:blue")
             ax.axhline(clearance * MM, color="k", ls="--", lw=1.0)
@@ -224,7 +219,7 @@ class DeflectionContactFigure(RunFigure):
                     loc="upper left")
             ax.grid(alpha=0.3)
             ax = axes[1, j]
-            force = signal_name("body", b, "contact_force")
+            force = body_signal(b, "contact_force")
             self._series(ax, data, PLANT, force, KN, baseline=True, lw=0.7)
             self._series(ax, data, PLANT, force, KN, lw=0.7, color="tab:red")
             if self.baseline is not None:
@@ -242,11 +237,11 @@ class DeflectionContactFigure(RunFigure):
         for _ax, text, body in self.quiet:
             runs = [(data, "")] + ([(self.baseline, " (open loop too)")]
                                    if self.baseline is not None else [])
-            force = signal_name("body", body, "contact_force")
+            force = body_signal(body, "contact_force")
             touched = any(np.any(column(d, PLANT, force) > 0) for d, _ in runs
                           if column(d, PLANT, force) is not None)
-            peak = np.nanmax(column(data, PLANT, signal_name("body", body,
-                                                              "radial_deflection")),
+            peak = np.nanmax(column(data, PLANT, body_signal(body,
+                                                  "radial_deflection")),
                              initial=0.0) * MM
             text.set_text("" if touched else
                           f"no wall contact{runs[-1][1]}:\npeak radial deflection {peak:.3g} mm"
@@ -265,7 +260,7 @@ class ActuatorsFigure(RunFigure):
               ) -> ActuatorsFigure | None:
         """The figure for ``data``'s columns (None: no actuator power recorded); ``period``:
         as for :meth:`DeflectionContactFigure.build`."""
-        if all(column(data, PLANT, signal_name("power", s)) is None
+        if all(column(data, PLANT, actuator_power(s)) is None
                for s in range(1, n_sites + 1)):
             return None
         fig, axes = figure_grid(5 * n_sites, 7.8, 3, n_sites, sharex=True, top=0.85)
@@ -276,7 +271,7 @@ class ActuatorsFigure(RunFigure):
                      else "")
             for row, a in enumerate(AXES):
                 ax = axes[row, j]
-                drawn = self._series(ax, data, CONTROLLER, signal_name("force", s, a), KN,
+                drawn = self._series(ax, data, CONTROLLER, actuator_force(s, a), KN,
                                      lw=0.7, color=colors[a])
                 ax.set_ylabel(f"force {a} [kN]")
                 ax.set_title(f"site {s}{where}: actuator {a}" if row == 0 else
@@ -286,7 +281,7 @@ class ActuatorsFigure(RunFigure):
                             transform=ax.transAxes)
                 ax.grid(alpha=0.3)
             ax = axes[len(AXES), j]
-            self._series(ax, data, PLANT, signal_name("power", s), lw=0.7, color="tab:green")
+            self._series(ax, data, PLANT, actuator_power(s), lw=0.7, color="tab:green")
             _time_panel(ax, "power [W]")
         return self._headed(axes, switch_on_time, title,
                             "actuator forces (C: bending about body y, E: about body x) and "

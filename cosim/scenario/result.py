@@ -15,9 +15,8 @@ writes (:meth:`Result.save`):
 from __future__ import annotations
 
 import base64
-import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -25,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from drillcosim.cosim.master.files import AtomicFile
+from drillcosim.plant.signals import CONTROLLER
 
 from .config import SceneConfig
 from .summary import span_info, summarize, write_json
@@ -41,14 +41,19 @@ def run_title(config: SceneConfig) -> str:
     """A run's figure title: the scene, the strain controller's gain [N/strain] (or that it is
     off) and switch-on time, the actuator delay [ms] and the communication step [ms]."""
     ctrl, st = config.controller, config.cosim
+    gain = getattr(ctrl.params, "gain", None)
     if not ctrl.enabled:
         law = "controller off"
-    elif config.state_space is not None:
-        law = f"state-space controller {config.state_space.file.name}"
+    elif ctrl.matrices is not None:
+        law = f"state-space controller {ctrl.matrices.name}"
+    elif CONTROLLER in config.fmu_files:
+        law = f"controller FMU {config.fmu_files[CONTROLLER].name}"
+    elif gain is None:
+        law = f"{ctrl.kind} law"
     else:
-        gain = f"{ctrl.gain:.3g}".replace("e+0", "e").replace("e+", "e").replace("e-0", "e-")
-        law = f"K = {gain} N/strain" + (f" from {ctrl.switch_on_time:g} s"
-                                        if ctrl.switch_on_time else "")
+        k = f"{gain:.3g}".replace("e+0", "e").replace("e+", "e").replace("e-0", "e-")
+        law = (f"{'' if ctrl.kind == 'proportional' else ctrl.kind.upper() + ' '}K = {k} N/strain"
+               + (f" from {config.switch_on_time:g} s" if config.switch_on_time else ""))
     return (f"{config.name}: {law}, actuator delay {st.actuator_delay * 1e3:g} ms, "
             f"step H = {st.step * 1e3:g} ms")
 
@@ -58,12 +63,11 @@ def plot_settings(config: SceneConfig, baseline: str | Path | None = None) -> di
     rows and folder: clearance [m], spans, sites, title (:func:`run_title`), controller
     switch-on time [s], the baseline's file (:func:`.baseline.baseline_path`) and the top
     drive's period [s]."""
-    ctrl = config.controller
     speed = config.scene.plant.top_drive.rotary_speed
     return {"clearance": config.scene.plant.contact.clearance,
             "spans": span_info(config.scene), "n_sites": config.n_sites,
             "title": run_title(config),
-            "switch_on_time": (ctrl.switch_on_time if ctrl.enabled else None) or None,
+            "switch_on_time": config.switch_on_time or None,
             "baseline": None if baseline is None else str(baseline),
             "revolution": 2 * math.pi / speed if speed > 0 else None}
 
@@ -120,6 +124,9 @@ class Result:
         completed.
     csv_path : Path or None
         The ``results.csv`` streamed during the run, if any.
+    components : dict
+        What ran each instance (:meth:`.build.BuiltSystem.components`: the FMU file, GUID,
+        model name, generation tool, drillcosim version and the parameters set).
     profile : dict
         Where the stepping loop's time went (:meth:`cosim.master.master.Result.profile`): per
         component the mean and longest step [s] and its share, the master's own share, the
@@ -136,7 +143,8 @@ class Result:
     real_time_factor: float
     failure: dict[str, Any] | None = None
     csv_path: Path | None = None
-    profile: dict[str, Any] = dataclasses.field(default_factory=dict)
+    components: dict[str, Any] = field(default_factory=dict)
+    profile: dict[str, Any] = field(default_factory=dict)
 
     @property
     def completed(self) -> bool:
@@ -172,22 +180,17 @@ class Result:
         """Peak and steady deflection, actuator effort, contact, stick-slip (the keys of
         :mod:`.summary`), and the run's controllers and co-simulation settings."""
         cfg = self.config
-        ctrl = cfg.controller
         summary = summarize(self.data, scene=cfg.name, scene_file=cfg.source, spans=self.spans,
                             n_sites=cfg.n_sites, stop_time=self.stop_time, step=cfg.cosim.step,
                             output_interval=cfg.cosim.output_interval, wall_time=self.wall_time,
                             real_time_factor=self.real_time_factor, end_time=self.end_time,
                             switch_on_time=self._switch_on_time, diverged=self.failure)
-        ss = cfg.state_space
-        summary["controller"] = dataclasses.asdict(ctrl) if ss is None else {
-            "enabled": True, "kind": "state_space", "matrices": str(ss.file),
-            "n_states": ss.params.n_states, "inputs": list(ss.params.input_names),
-            "outputs": list(ss.params.output_names),
-            "sample_period": ss.params.sample_period, "description": ss.params.description}
+        summary["controller"] = cfg.controller.record()
         if cfg.top_drive.enabled:
-            summary["top_drive_controller"] = dataclasses.asdict(cfg.top_drive)
+            summary["top_drive_controller"] = cfg.top_drive.record()
         summary["cosim"] = cfg.cosim.as_dict()
         summary["engine"] = self.engine
+        summary["components"] = self.components
         summary["telemetry"] = self.profile
         return summary
 
@@ -213,8 +216,7 @@ class Result:
 
     @property
     def _switch_on_time(self) -> float | None:
-        ctrl = self.config.controller
-        return ctrl.switch_on_time if ctrl.enabled else None
+        return self.config.switch_on_time
 
     def baseline(self) -> Path | None:
         """The file of this run's open-loop baseline (:func:`.baseline.baseline_path`: taken

@@ -10,13 +10,13 @@ same adapter (``fmu_src/build.py``, "Variants") whose variables are the scene's 
 (:class:`PlantLayout`: the inputs that act on it, every output, with units and descriptions)
 and whose ``scene`` and ``model`` parameters start at the scene and its model kind.
 
-Likewise the default ``StrainController.fmu`` serves two sites with one P law per channel;
-a scene with another number of sites or a ``[controller] gain_matrix`` gets
-``StrainController_<scene>`` (its sites, the relative gains ``gain_matrix_<i>_<j>``).
-A scene whose ``[controller] kind = "state_space"`` gets ``StateSpaceController_<scene>``: the
-generic state-space adapter with the matrices file's interface (names, units, limits, number
-of states, sample period) and the file itself as ``resources/state_space.json``.
-The top-drive controller (``TopDriveController.fmu``) has one layout.
+Likewise each registered controller law (:mod:`controller.registry`) has a default FMU for its
+default layout (``StrainController.fmu``: two sites, one P law per channel;
+``TopDriveController.fmu``, ...), and a scene whose law needs another layout
+(``Law.layout_for``: another number of sites, a ``[controller] gain_matrix``) gets the variant
+``<FMU>_<scene>`` of the same generic adapter (``fmu_src/law_fmu.py``). A law with a resource
+file (``[controller] kind = "state_space"``) always gets ``StateSpaceController_<scene>``, which
+carries the scene's matrices file as ``resources/state_space.json``.
 
 A variant's model identifier, file name, slave module and GUID differ from the default's
 (the module name carries a hash of the layout), so variants of several scenes and the default
@@ -33,9 +33,17 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from drillcosim.controller.state_space import StateSpaceParams
-from drillcosim.fmu_src.build import DEFAULT_OUT, REGISTRY, FmuRecipe, build_one, stale
+from drillcosim.fmu_src.build import (
+    DEFAULT_OUT,
+    PLANT_RECIPE,
+    REGISTRY,
+    FmuRecipe,
+    build_one,
+    law_recipe,
+    stale,
+)
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.params import PlantParams
 from drillcosim.plant.scene import Scene, scene_files, scenes_dir
@@ -46,15 +54,11 @@ from drillcosim.plant.signals import (
     body_signal,
 )
 
-__all__ = ["DEFAULT_CONTROLLER", "DEFAULT_PLANT", "STATE_SPACE_CONTROLLER",
-           "TOP_DRIVE_CONTROLLER", "PlantLayout", "controller_recipe", "default_fmu_dir",
-           "ensure_recipes", "plant_layout", "plant_recipe", "recipe_named",
-           "state_space_recipe", "variant_name"]
+__all__ = ["DEFAULT_PLANT", "PlantLayout", "built_for_scene", "controller_recipe",
+           "default_fmu_dir",
+           "ensure_recipes", "plant_layout", "plant_recipe", "recipe_named", "variant_name"]
 
-DEFAULT_PLANT = "DrillstringPlant"
-DEFAULT_CONTROLLER = "StrainController"
-TOP_DRIVE_CONTROLLER = "TopDriveController"
-STATE_SPACE_CONTROLLER = "StateSpaceController"
+DEFAULT_PLANT = PLANT_RECIPE.name
 
 Row = tuple[str, str, str]
 
@@ -92,6 +96,12 @@ class PlantLayout:
 def recipe_named(name: str) -> FmuRecipe:
     """The registered recipe ``name`` (:data:`fmu_src.build.REGISTRY`)."""
     return next(r for r in REGISTRY if r.name == name)
+
+
+def built_for_scene(recipe: FmuRecipe) -> bool:
+    """Whether ``recipe`` is an FMU built for a scene (not one of the default FMUs of
+    :data:`fmu_src.build.REGISTRY`)."""
+    return recipe not in REGISTRY
 
 
 def default_fmu_dir() -> Path:
@@ -177,55 +187,23 @@ def plant_recipe(scene: Scene) -> FmuRecipe:
         class_attributes=json.dumps(layout.attributes(description)), resource_files=copies)
 
 
-def controller_recipe(scene: Scene, n_sites: int, gain_matrix: tuple) -> FmuRecipe:
-    """The recipe of the strain controller FMU for ``n_sites`` sites and the relative gain
-    matrix (``()``: one P law per channel): the default for two sites and no matrix, else the
-    variant ``StrainController_<scene>`` (start of its matrix: ``gain_matrix`` or identity)."""
-    base = recipe_named(DEFAULT_CONTROLLER)
-    if n_sites == 2 and not gain_matrix:
-        return base
-    matrix = [list(row) for row in gain_matrix] or [
-        [1.0 if i == j else 0.0 for j in range(n_sites)] for i in range(n_sites)]
-    description = (f"Proportional strain-feedback controller built for scene '{scene.name}': "
-                   f"{n_sites} sites x gauges C/E; per axis F = gain * M @ strain across the "
-                   f"sites (M = gain_matrix, identity = one P law per channel), F > 0 = "
-                   f"compressive at D / tensile at C; saturation, switch-on time, first-order "
-                   f"actuator lag")
-    layout = {"LAYOUT": {"n_sites": n_sites, "gain_matrix": matrix, "description": description}}
-    return FmuRecipe(
-        name=variant_name(DEFAULT_CONTROLLER, scene), script=base.script, vendored=base.vendored,
-        extra_files=base.extra_files, options=base.options, requires=base.requires,
-        exclude=base.exclude, base=DEFAULT_CONTROLLER, class_attributes=json.dumps(layout))
-
-
-def state_space_recipe(scene: Scene, params: StateSpaceParams, matrices: Path) -> FmuRecipe:
-    """The recipe of ``StateSpaceController_<scene>``: the generic adapter with the interface
-    of ``params`` (read from the file ``matrices``, which the FMU carries as its resource)."""
-    base = recipe_named(STATE_SPACE_CONTROLLER)
-
-    def limit(x: float) -> float | None:
-        return None if x in (float("inf"), float("-inf")) else x
-
-    description = (f"Discrete state-space controller built for scene '{scene.name}' "
-                   f"(u = clip(C x + D y), x+ = A x + B y; matrices in "
-                   f"resources/state_space.json): {len(params.inputs)} inputs, "
-                   f"{len(params.outputs)} outputs, {params.n_states} states, Ts = "
-                   f"{params.sample_period:g} s. {params.description}")
-    layout = {
-        "inputs": [[s.name, s.unit, f"Input {i} of the state-space law (plant output "
-                    f"{s.name})"] for i, s in enumerate(params.inputs, start=1)],
-        "outputs": [[s.name, s.unit, f"Output {i} of the state-space law (plant input "
-                     f"{s.name})"] for i, s in enumerate(params.outputs, start=1)],
-        "lower": [limit(s.lower) for s in params.outputs],
-        "upper": [limit(s.upper) for s in params.outputs],
-        "n_states": params.n_states, "sample_period": params.sample_period,
-        "description": description}
-    return FmuRecipe(
-        name=variant_name(STATE_SPACE_CONTROLLER, scene), script=base.script,
-        vendored=base.vendored, extra_files=base.extra_files, options=base.options,
-        requires=base.requires, exclude=base.exclude, base=STATE_SPACE_CONTROLLER,
-        class_attributes=json.dumps({"LAYOUT": layout}),
-        resource_files=((str(Path(matrices).resolve()), "state_space.json"),))
+def controller_recipe(setting: Any, scene: Scene, n_sites: int) -> FmuRecipe:
+    """The recipe of the FMU that runs a controller (a :class:`.controllers.ControllerSetting`)
+    of ``scene`` (``n_sites`` actuator sites): its law's default FMU where the law's layout for
+    the scene is the default one, else the variant ``<FMU>_<scene>`` (a law with a resource
+    file: always, carrying the scene's file)."""
+    law = setting.law
+    layout = setting.layout(n_sites)
+    if not law.RESOURCE and layout == law.default_layout():
+        return recipe_named(law.FMU)
+    ports = law.ports(layout)
+    n_in = sum(p.causality == "input" for p in ports)
+    n_out = sum(p.causality == "output" for p in ports)
+    description = (f"{law.DESCRIPTION}. Built for scene '{scene.name}': {n_in} inputs, {n_out} "
+                   f"outputs" + (f". {setting.params.description}" if law.RESOURCE else ""))
+    return law_recipe(law, {**layout, "description": description},
+                      name=variant_name(law.FMU, scene),
+                      resource=Path(setting.matrices).resolve() if law.RESOURCE else "")
 
 
 def ensure_recipes(recipes: Sequence[FmuRecipe], fmu_dir: str | Path | None = None

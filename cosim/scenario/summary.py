@@ -61,6 +61,7 @@ from drillcosim.plant.signals import (
     TOP_DRIVE_TORQUE,
     actuator_force,
     actuator_power,
+    bodies_in,
     body_signal,
     strain,
 )
@@ -102,8 +103,7 @@ def column(data: np.ndarray, fmu: str, name: str) -> np.ndarray | None:
 
 def contact_bodies(data: np.ndarray) -> list[int]:
     """Bodies whose ``plant.body<b>_radial_deflection`` was recorded."""
-    return sorted({int(n[len(PLANT) + 5:].split("_")[0]) for n in (data.dtype.names or ())
-                   if n.startswith(f"{PLANT}.body") and n.endswith("_radial_deflection")})
+    return bodies_in(data.dtype.names or (), instance=PLANT)
 
 
 def span_info(scene: Scene) -> dict[int, dict[str, float | str]]:

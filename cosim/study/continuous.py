@@ -308,7 +308,7 @@ def law_from_scene(scene: str | Path | SceneConfig, delay: float = 0.0,
     once there); ``gain`` overrides the scene's gain [N per unit strain], ``delay`` is the
     actuator delay [s].
     """
-    params = _config(scene).controller
+    params = _config(scene).controller.params
     if gain is not None:
         params = replace(params, gain=float(gain))
     return StrainLaw.from_controller(params, delay=delay)

@@ -37,13 +37,13 @@ __all__ = ["loop_model", "point_prediction", "predicted_boundary", "predicted_cu
 def unavailable(config: SceneConfig) -> str:
     """Why the linear prediction does not model ``config``'s strain loop ("" if it does)."""
     ctrl = config.controller
-    if config.state_space is not None:
-        return "a state-space controller (the prediction models the P law)"
     if CONTROLLER in config.fmu_files:
         return "a controller FMU of the user's (the prediction models the project's P law)"
-    if ctrl.mode != "unrestricted":
-        return f"actuator mode {ctrl.mode!r} is not linear"
-    if ctrl.gain_matrix:
+    if ctrl.kind != "proportional":
+        return f"the {ctrl.kind!r} law (the prediction models the P law)"
+    if ctrl.params.mode != "unrestricted":
+        return f"actuator mode {ctrl.params.mode!r} is not linear"
+    if ctrl.params.gain_matrix:
         return "a MIMO gain matrix (the prediction models the same gain on every channel)"
     if config.scene.model != "full3d":
         return f"model {config.scene.model!r} has no lateral strain loop"
@@ -61,7 +61,7 @@ def loop_model(config: SceneConfig) -> LoopModel:
     (its discretizations and frequency responses are kept with it)."""
     st = config.cosim
     key = json.dumps([repr(config.scene.plant), st.algorithm, list(st.order), st.coupling,
-                      st.sensor_delay, config.controller.lag_time_constant])
+                      st.sensor_delay, config.controller.params.lag_time_constant])
     if key not in _MODELS:
         if len(_MODELS) >= 8:
             _MODELS.pop(next(iter(_MODELS)))
@@ -81,7 +81,7 @@ def point_prediction(config: SceneConfig) -> tuple[float, str]:
         return math.nan, f"prediction unavailable: {exc}"
     st = config.cosim
     with threadpool_limits(1):       # ~250 states: one BLAS thread is fastest
-        return lm.growth_rate(config.controller.gain, st.actuator_delay, st.step), ""
+        return lm.growth_rate(config.controller.params.gain, st.actuator_delay, st.step), ""
 
 
 def prediction_progress(total: int, progress: bool | None) -> tqdm:

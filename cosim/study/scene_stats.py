@@ -165,10 +165,9 @@ def run_statistics(data: np.ndarray, config: SceneConfig) -> dict[str, float]:
         NaN where a quantity does not apply (no second span, no switch-on, no contact).
     """
     spans = span_info(config.scene)
-    ctrl = config.controller
     t = np.asarray(data["time"], dtype=float)
-    switch = ctrl.switch_on_time if ctrl.enabled and len(t) and \
-        t[0] < ctrl.switch_on_time < t[-1] else None
+    on = config.switch_on_time
+    switch = on if on is not None and len(t) and t[0] < on < t[-1] else None
     summ = summarize(data, spans=spans, n_sites=config.n_sites,
                      switch_on_time=switch)
     out: dict[str, float] = {f"{s}_{q}": math.nan for s in SPANS for q in SPAN_STATS}

@@ -470,6 +470,9 @@ class LoopModel:
             raise ConfigError(f"scene {sc.name!r}: the stability prediction linearizes the "
                               "lateral strain loop (strain gauges -> bending actuators), which "
                               f"model {sc.model!r} does not have; allowed: a full3d scene")
+        if config.controller.kind != "proportional":
+            raise ConfigError(f"scene {sc.name!r}: the stability prediction models the P law "
+                              f"(kind 'proportional'), not kind {config.controller.kind!r}")
         st = config.cosim
         if st.controller_ticks != 1:
             raise ConfigError("LoopModel: only controller_sample_period = step is modelled")
@@ -477,7 +480,7 @@ class LoopModel:
         opts: dict[str, Any] = {
             "algorithm": st.algorithm, "order": tuple(st.order), "coupling": st.coupling,
             "sensor_delay": st.sensor_delay,
-            "lag_time_constant": config.controller.lag_time_constant,
+            "lag_time_constant": config.controller.params.lag_time_constant,
         }
         if kwargs.get("method") == "rk4" and "max_step" not in kwargs:
             kwargs["max_step"] = stable_step

@@ -23,10 +23,11 @@ import math
 import multiprocessing
 import os
 import time
+import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -34,17 +35,24 @@ from numpy.linalg import LinAlgError
 from tqdm import tqdm
 
 from drillcosim.cosim.master.errors import UserError
-from drillcosim.cosim.scenario.build import scene_recipes
-from drillcosim.cosim.scenario.config import key_paths, load_config
-from drillcosim.cosim.scenario.scene_fmus import ensure_recipes
+from drillcosim.cosim.scenario.build import build_system, scene_recipes
+from drillcosim.cosim.scenario.config import (
+    ConfigError,
+    SceneConfig,
+    check_key_path,
+    load_config,
+)
+from drillcosim.cosim.scenario.scene_fmus import default_fmu_dir, ensure_recipes
+from drillcosim.plant.signals import CONTROLLER, TOP_DRIVE
 
-from .grid import DEFAULT_GAIN_KEY, Point, SweepSpec
-from .point import PointOptions, default_gain_key, error_row, measure_point, point_config
+from .branch import branch_points
+from .grid import DEFAULT_GAIN_KEY, Point, SweepSpec, check_gain_key
+from .point import PointOptions, error_row, measure_point, point_config
 from .table import ResultTable, notes, verdict_counts
 from .verdict import scene_judging_window
 
-__all__ = ["StudyPoint", "SweepOutcome", "SweepSpec", "execute_points", "execute_sweep",
-           "judging_note", "point_row", "sweep_spec"]
+__all__ = ["StudyPoint", "SweepOutcome", "SweepSpec", "check_points", "describe_components",
+           "execute_points", "execute_sweep", "judging_note", "point_row", "sweep_spec"]
 
 #: A point measurement: ``measure(**point.kwargs()) -> dict`` (module-level, picklable).
 Measure = Callable[..., dict]
@@ -209,7 +217,8 @@ def _inline(points: Sequence[StudyPoint], measure: Measure) -> Iterator[dict[str
 def execute_points(points: Sequence[StudyPoint], table: ResultTable, measure: Measure, *,
                    workers: int | None = None, scheduler: Any = None,
                    progress: bool | None = None, retry_errors: bool = False, desc: str = "sweep",
-                   meta: Mapping[str, Any] | None = None) -> int:
+                   meta: Mapping[str, Any] | None = None,
+                   prepare: Callable[[list], list] | None = None) -> int:
     """Run the points not yet in ``table`` and append each row as it finishes.
 
     Holds the table folder's lock (:meth:`ResultTable.lock`) while running; the table is
@@ -229,6 +238,9 @@ def execute_points(points: Sequence[StudyPoint], table: ResultTable, measure: Me
     meta : mapping, optional
         ``{file name: JSON-ready content}`` written into the table's folder once the lock
         is held (the study's description, e.g. ``sweep.json``).
+    prepare : callable, optional
+        Applied to the points still to run before they are dispatched (e.g.
+        :func:`cosim.study.branch.branch_points`).
 
     Returns
     -------
@@ -242,6 +254,8 @@ def execute_points(points: Sequence[StudyPoint], table: ResultTable, measure: Me
         table.rows = table.load(repair=True)     # re-read and repaired under the lock
         done = table.keys(include_errors=not retry_errors)
         todo = [p for p in points if p.key not in done]
+        if prepare is not None and todo:
+            todo = prepare(todo)
         n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
         if scheduler is not None:
             rows = _dask(todo, measure, scheduler)
@@ -262,22 +276,50 @@ def execute_points(points: Sequence[StudyPoint], table: ResultTable, measure: Me
     return len(todo)
 
 
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    return value
+
+
 def _build_fmus(points: Sequence[Point]) -> None:
-    """Build (or find cached) the project FMUs the points run (default folder), one point of
-    each kind, so workers do not all build them at the same time."""
+    """Build (or find cached) the project FMUs the points run (default folder), once each, so
+    workers do not all build them at the same time."""
     recipes = {}
-    for p in {p.kind: p for p in points}.values():
-        kw = p.kwargs()
-        config = point_config(p.scene, p.gain, p.delay, p.step, p.stop_time, kw["open_loop"],
-                              kw["overrides"], p.gain_key)
+    for p in points:
+        config = p.config if p.config is not None else point_config(
+            p.scene, p.gain, p.delay, p.step, p.stop_time, p.kind == "open_loop",
+            json.loads(p.overrides) if p.overrides else None, p.gain_key)
         recipes.update({r.name: r for i, r in scene_recipes(config).items()
                         if i not in config.fmu_files})
     ensure_recipes(list(recipes.values()))
 
 
+def check_points(points: Sequence[Point], engine: str) -> None:
+    """Build every point's system (engine ``fmu``; ``inprocess``: the first point of each kind)
+    as the measurement will, without running it: a problem the user must fix (FMUs that do not
+    fit, an unknown or out-of-range parameter of a foreign FMU, a value a key cannot take)
+    raises its :class:`UserError` here, before any point runs. The FMUs must be built
+    (:func:`_build_fmus`): they are taken from the default folder as they are."""
+    firsts: dict[str, Point] = {}
+    for p in points:
+        firsts.setdefault(p.kind, p)
+    todo = points if engine == "fmu" else list(firsts.values())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the run itself warns (InterfaceWarning), once
+        for p in todo:
+            if p.config is not None:
+                built = build_system(p.config, engine, fmu_dir=default_fmu_dir())
+                for slave in built.slaves.values():
+                    slave.close()
+
+
 def execute_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int | None = None,
                   scheduler: Any = None, progress: bool | None = None,
-                  measure: Measure = measure_point, retry_errors: bool = False) -> SweepOutcome:
+                  measure: Measure = measure_point, retry_errors: bool = False,
+                  branch: bool = True) -> SweepOutcome:
     """Run (or resume) a sweep and record every point in ``out_dir``.
 
     Parameters
@@ -296,6 +338,9 @@ def execute_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int |
         Point measurement (module-level, picklable), default :func:`measure_point`.
     retry_errors : bool
         Re-run points recorded as ``error``.
+    branch : bool
+        Closed-loop points identical up to the controller's switch-on continue from one
+        checkpoint of that prefix per group, run here first (:mod:`.branch`; same numbers).
 
     Returns
     -------
@@ -304,51 +349,117 @@ def execute_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int |
     wall0 = time.perf_counter()
     points = spec.points()
     table = ResultTable(out_dir)
-    meta = {"spec": {k: (list(v) if isinstance(v, (list, tuple)) else v)
-                     for k, v in asdict(spec).items()}, "n_points": len(points)}
-    if spec.engine == "fmu" and scheduler is None and measure is measure_point:
-        _build_fmus(points)  # once here, not by every worker at the same time
+    meta = {"spec": {f.name: _jsonable(getattr(spec, f.name)) for f in fields(spec)
+                     if f.name != "base"},
+            "n_points": len(points), "gain_key": spec.gain_key,
+            "vary": [key for key, _values in spec.vary]}
+    if measure is measure_point:
+        if spec.engine == "fmu":
+            _build_fmus(points)  # once here, not by every worker at the same time
+        check_points(points, spec.engine)  # a problem the user must fix: before any point
+        if spec.base is not None:
+            meta["components"] = describe_components(spec.base, spec.engine)
     n_run = execute_points(points, table, measure, workers=workers, scheduler=scheduler,
                            progress=progress, retry_errors=retry_errors,
-                           meta={"sweep.json": meta})
+                           meta={"sweep.json": meta},
+                           prepare=branch_points if branch and measure is measure_point
+                           else None)
     keys = {p.key for p in points}
     mine = [r for r in table.rows if r["key"] in keys]
     return SweepOutcome(Path(out_dir), len(points), len(points) - n_run, n_run,
                         time.perf_counter() - wall0, verdict_counts(mine), tuple(notes(mine)))
 
 
-def sweep_spec(scene: str, gains: Sequence[float], delays: Sequence[float],
-               steps: Sequence[float], stop_time: float | None, engine: str = "fmu",
+def sweep_spec(scene: str | Path, gains: Sequence[float] | None = None,
+               delays: Sequence[float] | None = None, steps: Sequence[float] | None = None,
+               stop_time: float | None = None, engine: str = "fmu",
                overrides: Mapping[str, Any] | None = None,
-               options: Mapping[str, float] | None = None,
-               gain_key: str | None = None) -> SweepSpec:
-    """A checked :class:`SweepSpec`: the stop time defaults to the scene's, the gain key to
-    :func:`cosim.study.point.default_gain_key`. A sweep of the strain gain runs the open-loop
-    references (the control benefit); a sweep of another controller's gain has none (a
-    top-drive controller in torque mode is the drive: without it the string is not driven).
+               options: Mapping[str, float] | None = None, gain_key: str | None = None,
+               vary: Mapping[str, Sequence[Any]] | None = None, *,
+               plant_fmu: str | Path | None = None,
+               controller_fmu: str | Path | None = None) -> SweepSpec:
+    """The sweep, planned once: the scene with ``overrides`` validated into its base
+    configuration, and every point's configuration derived from it (each value validated
+    once, here: a bad one is a :class:`UserError` before anything runs).
+
+    Parameters
+    ----------
+    scene : str or path
+    gains, delays, steps : sequences of float, optional
+        Values of the gain key, of ``cosim.actuator_delay`` [s] and of ``cosim.step`` [s]
+        (the shortcuts of ``vary``); default: no gain axis (the scene's gain), the scene's
+        delay and step.
+    stop_time : float, optional
+        [s]; default the scene's.
+    engine : {"fmu", "inprocess"}
+    overrides : mapping, optional
+        Scene keys by key path for every point.
+    options : mapping, optional
+        Point metric options (:class:`cosim.study.point.PointOptions`).
+    gain_key : str, optional
+        The key ``gains`` set; default :func:`cosim.study.point.default_gain_key`.
+    vary : mapping of str -> sequence, optional
+        Further axes by key path (any scene key: ``controller.parameters.kd``,
+        ``cosim.controller_sample_period``, ...); the gain key, ``cosim.actuator_delay`` and
+        ``cosim.step`` are the shortcuts' axes.
+    plant_fmu, controller_fmu : path-like, optional
+        FMU files (any maker) instead of the project's, as for :func:`drillcosim.simulate`.
 
     Raises
     ------
     UserError
-        Bad values or combinations (e.g. a stop time some step does not divide), before
-        anything runs.
+        Bad values or combinations, before anything runs.
     """
-    over = key_paths(overrides)
+    base = load_config(scene, overrides, plant_fmu=plant_fmu, controller_fmu=controller_fmu)
     if stop_time is None:
-        stop_time = load_config(scene, over).cosim.stop_time
-    key = default_gain_key(scene, over) if gain_key is None else gain_key
-    values = {}
-    for what, seq, low in (("gains", gains, 0.0), ("delays", delays, 0.0), ("steps", steps, None)):
-        vals = [float(v) for v in seq]
-        if not vals or any(not math.isfinite(v) or (v < low if low is not None else v <= 0)
-                           for v in vals):
-            raise UserError(f"{what} = {list(seq)!r}: at least one finite value, each "
-                            f"{'>= 0' if low is not None else '> 0'}")
-        values[what] = sorted(set(vals))
-    spec = SweepSpec(scene, values["gains"], values["delays"], values["steps"], float(stop_time),
-                     engine, over, key == DEFAULT_GAIN_KEY, dict(options or {}), key)
-    spec.points()                   # bad combinations fail here, before anything runs
+        stop_time = base.cosim.stop_time
+    if gain_key is None:
+        instances = base.instances
+        gain_key = (f"{TOP_DRIVE}.p_gain" if TOP_DRIVE in instances and
+                    CONTROLLER not in instances else DEFAULT_GAIN_KEY)
+    check_gain_key(gain_key)
+    axes: dict[str, list[Any]] = {}
+    for key, values in (vary or {}).items():
+        check_key_path(key, "--vary")
+        if isinstance(values, (str, bytes)) or not hasattr(values, "__iter__"):
+            raise UserError(f"--vary {key}: a list of values, got {values!r}")
+        axes[key] = list(dict.fromkeys(values))
+        if not axes[key]:
+            raise UserError(f"--vary {key}: at least one value")
+    shortcuts = {gain_key: gains, "cosim.actuator_delay": delays, "cosim.step": steps}
+    for key, given in shortcuts.items():
+        if key in axes and given is not None:
+            raise UserError(f"{key} is given twice (--vary and its shortcut)")
+    values = {key: axes.pop(key, None if given is None else list(given))
+              for key, given in shortcuts.items()}
+    for key, given in values.items():
+        if given is not None and not given:
+            raise UserError(f"{key}: at least one value")
+    spec = SweepSpec(
+        str(scene), sorted(set(values[gain_key] or ())),
+        sorted(set(values["cosim.actuator_delay"] or [base.cosim.actuator_delay])),
+        sorted(set(values["cosim.step"] or [base.cosim.step])), float(stop_time), engine,
+        dict(base.overrides), True, dict(options or {}), gain_key,
+        tuple((k, tuple(v)) for k, v in axes.items()), base)
+    spec = replace(spec, open_loop=spec.table == CONTROLLER)
+    try:
+        spec.points()  # every point's configuration, validated here
+    except ConfigError as exc:
+        raise UserError(f"sweep point: {exc}") from None
     return spec
+
+
+def describe_components(config: SceneConfig, engine: str) -> dict[str, Any]:
+    """What runs a configuration, per instance: the FMU file, its GUID, model name and
+    generation tool, the drillcosim version that runs it and the parameters the system sets
+    (engine ``fmu``; ``inprocess``: the law or plant and its parameters)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        built = build_system(config, engine, fmu_dir=default_fmu_dir())
+    out = built.components()
+    for slave in built.slaves.values():
+        slave.close()
+    return out
 
 
 def judging_note(spec: SweepSpec) -> str:
@@ -357,8 +468,9 @@ def judging_note(spec: SweepSpec) -> str:
     See :func:`cosim.study.verdict.scene_judging_window`; closed-loop points of such a sweep
     that do not diverge are ``undecided``.
     """
-    if spec.gain_key != DEFAULT_GAIN_KEY:
-        return (f"the verdicts judge the strain loop's growth; a sweep of {spec.gain_key} is "
+    if spec.table != CONTROLLER:
+        what = spec.gain_key if spec.gains else f"the {spec.table}"
+        return (f"the verdicts judge the strain loop's growth; a sweep of {what} is "
                 "read from its stick_slip_severity / stick_fraction columns (--maps: "
                 "stick_slip_map.png); its points are 'undecided'")
     opts = PointOptions.from_kwargs(dict(spec.options))

@@ -26,7 +26,9 @@ judged, "" if it can): :mod:`cosim.study.verdict`. Measured besides the metrics
 (:func:`cosim.study.point.measure_point`): ``predicted_growth_rate`` [1/s], ``contact_time`` [s],
 ``rms_rise_<span>`` [1], and the point's ``wall_time`` split into ``startup_time`` (configuration,
 build, FMU instantiation and initialization) and ``stepping_time`` [s], plus ``worker_startup``
-[s] (the worker process's start, imports included, before its first point; NaN for the others).
+[s] (the worker process's start, imports included, before its first point; NaN for the others)
+and ``branch_time`` [s] (the point continued from a shared prefix's checkpoint at that time,
+:mod:`cosim.study.branch`; NaN: run from the start).
 """
 
 from __future__ import annotations
@@ -47,22 +49,23 @@ __all__ = ["COLUMNS", "DERIVED", "ResultTable", "derive", "notes", "read_table",
            "verdict_counts"]
 
 #: Column order of the table (units: gain that of the sweep's gain key (N/strain for the strain
-#: gain), times s, deflections m, force N, power W, growth rates 1/s, stick-slip measures 1).
+#: gain), times s, deflections m, force N, power W, growth rates 1/s, stick-slip measures 1;
+#: ``varied``: the point's values of the sweep's other axes, JSON by key path).
 COLUMNS: tuple[str, ...] = (
-    "key", "scene", "engine", "kind", "gain", "delay", "step", "stop_time", "status",
+    "key", "scene", "engine", "kind", "gain", "delay", "step", "stop_time", "varied", "status",
     "verdict", "stable", "growth_rate", "growth_noise", "growth_excess",
     "predicted_growth_rate", "agrees_with_prediction", "prediction_note", "divergence_time",
     "end_time", "min_stop_time", "contact_time", "rms_long", "rms_short", "benefit_long",
     "benefit_short", "rms_rise_long", "rms_rise_short", "benefit_note",
     "peak_deflection_long", "peak_deflection_short", "peak_force", "peak_power",
     "stick_slip_severity", "stick_fraction", "wall_time", "startup_time", "stepping_time",
-    "worker_startup", "reason",
+    "worker_startup", "branch_time", "reason",
 )
 #: Columns computed from the rows by :func:`derive` (``reason`` too, for completed runs;
 #: ``prediction_note`` where the point has a prediction).
 DERIVED: tuple[str, ...] = ("verdict", "stable", "growth_excess", "agrees_with_prediction",
                             "benefit_long", "benefit_short", "benefit_note")
-_TEXT = {"key", "scene", "engine", "kind", "status", "verdict", "prediction_note",
+_TEXT = {"key", "scene", "engine", "kind", "varied", "status", "verdict", "prediction_note",
          "benefit_note", "reason"}
 SPANS = ("long", "short")
 _STABLE = {"stable": 1.0, "unstable": 0.0}

@@ -161,7 +161,8 @@ def _cached_window(scene: str, overrides: str, highpass: float, fit_fraction: fl
                    ) -> JudgingWindow:
     config = load_config(scene, json.loads(overrides) if overrides else None)
     # a closed-loop point switches the controller on whatever the scene file says
-    start_up = max(config.scene.plant.top_drive.ramp_time, config.controller.switch_on_time)
+    start_up = max(config.scene.plant.top_drive.ramp_time,
+                   getattr(config.controller.params, "switch_on_time", 0.0))
     A = coupled_plant(config.scene)[0]
     with threadpool_limits(1):      # ~240 states: one BLAS thread (6x faster on a busy machine)
         lam = scipy.linalg.eigvals(A)

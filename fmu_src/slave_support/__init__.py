@@ -38,13 +38,27 @@ from types import ModuleType
 from typing import Any, ClassVar
 
 import numpy as np
-from _dcs_pythonfmu_0_7_0 import Boolean, Fmi2Slave, Integer, Real, String
-from _dcs_pythonfmu_0_7_0.enums import Fmi2Causality, Fmi2Status, Fmi2Variability
+from _dcs_pythonfmu_0_7_0 import (
+    Boolean,
+    DefaultExperiment,
+    Fmi2Causality,
+    Fmi2Initial,
+    Fmi2Slave,
+    Fmi2Variability,
+    Integer,
+    Real,
+    String,
+    enums,
+)
 
 from . import state as fmu_state
+from . import vendored
 from .native import provide
 
-__all__ = ["DcsSlave", "LawSlave"]
+Fmi2Status = enums.Fmi2Status
+
+__all__ = ["DcsSlave", "DefaultExperiment", "Fmi2Status", "LawSlave", "XmlReal", "ranges_of",
+           "units_of", "vendored"]
 
 #: (variable class, conversion of a value, neutral value of a rejected get)
 _KINDS: dict[str, tuple[type, Callable[[Any], Any], Any]] = {
@@ -53,6 +67,43 @@ _KINDS: dict[str, tuple[type, Callable[[Any], Any], Any]] = {
     "Boolean": (Boolean, bool, False),
     "String": (String, str, ""),
 }
+
+
+def _xml_double(value: float) -> str:
+    """Shortest round-trip text of a float in XML Schema form (INF, -INF, NaN)."""
+    if math.isnan(value):
+        return "NaN"
+    if math.isinf(value):
+        return "INF" if value > 0 else "-INF"
+    return repr(float(value))
+
+
+class XmlReal(Real):
+    """A Real whose start is written round-trip exact and XML-Schema valid (``INF``)."""
+
+    def to_xml(self) -> Any:
+        node = super().to_xml()
+        real = node.find("Real")
+        if real is not None and self.start is not None:
+            real.set("start", _xml_double(float(self.start)))
+        return node
+
+
+#: FMI type name of a port -> (variable class, conversion of a start value)
+_TYPES: dict[str, tuple[type, Callable[[Any], Any]]] = {
+    "Real": (XmlReal, float), "Integer": (Integer, int), "Boolean": (Boolean, bool),
+    "String": (String, str)}
+
+
+def units_of(ports: Any) -> dict[str, str]:
+    """``{name: unit}`` of the Real ports that have a unit (what the build writes into the
+    modelDescription: ``VARIABLE_UNITS``)."""
+    return {p.name: p.unit for p in ports if p.type == "Real" and p.unit}
+
+
+def ranges_of(ports: Any) -> dict[str, tuple[float, float]]:
+    """``{name: (min, max)}`` of the ports with a declared range (``VARIABLE_RANGES``)."""
+    return {p.name: tuple(p.range) for p in ports if p.range is not None}
 
 
 class DcsSlave(Fmi2Slave):
@@ -100,6 +151,37 @@ class DcsSlave(Fmi2Slave):
 
         var.getter, var.setter = getter, setter
         self.register_variable(var, nested=False)
+
+    def register_ports(self, ports: Any, values: dict[str, Any]) -> None:
+        """Register the variables of a port table (``controller/ports.py``, ``plant/signals.py``
+        rows: name, causality, variability, unit, description, start, range, type), in order.
+
+        Real inputs and outputs live in the buffers (:meth:`register_real_io`; an output with a
+        start is ``initial="exact"``, one without ``"calculated"``); a parameter's value lives
+        in ``values`` (set to its start here), read and written through getter and setter.
+        """
+        for port in ports:
+            cls, convert = _TYPES[port.type]
+            causality = Fmi2Causality[port.causality]
+            variability = Fmi2Variability[port.variability]
+            if port.causality in ("input", "output"):
+                initial = None
+                if port.causality == "output":
+                    initial = Fmi2Initial.calculated if port.start is None else Fmi2Initial.exact
+                self.register_real_io(cls(port.name, causality=causality, variability=variability,
+                                          initial=initial, description=port.description))
+                continue
+            values[port.name] = convert(port.start)
+
+            def getter(name: str = port.name) -> Any:
+                return values[name]
+
+            def setter(value: Any, name: str = port.name) -> None:
+                values[name] = value
+
+            self.register_variable(cls(port.name, causality=causality, variability=variability,
+                                       description=port.description, getter=getter,
+                                       setter=setter), nested=False)
 
     def _fmi2_real_buffers(self) -> tuple[list[int], np.ndarray, list[int], np.ndarray]:
         """(input vrs, inputs, output vrs, outputs): what the wrapper moves without Python."""

@@ -166,7 +166,8 @@ class NativeLoop:
         s.horizons = ctypes.cast(self.c_horizons, _F64P)
         s.y = y_address
         s.newest = ctypes.cast(self.newest, ctypes.POINTER(ctypes.c_int64))
-        s.start, s.num, s.den = execution.start_time, execution._num, execution._den
+        frac = execution.base_fraction
+        s.start, s.num, s.den = execution.start_time, frac.numerator, frac.denominator
         index = alg.y_index
         limit_index = [index[r] for lim in limits for r in lim.refs]
         limit = [lim.bound for lim in limits for _r in lim.refs]
