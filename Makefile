@@ -7,9 +7,9 @@ STAMP := $(VENV)/.installed
 FMUS := build/fmus/.python-fmus
 C_FMUS := build/fmus/StrainControllerC.fmu
 SRC := $(shell find plant controller fmu_src -name '*.py' -o -name '*.c' -o -name '*.h' -o -name '*.json' 2>/dev/null)
-C_SRC := $(wildcard fmu_src/c_controller/*.c fmu_src/c_controller/*.h fmu_src/c_controller/*.xml fmu_src/wrapper/fmi2/*.h fmu_src/wrapper/dcs_registry.*) fmu_src/build_c.py
+C_SRC := $(wildcard fmu_src/c_controller/*.c fmu_src/c_controller/*.h fmu_src/c_controller/*.xml fmu_src/wrapper/fmi2/*.h fmu_src/wrapper/dcs_registry.* fmu_src/wrapper/dcs_lock.h) fmu_src/build_c.py
 
-.PHONY: all install fmus run test docs lint bench clean
+.PHONY: all install fmus run test docs lint bench clean windows-bench
 
 all: install fmus
 
@@ -45,6 +45,11 @@ test: install fmus
 docs: install fmus
 	$(BIN)/python -m sphinx -b html -n -W --keep-going -q docs build/docs
 	@echo "build/docs/index.html"
+
+# The Windows bench of the tests (wine + the embeddable CPython for Windows + win_amd64 wheels,
+# fetched once into $DRILLCOSIM_WINDOWS_BENCH, default ~/.cache/drillcosim-windows-bench).
+windows-bench: install
+	$(BIN)/python tests/support/windows_bench.py prepare
 
 bench: install fmus
 	$(BIN)/drillcosim bench

@@ -299,8 +299,9 @@ def modes(scene: str | Path = "table1_lateral_step", *, model: str | None = None
             "spin_rad_s": sc.plant.top_drive.rotary_speed, "modes": table}
 
 
-def build_fmus(out: str | Path | None = None, *, scene: str | Path | None = None
-               ) -> dict[str, Path]:
+def build_fmus(out: str | Path | None = None, *, scene: str | Path | None = None,
+               platforms: str | Sequence[str] | None = None,
+               standalone: bool = False) -> dict[str, Path]:
     """Build the FMUs (``drillcosim build``).
 
     Parameters
@@ -310,6 +311,13 @@ def build_fmus(out: str | Path | None = None, *, scene: str | Path | None = None
     scene : str or path, optional
         Build the FMUs that run this scene (plant and controllers for its layout, or the
         default ones where they fit) instead of the default set.
+    platforms : str or sequence of str, optional
+        Binary platforms, e.g. ``"linux64,win64"``; default: this machine's and every other
+        one whose C compiler is found (a skipped one is named in one printed line).
+    standalone : bool
+        Also write self-contained copies that carry their own Python runtime for each of their
+        platforms (:mod:`drillcosim.fmu_src.standalone`) into ``<out>/standalone/``; those
+        are returned.
 
     Returns
     -------
@@ -319,12 +327,32 @@ def build_fmus(out: str | Path | None = None, *, scene: str | Path | None = None
     Raises
     ------
     RuntimeError
-        No C compiler for ``StrainControllerC.fmu`` (the others are built).
+        No C compiler for ``StrainControllerC.fmu`` (the others are built), or no runtime can
+        be made (``standalone``: the building Python has no shared libpython, a download
+        failed).
+    ValueError
+        An unknown platform, or one named whose compiler is missing.
     """
+    from drillcosim.fmu_src.platforms import select
+
     folder = Path(out) if out is not None else default_out()
+    try:
+        selection = select(platforms)
+    except ValueError as exc:
+        if platforms is not None:
+            raise
+        raise RuntimeError(f"building the FMUs needs a C compiler: {exc}") from None
     if scene is not None:
-        return {instance: build_one(recipe, folder)
-                for instance, recipe in scene_recipes(load_config(scene)).items()}
-    built = {Path(p).stem: Path(p) for p in build_all(folder)}
-    built["StrainControllerC"] = build_c_controller(folder)
+        if selection.note():
+            print(selection.note())
+        built = {instance: build_one(recipe, folder, selection)
+                 for instance, recipe in scene_recipes(load_config(scene)).items()}
+    else:
+        built = {Path(p).stem: Path(p) for p in build_all(folder, platforms=selection)}
+        built["StrainControllerC"] = build_c_controller(folder, platforms=selection)
+    if standalone:
+        from drillcosim.fmu_src.standalone import make_standalone
+
+        built = {key: make_standalone(path, folder / "standalone" / path.name)
+                 for key, path in built.items()}
     return built
