@@ -551,5 +551,16 @@ def test_field_scene_runs_through_its_fmu_as_in_process(tmp_path):
     assert "hook_load" in cols and "top_torque" in cols
     _, v, r = simulate(m, 0.1, 1e-3, outputs=list(cols))
     assert r.ok
+    # the bit's axial force is the bit spring times the bit's axial position, 3 km down: one last
+    # bit of that position (np.spacing, 4.5e-13 m) is k_b * 4.5e-13 m = 4.5e-4 N at 1e9 N/m, so
+    # the bit's force is held to a few of those and its torque (friction on that force at most
+    # the bit's radius out) to that times the radius (the time's last bit moves the drive's ramp)
+    depth = sum(s.length for s in sc.plant.sections)
+    ulp_force = 4 * sc.plant.bit.axial_stiffness * np.spacing(depth)
+    extra = {"bit_axial_force": ulp_force, "bit_torque": ulp_force * sc.plant.bit.radius}
+    off = {}
     for c, i in cols.items():
-        assert np.abs(data[:, i] - v[c]).max() <= 1e-12 * np.abs(v[c]).max() + 1e-9, c
+        err = np.abs(data[:, i] - v[c]).max()
+        if err > 1e-12 * np.abs(v[c]).max() + 1e-9 + extra.get(c, 0.0):
+            off[c] = err
+    assert not off, off
