@@ -21,13 +21,15 @@ RECORD_EXPEULER = 1
 
 @njit(cache=True)
 def run_record(model, method, t0, h, n_out, max_dt, breakpoints, y, p, ip, fp, u, wR, wF, wM, k1,
-               k2, k3, k4, yt, op_idx, op_sizes, op_blocks, zbit_ref, out, idx, rec, limits):
+               k2, k3, k4, yt, op_idx, op_sizes, op_blocks, op_ramp, zbit_ref, out, idx, rec,
+               limits):
     """Advance ``n_out`` output steps of ``h`` [s], recording the outputs ``idx``.
 
     ``method``: :data:`RECORD_RK4` (steps <= ``max_dt`` [s], split at ``breakpoints`` by
     :func:`plant.integrators.advance_rk4_span`) or :data:`RECORD_EXPEULER` (one exponential
-    Euler step of ``h`` with the operator ``op_*`` for this ``h``; the caller ensures that no
-    breakpoint lies inside an output step). ``rec`` (n_out + 1, len(idx)) receives the outputs
+    Euler step of ``h`` with the operator ``op_*`` for this ``h``,
+    ``DrillstringModel.expeuler_operator``; the caller ensures that no breakpoint lies inside
+    an output step). ``rec`` (n_out + 1, len(idx)) receives the outputs
     at t0 and after every step; ``limits`` = (max_lateral, max_tilt, max_speed, max_strain).
     Returns ``(completed output steps, guard code, index, value)``; on a violation the row of
     the failing step is recorded and the loop stops.
@@ -43,8 +45,8 @@ def run_record(model, method, t0, h, n_out, max_dt, breakpoints, y, p, ip, fp, u
     for k in range(n_out):
         t = t0 + k * h
         if method == RECORD_EXPEULER:
-            advance_expeuler(model, t, y, 1, h, op_idx, op_sizes, op_blocks, p, ip, fp, u, wR,
-                             wF, wM, k1, k2)
+            advance_expeuler(model, t, y, 1, h, op_idx, op_sizes, op_blocks, op_ramp, p, ip,
+                             fp, u, wR, wF, wM, k1, k2)
         else:
             advance_rk4_span(model, t, t + h, max_dt, breakpoints, y, p, ip, fp, u, wR, wF, wM,
                              k1, k2, k3, k4, yt)

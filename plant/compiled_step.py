@@ -95,6 +95,7 @@ _SLOTS: tuple[tuple[str, type], ...] = (
     ("report", np.float64), ("tab_a", np.float64), ("tab_b", np.float64),
     ("tab_c", np.float64), ("op_idx", np.int64), ("op_sizes", np.int64),
     ("op_blocks", np.float64), ("P1", np.float64), ("P2", np.float64), ("Q", np.float64),
+    ("op_ramp", np.float64),
 )
 _SLOT = {name: k for k, (name, _dtype) in enumerate(_SLOTS)}
 _WIDTH = 4  # address, d0, d1, d2
@@ -162,9 +163,13 @@ def _segments_need_operator(t, h, max_step, breakpoints, op_dt):
 
 @njit(cache=True)
 def step_core(t, h, meta, settings, clock, y, p, ip, fp, u, wR, wF, wM, work, breakpoints,
-              inputs, in_index, outputs, out_index, out, report, tab_a, tab_b, tab_c, op_idx,
-              op_sizes, op_blocks, P1, P2, Q):
-    """One step of ``PlantSimulator.do_step`` (see the module docstring); returns a code."""
+              inputs, in_index, outputs, out_index, out, report, tab_a, tab_b, tab_c,
+              expeuler_op, etd2_op):
+    """One step of ``PlantSimulator.do_step`` (see the module docstring); returns a code.
+
+    ``expeuler_op``: the exponential Euler operator ``(op_idx, op_sizes, op_blocks, op_ramp)``
+    (``DrillstringModel.expeuler_operator``); ``etd2_op``: ``(P1, P2, Q)``.
+    """
     for j in range(in_index.size):
         u[in_index[j]] = inputs[j]
     if not (h > 0.0 and math.isfinite(h)):
@@ -209,9 +214,11 @@ def step_core(t, h, meta, settings, clock, y, p, ip, fp, u, wR, wF, wM, work, br
                 done = advance_verlet(model, t, y, n_sub, dt, settings[S_VERLET_LAMBDA], p, ip,
                                       fp, u, wR, wF, wM, k1, k2, k3[:half], k4[:half])
             elif kernel == KERNEL_EXPEULER:
-                done = advance_expeuler(model, t, y, n_sub, dt, op_idx, op_sizes, op_blocks, p,
-                                        ip, fp, u, wR, wF, wM, k1, k2)
+                op_idx, op_sizes, op_blocks, op_ramp = expeuler_op
+                done = advance_expeuler(model, t, y, n_sub, dt, op_idx, op_sizes, op_blocks,
+                                        op_ramp, p, ip, fp, u, wR, wF, wM, k1, k2)
             else:
+                P1, P2, Q = etd2_op
                 done = advance_etd2(model, t, y, n_sub, dt, P1, P2, Q, p, ip, fp, u, wR, wF,
                                     wM, k1, k2, k3)
             clock[0] = te if done == n_sub else t + done * dt
@@ -249,8 +256,8 @@ def plant_step(context, t, h):
             t, h, _i1(c, 0), _f1(c, 1), _f1(c, 2), _f1(c, 3), _f1(c, 4), _i1(c, 5), _f1(c, 6),
             _f1(c, 7), _f3(c, 8), _f2(c, 9), _f2(c, 10), _f2(c, 11), _f1(c, 12), _f1(c, 13),
             _i1(c, 14), _f1(c, 15), _i1(c, 16), _f1(c, 17), _f1(c, 18), _f2(c, 19),
-            _f1(c, 20), _f1(c, 21), _i2(c, 22), _i1(c, 23), _f3(c, 24), _f2(c, 25),
-            _f2(c, 26), _f2(c, 27))
+            _f1(c, 20), _f1(c, 21), (_i2(c, 22), _i1(c, 23), _f3(c, 24), _f2(c, 28)),
+            (_f2(c, 25), _f2(c, 26), _f2(c, 27)))
     except Exception:  # noqa: BLE001 - reported as INTERNAL (see the docstring)
         return INTERNAL
 
@@ -379,11 +386,12 @@ class CompiledStep:
         empty_f2 = np.zeros((0, 0))
         tab = method.tableau or (empty_f2, np.zeros(0), np.zeros(0))
         op_idx, op_sizes, op_blocks = empty_i2, np.zeros(0, dtype=np.int64), np.zeros((0, 0, 0))
+        op_ramp = empty_f2
         P1 = P2 = Q = empty_f2
         if sim.operator_dt is not None:
             settings[S_OP_DT] = sim.operator_dt
             if method.kernel == KERNEL_EXPEULER:
-                op_idx, op_sizes, op_blocks = m.expeuler_operator(sim.operator_dt)
+                op_idx, op_sizes, op_blocks, op_ramp = m.expeuler_operator(sim.operator_dt)
             else:
                 P1, P2, Q = m.exponential_matrices(sim.operator_dt)
         inputs, in_index, outputs, out_index = self._io
@@ -394,7 +402,7 @@ class CompiledStep:
             "in_index": in_index, "outputs": outputs, "out_index": out_index, "out": m._out,
             "report": self.report, "tab_a": tab[0], "tab_b": tab[1], "tab_c": tab[2],
             "op_idx": op_idx, "op_sizes": op_sizes, "op_blocks": op_blocks, "P1": P1,
-            "P2": P2, "Q": Q,
+            "P2": P2, "Q": Q, "op_ramp": op_ramp,
         }
         ctx = np.zeros(len(_SLOTS) * _WIDTH, dtype=np.int64)
         for k, (name, dtype) in enumerate(_SLOTS):

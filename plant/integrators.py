@@ -16,7 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .kernels import rhs, set_load_modes
+from .kernels import rhs, set_load_modes, top_drive
+from .layout import T_RAMP
 
 _CACHE = True
 
@@ -434,22 +435,52 @@ def block_matvec_add(idx, sizes, blocks, x, out, xb):
             out[idx[b, r]] += acc
 
 
-@njit(cache=_CACHE)
-def advance_expeuler(model, t0, y, n_steps, dt, idx, sizes, blocks, p, ip, fp, u, wR, wF, wM, f,
-                     xb):
-    """Exponential Euler ``y1 = y + dt phi1(dt A) f(t, y)``, ``P1 = dt phi1(dt A)`` precomputed.
+@njit(cache=_CACHE, inline="always")
+def add_drive_ramp(t, dt, y, ramp, t_ramp):
+    """``y +=`` what exponential Euler's ``y + P1 f(t, y)`` leaves out of the exact step's
+    response to the top drive's prescribed motion over ``[t, t + dt]`` [s].
 
-    Exact for linear autonomous systems with constant forcing over the step (any ``dt``: no
-    stability limit from the stiff, overdamped high modes); first order in the variation of the
-    forcing and the nonlinear remainder ``g = f - A y``. One rhs and one block mat-vec a step
-    (``P1`` in the form of :func:`block_split`, computed for this ``dt``; ``f``, ``xb`` scratch
-    like ``y``). Returns completed steps like :func:`advance_rk4`.
+    The drive moves as :func:`plant.kernels.top_drive` with unit final speed times each drive's
+    speed: its speed is linear in time over a step that does not straddle the end of the ramp
+    ``t_ramp`` [s] (a breakpoint), ``s(t + tau) = s0 + a tau`` (``s0`` the speed just after
+    ``t``, ``a`` the acceleration), and its position is the integral. With ``g`` the
+    direction in which the drive's position and speed enter ``f`` (spring ``K``, damper ``C``),
+    the exact step adds to ``y + P1 f(t, y)`` (which holds ``f``'s drive terms at ``t``):
+    ``(s0 - s(t)) C P1 g + s0 K dt^2 phi2 g + a (C dt^2 phi2 g + K dt^3 phi3 g)`` (the
+    ``phi_k`` at ``dt A``). ``ramp`` (3, N) holds those three vectors summed over the drives,
+    each times its speed (:meth:`plant.model.DrillstringModel.expeuler_operator`); ``(0, N)``:
+    no drive moves, nothing added. ``s0 - s(t)`` is nonzero only at ``t = 0`` without a ramp.
+    """
+    if ramp.shape[0] == 0:
+        return
+    tm = t + 0.5 * dt
+    acc = 1.0 / t_ramp if (t_ramp > 0.0 and tm < t_ramp) else 0.0
+    s_t = top_drive(t, 1.0, t_ramp)[1]
+    s0 = top_drive(tm, 1.0, t_ramp)[1] - 0.5 * dt * acc
+    jump = s0 - s_t
+    for i in range(y.size):
+        y[i] += jump * ramp[0, i] + s0 * ramp[1, i] + acc * ramp[2, i]
+
+
+@njit(cache=_CACHE)
+def advance_expeuler(model, t0, y, n_steps, dt, idx, sizes, blocks, ramp, p, ip, fp, u, wR, wF,
+                     wM, f, xb):
+    """Exponential Euler ``y1 = y + dt phi1(dt A) f(t, y)``, ``P1 = dt phi1(dt A)`` precomputed,
+    plus the exact response to the top drive's prescribed motion (:func:`add_drive_ramp`).
+
+    Exact for linear systems with constant forcing over the step and the top drive's hoisting
+    and rotation ramps (any ``dt``: no stability limit from the stiff, overdamped high modes);
+    first order in any other variation of the forcing and in the nonlinear remainder
+    ``g = f - A y``. One rhs and one block mat-vec a step (``P1`` in the form of
+    :func:`block_split`, computed for this ``dt``; ``ramp`` (3, N) or (0, N) for this ``dt``;
+    ``f``, ``xb`` scratch like ``y``). Returns completed steps like :func:`advance_rk4`.
     """
     for s in range(n_steps):
         t = t0 + s * dt
         set_load_modes(ip, fp, t + 0.5 * dt)
         rhs(model, t, y, f, p, ip, fp, u, wR, wF, wM)
         block_matvec_add(idx, sizes, blocks, f, y, xb)
+        add_drive_ramp(t, dt, y, ramp, p[T_RAMP])
         if (s & 63) == 63 and not _all_finite(y):
             return s
     if not _all_finite(y):
@@ -509,6 +540,30 @@ def exponential_matrices(A, dt: float):
     P2 = np.ascontiguousarray(E[:N, 2 * N:] / dt)
     Q = np.ascontiguousarray(P2 @ eA)
     return P1, P2, Q
+
+
+def polynomial_input_responses(A, G, dt: float) -> np.ndarray:
+    """``W[k] = dt^(k+1) phi_(k+1)(dt A) G`` for k = 0, 1, 2: the responses over one step
+    ``dt`` [s] of ``y' = A y + G w(t)`` from ``y = 0`` to the inputs ``w = 1``, ``w = t`` and
+    ``w = t^2 / 2`` (``A`` (N, N) [1/s], ``G`` (N, m)); shape (3, N, m).
+
+    One matrix exponential of the augmented matrix ``[[A, G, 0, 0], [0, 0, I, 0], [0, 0, 0, I],
+    [0, 0, 0, 0]] dt`` (Al-Mohy and Higham 2011, "Computing the action of the matrix
+    exponential ...", section 2): its top-right blocks are
+    ``int_0^dt e^((dt - s) A) G s^k / k! ds``. Size N + 3 m, no inverse of ``A``.
+    """
+    from scipy.linalg import expm
+
+    A = np.asarray(A, dtype=float)
+    G = np.asarray(G, dtype=float).reshape(A.shape[0], -1)
+    N, m = G.shape
+    M = np.zeros((N + 3 * m, N + 3 * m))
+    M[:N, :N] = A * dt
+    M[:N, N:N + m] = G * dt
+    M[N:N + m, N + m:N + 2 * m] = np.eye(m) * dt
+    M[N + m:N + 2 * m, N + 2 * m:] = np.eye(m) * dt
+    E = expm(M)
+    return np.stack([E[:N, N + k * m:N + (k + 1) * m] for k in range(3)])
 
 
 # ---------------------------------------------------------------------------------------------

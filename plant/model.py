@@ -45,6 +45,7 @@ from .integrators import (
     advance_verlet,
     block_split,
     exponential_matrices,
+    polynomial_input_responses,
     stable_step,
 )
 from .observables import outputs3d, outputs_at
@@ -940,27 +941,76 @@ class DrillstringModel:
         return cache[dt]
 
     def expeuler_operator(self, dt: float) -> tuple[np.ndarray, ...]:
-        """``P1 = dt phi1(dt A)`` for step ``dt`` [s] in the block form of ``block_split``."""
+        """Exponential Euler's operator for step ``dt`` [s]: ``P1 = dt phi1(dt A)`` in the block
+        form of ``block_split``, then the top drive's ramp vectors (3, n_state), or (0,
+        n_state) when no drive moves (:func:`plant.integrators.add_drive_ramp`)."""
         cache = self.__dict__.setdefault("_p1_blocks", {})
         if dt not in cache:
             if len(cache) >= _EXPM_CACHE_SIZE:  # variable steps: keep the newest few
                 cache.pop(next(iter(cache)))
-            cache[dt] = block_split(self.exponential_matrices(dt)[0])
+            cache[dt] = (*block_split(self.exponential_matrices(dt)[0]), self._drive_ramp(dt))
         return cache[dt]
 
-    @property
-    def linear_time_invariant(self) -> bool:
-        """Is the model linear time-invariant up to the small-twist ``sin`` and the loads?
+    def _drive_ramp(self, dt: float) -> np.ndarray:
+        """The ramp vectors of :func:`plant.integrators.add_drive_ramp` for step ``dt`` [s].
 
-        True for the axial-torsional chain without a prescribed top-drive rotation (a top drive
-        driven by its held input is fine: constant forcing over a step), prescribed bit motion
-        and bit torque (the Table 1 modal tests): then exponential Euler about the equilibrium
-        Jacobian is exact for the piecewise-constant loads and inputs, whatever the step.
+        The drives that move: hoisting (the top spring and damper on body 1's axial motion)
+        and a prescribed rotation (the torsional ones on its rotation). Each enters ``f`` as
+        ``(K x(t) + C x'(t)) g``, ``g`` the unit vector of body 1's acceleration over its mass
+        (polar inertia), ``x`` the drive's travel [m or rad]; in the equilibrium Jacobian
+        ``A`` the torsional spring's ``sin`` is linear. Rows, summed over the drives times
+        their speed: ``C P1 g``, ``K dt^2 phi2 g``, ``C dt^2 phi2 g + K dt^3 phi3 g``.
         """
         p = self.p
-        ramp = self.params.top_drive.mode == "prescribed" and p[lay.OMEGA0] != 0.0
-        return (self.kind == "axial_torsional" and not ramp and self.params.bit.model != "cutting"
-                and (p[lay.BIT_AMP] == 0.0 or p[lay.KB_AX] == 0.0) and p[lay.BIT_TORQUE] == 0.0)
+        n = self.n
+        drives = []  # (speed, state index, 1 / inertia, K, C)
+        if p[lay.HOIST] != 0.0:
+            drives.append((p[lay.HOIST], 2 * n, p[lay.NP + lay.B_IM], p[lay.KT_AX],
+                           p[lay.CT_AX]))
+        if self.params.top_drive.mode == "prescribed" and p[lay.OMEGA0] != 0.0 \
+                and p[lay.KT_TO] > 0.0:
+            drives.append((p[lay.OMEGA0], 3 * n, p[lay.NP + lay.B_IJP], p[lay.KT_TO],
+                           p[lay.CT_TO]))
+        if not drives:
+            return np.zeros((0, self.n_state))
+        G = np.zeros((self.n_state, len(drives)))
+        for j, (_speed, i, inv, _k, _c) in enumerate(drives):
+            G[i, j] = inv
+        W = polynomial_input_responses(self.initial_jacobian, G, dt)
+        ramp = np.zeros((3, self.n_state))
+        for j, (speed, _i, _inv, k, c) in enumerate(drives):
+            ramp[0] += speed * c * W[0][:, j]
+            ramp[1] += speed * k * W[1][:, j]
+            ramp[2] += speed * (c * W[1][:, j] + k * W[2][:, j])
+        return ramp
+
+    @property
+    def exponential_exclusions(self) -> list[str]:
+        """Why the exact exponential step does not fit this model ([] when it does).
+
+        It fits the axial-torsional chain, linear up to the small-twist ``sin``, with inputs
+        it integrates exactly whatever the step: inputs held over a step (a top-drive speed
+        command or motor torque), step loads (steps split at their switch times), and the top
+        drive's prescribed hoisting and rotation (piecewise polynomial in time:
+        :func:`plant.integrators.add_drive_ramp`). It does not fit the full 3D model (far
+        from linear under spin) or the bit's nonlinear or oscillating inputs: the cutting bit
+        (a unilateral contact and friction law), a bit torque (``tanh`` of the bit speed) and
+        the prescribed bit displacement (a sine of the top-drive angle: exponential Euler
+        would hold it over a step, a first-order error).
+        """
+        p = self.p
+        out = []
+        if self.kind != "axial_torsional":
+            out.append(f"model = {self.kind!r} (not linear: the exact step needs "
+                       "'axial_torsional')")
+        if self.params.bit.model == "cutting":
+            out.append("bit.model = 'cutting' (a nonlinear contact and friction law)")
+        if p[lay.BIT_AMP] != 0.0 and p[lay.KB_AX] != 0.0:
+            out.append("bit.displacement_amplitude > 0 (a sine of the top-drive angle, not "
+                       "polynomial in time)")
+        if p[lay.BIT_TORQUE] != 0.0:
+            out.append("bit.torque > 0 (tanh of the bit speed: nonlinear)")
+        return out
 
     @property
     def default_method(self) -> str:
@@ -971,17 +1021,22 @@ class DrillstringModel:
     def method_for_step(self, h: float | None) -> str:
         """The fastest accurate fixed-step method for communication steps of ``h`` [s].
 
-        Exponential Euler (exact, one step a communication step) if
-        :attr:`linear_time_invariant`. Else, among the methods of
+        Exponential Euler (exact for the linear chain, one step a communication step) unless
+        :attr:`exponential_exclusions` names a reason: the axial-torsional chain whose inputs
+        are held over a step, step loads, or the top drive's prescribed hoisting and rotation
+        (ramps: integrated exactly through ``phi`` functions). Else, among the methods of
         :data:`plant.integrators.METHODS` marked ``automatic`` for this model kind (they met
-        the accuracy bar of ``BENCHMARKS.md`` at their automatic step), the fewest right-hand
-        side evaluations per communication step, ``stages * ceil(h / stable step)`` (per unit
-        time, ``stages / stable step``, for ``h = None``); ties go to fewer internal steps
-        (less work besides the right-hand sides), then to the higher order. For the paper's 3D
-        string at 0.25 ms (the closed loop) one step of Kutta's 3rd-order method beats one RK4
-        step; at 1 ms three RK4 steps tie with four 3-stage steps and RK4 is kept.
+        the accuracy bar of ``BENCHMARKS.md`` at their automatic step; explicit Runge-Kutta
+        methods that evaluate the prescribed motions at their stage times, so a hoisting or
+        rotation ramp is integrated to their order, its end a breakpoint), the fewest
+        right-hand side evaluations per communication step, ``stages * ceil(h / stable
+        step)`` (per unit time, ``stages / stable step``, for ``h = None``); ties go to fewer
+        internal steps (less work besides the right-hand sides), then to the higher order.
+        For the paper's 3D string at 0.25 ms (the closed loop) one step of Kutta's 3rd-order
+        method beats one RK4 step; at 1 ms three RK4 steps tie with four 3-stage steps and
+        RK4 is kept.
         """
-        if self.linear_time_invariant:
+        if not self.exponential_exclusions:
             return "expeuler"
         best: tuple[tuple[float, float, int], str] | None = None
         for spec in METHODS.values():

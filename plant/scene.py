@@ -138,7 +138,7 @@ def run_ports(scene: str, model: str) -> tuple[Port, ...]:
         Port("max_internal_step", "parameter", "fixed", "s", "Upper bound of the internal "
              "step; 0 = automatic (per communication step the method with the fewest "
              "right-hand sides at its stable step, RK4 or Kutta's 3rd order, or one exact "
-             "exponential step for a linear time-invariant axial-torsional scene)", 0.0),
+             "exponential step for a linear axial-torsional scene)", 0.0),
     )
 
 

@@ -49,7 +49,8 @@ class StepResult:
     value: float = math.nan
 
 
-_NO_OPERATOR = (np.zeros((0, 0), dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 0, 0)))
+_NO_OPERATOR = (np.zeros((0, 0), dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 0, 0)),
+                np.zeros((0, 0)))
 
 
 class PlantSimulator:
@@ -67,8 +68,8 @@ class PlantSimulator:
         ``"expeuler"``, ...; see :meth:`DrillstringModel.advance`). ``"auto"`` without
         ``max_step`` is :meth:`DrillstringModel.method_for_step` of each step's size (the
         fewest right-hand sides per communication step among the methods that met the
-        accuracy bar, ``BENCHMARKS.md``; exponential Euler for a linear time-invariant
-        axial-torsional scene); with ``max_step`` it is :attr:`DrillstringModel.default_method`.
+        accuracy bar, ``BENCHMARKS.md``; exponential Euler for a linear axial-torsional
+        scene); with ``max_step`` it is :attr:`DrillstringModel.default_method`.
         ``"dopri5"`` is adaptive (``rtol``, ``atol``) and steps to each communication point.
 
     Attributes

@@ -93,13 +93,19 @@ def test_small_angle_functions_match_the_library():
         assert abs(c - exact) <= 4.5e-16 * exact + 1e-300, x
 
 
-def test_auto_method_is_exponential_euler_only_for_linear_time_invariant_scenes():
+def test_auto_method_is_exponential_euler_only_where_it_is_exact():
     for name in ("table1_axial_pulse", "table1_torsional_pulse"):
         sc = load_scene(name)
         m = DrillstringModel(sc.plant, sc.model)
         assert m.kind == "axial_torsional" and m.default_method == "expeuler"
         assert PlantSimulator(m).method == "expeuler"
-    for ov in ({"top_drive": {"rotary_speed": 10.0}}, {"bit": {"torque": 100.0}}):
+    # a prescribed rotation ramp is integrated exactly (issue 34, tests/test_drive_ramps.py);
+    # a bit torque (tanh) or the bit's sinusoidal displacement are not
+    sc = load_scene("table1_torsional_pulse", overrides={"top_drive": {"rotary_speed": 10.0}})
+    assert DrillstringModel(sc.plant, "axial_torsional").default_method == "expeuler"
+    for ov in ({"top_drive": {"rotary_speed": 10.0},
+                "bit": {"axial_stiffness": 1e9, "displacement_amplitude": 0.003}},
+               {"bit": {"torque": 100.0}}):
         sc = load_scene("table1_torsional_pulse", overrides=ov)
         assert DrillstringModel(sc.plant, "axial_torsional").default_method == "rk4"
     sc = load_scene("paper_open_loop")
@@ -124,7 +130,8 @@ def test_compiled_recording_equals_stepping_for_exponential_euler(start):
 
 def test_exponential_operator_is_two_blocks_on_the_chain():
     m = _pulse_model(0.0, 0.01)
-    idx, sizes, blocks = m.expeuler_operator(1e-3)
+    idx, sizes, blocks, ramp = m.expeuler_operator(1e-3)
+    assert ramp.shape == (0, m.n_state)  # no drive moves
     assert sizes.tolist() == [2 * m.n, 2 * m.n]  # axial and torsional states never couple
     P1 = m.exponential_matrices(1e-3)[0]
     x = np.random.default_rng(0).normal(size=P1.shape[0])
