@@ -762,6 +762,8 @@ class PlantParams:
                 )
         if self.trajectory is None and any(s.stabilizers for s in sections):
             raise ValueError("sections.stabilizers need a [trajectory] (the hole the blades touch)")
+        if self.trajectory is not None:
+            self._check_gauges_fit_the_hole()
         for b in self.contact.bodies:
             if not 1 <= b <= n:
                 raise ValueError(f"contact.bodies: {b} is out of range: allowed [1, {n}]")
@@ -785,6 +787,29 @@ class PlantParams:
             raise ValueError(
                 "bit.weight_on_bit must be 0 when bit.axial_stiffness = 0 (an axially free bit)"
             )
+
+    def _check_gauges_fit_the_hole(self) -> None:
+        """Refuse a bit (gauge 2 ``bit.radius``) or a stabilizer blade larger than the hole
+        at its measured depth (the hole is what it drills or passes through: at most equal)."""
+        traj = self.trajectory
+        L = self.string_length
+        hole = traj.hole_diameter(L)
+        gauge = 2.0 * self.bit.radius
+        if gauge > hole:
+            raise ValueError(
+                f"bit.radius = {self.bit.radius!r} m: the bit's gauge diameter {gauge:g} m is "
+                f"larger than the hole diameter {hole:g} m at measured depth {L:g} m "
+                f"(trajectory.hole): allowed bit.radius <= {0.5 * hole:g} m")
+        top = 0.0
+        for i, sec in enumerate(self.sections):
+            for z in sec.stabilizers:
+                hole = traj.hole_diameter(top + z)
+                if sec.stabilizer_diameter > hole:
+                    raise ValueError(
+                        f"sections[{i}] ({sec.kind}).stabilizer_diameter = "
+                        f"{sec.stabilizer_diameter!r} m is larger than the hole diameter "
+                        f"{hole:g} m at measured depth {top + z:g} m (trajectory.hole)")
+            top += sec.length
 
     # --- the string's bodies --------------------------------------------------------------
     @property

@@ -29,7 +29,7 @@ from drillcosim.plant.params import (
     TrajectoryParams,
     UnbalanceParams,
 )
-from drillcosim.plant.scene import SceneError, load_scene, scene_from_dict
+from drillcosim.plant.scene import SceneError, list_scenes, load_scene, scene_from_dict
 from drillcosim.plant.simulator import simulate
 from drillcosim.plant.trajectory import WellPath
 from support.soft_string import Element, soft_string
@@ -326,7 +326,8 @@ def test_buoyed_hook_load_is_the_buoyed_weight():
     for traj in (None, TrajectoryParams(hole=((5000.0, HOLE),))):
         p = PlantParams(sections=secs, trajectory=traj, gravity=G,
                         fluid=FluidParams(enabled=True, density=rho_m),
-                        bit=BitParams(axial_stiffness=0.0), contact=ContactParams(bodies=(1,)),
+                        bit=BitParams(axial_stiffness=0.0, radius=HOLE / 2),
+                        contact=ContactParams(bodies=(1,)),
                         unbalance=UnbalanceParams(enabled=False))
         weight = (1500.0 * 29.0 + 60.0 * STEEL * area(0.1714, 0.0714)) * G * (1 - rho_m / STEEL)
         for kind in ("axial_torsional", "full3d"):
@@ -372,8 +373,8 @@ def test_energy_is_conserved_in_a_curved_hole():
                                             (700, 30, 60)), hole=((700.0, HOLE),)),
         contact=ContactParams(stiffness=1e7), gravity=G,
         damping=DampingParams(axial_ratio=0.0, torsional_ratio=0.0, lateral_ratio=0.0),
-        top_drive=TopDriveParams(rotary_speed=0.0), bit=BitParams(axial_stiffness=0.0),
-        unbalance=UnbalanceParams(enabled=False))
+        top_drive=TopDriveParams(rotary_speed=0.0),
+        bit=BitParams(axial_stiffness=0.0, radius=HOLE / 2), unbalance=UnbalanceParams(enabled=False))
     drift = []
     for div in (1, 4):
         m = DrillstringModel(p, "full3d")
@@ -450,7 +451,8 @@ def test_field_scenes_through_the_api_equal_the_plant_alone():
         ({"sections": [{"length": -1.0}]}, ["sections.length", "-1"]),
         ({"sections": [{"length": 10.0, "kind": "pipe"}]}, ["sections.kind", "'pipe'"]),
         ({"sections": [{"length": 10.0, "segment_length": 1.0}],
-          "trajectory": {"survey": [[0, 0, 0], [100, 10, 0]], "hole": [[100, 0.1]]}},
+          "trajectory": {"survey": [[0, 0, 0], [100, 10, 0]], "hole": [[100, 0.1]]},
+          "bit": {"radius": 0.04}},
          ["does not fit the hole"]),
         ({"sections": [{"length": 10.0, "segment_length": 1.0}],
           "trajectory": {"survey": [[10, 0, 0]], "hole": [[100, 0.3]]}},
@@ -462,6 +464,14 @@ def test_field_scenes_through_the_api_equal_the_plant_alone():
          ["trajectory.hole"]),
         ({"sections": [{"length": 10.0, "segment_length": 1.0, "stabilizers": [2.0],
                         "stabilizer_diameter": 0.2}]}, ["stabilizers", "[trajectory]"]),
+        # issue 34: a bit or a stabilizer blade larger than the hole at its depth
+        ({"sections": [{"length": 10.0, "segment_length": 1.0}],
+          "trajectory": {"hole": [[100, HOLE]]}, "bit": {"radius": 0.108}},
+         ["bit.radius = 0.108 m", "gauge diameter 0.216 m", "hole diameter 0.2159 m"]),
+        ({"sections": [{"length": 20.0, "segment_length": 1.0, "stabilizers": [2.0, 15.0],
+                        "stabilizer_diameter": 0.22}],
+          "trajectory": {"hole": [[10.0, 0.2205], [100.0, HOLE]]}, "bit": {"radius": 0.1}},
+         ["stabilizer_diameter = 0.22 m", "hole diameter 0.2159 m", "measured depth 15 m"]),
         ({"fluid": {"density": -5.0}}, ["fluid.density", "-5"]),
         ({"sections": [{"length": 10.0}]}, ["at least 2"]),
     ],
@@ -474,6 +484,49 @@ def test_bad_field_input_is_one_clear_line(data, words):
     assert "\n" not in msg
     for w in words:
         assert w in msg, (w, msg)
+
+
+def test_bits_and_blades_fit_their_hole():
+    """Every shipped scene with a hole: the bit's gauge and every stabilizer blade are no
+    larger than the hole at their measured depth (the 8.5-in bit in the 8.5-in hole: equal);
+    the same blades pass where the hole is larger (a blade in the casing)."""
+    for name in list_scenes():
+        p = load_scene(name).plant
+        if p.trajectory is None:
+            continue
+        assert 2.0 * p.bit.radius <= p.trajectory.hole_diameter(p.string_length), name
+        top = 0.0
+        for sec in p.sections:
+            for z in sec.stabilizers:
+                assert sec.stabilizer_diameter <= p.trajectory.hole_diameter(top + z), name
+            top += sec.length
+    sc = load_scene("field_vertical_3km")
+    assert 2.0 * sc.plant.bit.radius == HOLE  # gauge = hole
+    ok = {"sections": [{"length": 20.0, "segment_length": 1.0, "stabilizers": [2.0],
+                        "stabilizer_diameter": 0.22}],
+          "trajectory": {"hole": [[10.0, 0.2205], [100.0, HOLE]]}, "bit": {"radius": HOLE / 2}}
+    scene_from_dict({"contact": {"bodies": [1]}, **ok})
+
+
+def test_cli_refuses_a_bit_larger_than_its_hole(tmp_path):
+    """``drillcosim run`` on a scene whose bit is larger than the hole: exit 2, one line naming
+    both diameters with their unit, no traceback, no run."""
+    import subprocess
+    import sys
+
+    bad = tmp_path / "big_bit.toml"
+    bad.write_text('extends = "field_vertical_3km"\n[bit]\nradius = 0.11\n')
+    proc = subprocess.run([sys.executable, "-c", "import sys; from drillcosim.cosim.cli import "
+                           "console_main; sys.argv[0] = 'drillcosim'; sys.exit(console_main())",
+                           "run", str(bad), "--no-plots", "--out", str(tmp_path / "out")],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    for words in ("big_bit.toml", "bit.radius = 0.11 m", "gauge diameter 0.22 m",
+                  "hole diameter 0.2159 m"):
+        assert words in lines[0], (words, lines[0])
+    assert not (tmp_path / "out").exists()
 
 
 @pytest.mark.slow
