@@ -806,9 +806,10 @@ class PlantParams:
                 hole = traj.hole_diameter(top + z)
                 if sec.stabilizer_diameter > hole:
                     raise ValueError(
-                        f"sections[{i}] ({sec.kind}).stabilizer_diameter = "
-                        f"{sec.stabilizer_diameter!r} m is larger than the hole diameter "
-                        f"{hole:g} m at measured depth {top + z:g} m (trajectory.hole)")
+                        f"sections: section {i + 1} ({sec.kind}) has stabilizer_diameter = "
+                        f"{sec.stabilizer_diameter!r} m, larger than the hole diameter "
+                        f"{hole:g} m at its blade's measured depth {top + z:g} m "
+                        "(trajectory.hole)")
             top += sec.length
 
     # --- the string's bodies --------------------------------------------------------------
