@@ -411,10 +411,8 @@ PLANT_RECIPE = FmuRecipe(
     vendored=(vendored("plant"), vendored("fmu_src/slave_support")),
     extra_files=("scenes",),
     requires=("numpy", "scipy", "numba"),
-    # the numpy reference rhs (tests, benchmarks), the linear/modal analysis and the
-    # continuous-time closed loop (study layer): the FMU never imports them (tested)
-    exclude=("plant/numpy_rhs.py", "plant/linearize.py", "plant/modal.py",
-             "plant/equilibrium.py", "plant/closed_loop.py",
+    # the numpy reference rhs (tests, benchmarks): the FMU never imports it (tested)
+    exclude=("plant/numpy_rhs.py",
              "scenes/*.json"),   # controller matrices (the plant reads only the TOML)
 )
 

@@ -1,7 +1,7 @@
 """Linear, discrete-time stability prediction of the sampled strain-feedback loop.
 
 The plant is linearized about the straight string spinning with the top drive
-(:func:`plant.linearize.linearize`, top-drive frame, where gauges and actuators
+(:func:`analysis.linearize.linearize`, top-drive frame, where gauges and actuators
 are body-fixed and the loop is linear time-invariant)::
 
     dx/dt = A x + B u,    s = C x        (u: actuator forces [N], s: strains [1])
@@ -55,11 +55,11 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
+from drillcosim.analysis.linearize import linearize
 from drillcosim.cosim.master.algorithms import newest_sample_tick
 from drillcosim.cosim.master.delays import DelayLine
 from drillcosim.cosim.master.system import ALGORITHMS
 from drillcosim.cosim.scenario.config import ConfigError, SceneConfig, load_config
-from drillcosim.plant.linearize import linearize
 
 __all__ = [
     "LoopModel",
@@ -365,7 +365,7 @@ def coupled_plant(scene: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nd
     Returns
     -------
     A, B, C, dropped : numpy.ndarray
-        As :func:`reduce_loop` returns them for :func:`plant.linearize.linearize`'s
+        As :func:`reduce_loop` returns them for :func:`analysis.linearize.linearize`'s
         ``A`` [1/s], ``B``, ``C``.
     stable_step : float
         The plant model's own stable RK4 step [s].

@@ -22,12 +22,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from drillcosim.plant.kernels import top_drive
+from drillcosim.plant.layout import OMEGA0, T_RAMP
+from drillcosim.plant.model import DrillstringModel
+from drillcosim.plant.params import PlantParams
+from drillcosim.plant.signals import site_channels, strain
+
 from .equilibrium import static_equilibrium
-from .kernels import top_drive
-from .layout import OMEGA0, T_RAMP
-from .model import DrillstringModel
-from .params import PlantParams
-from .signals import site_channels, strain
 
 __all__ = ["LinearModel", "operating_params", "linearize", "inertial_lateral_eigenvalue"]
 

@@ -13,9 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drillcosim.plant.model import DrillstringModel
+
 from .equilibrium import static_equilibrium
 from .linearize import inertial_lateral_eigenvalue, linearize
-from .model import DrillstringModel
 
 __all__ = ["Mode", "static_equilibrium", "modes", "first_modes", "analytic_reference"]
 
