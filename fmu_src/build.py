@@ -411,9 +411,7 @@ PLANT_RECIPE = FmuRecipe(
     vendored=(vendored("plant"), vendored("fmu_src/slave_support")),
     extra_files=("scenes",),
     requires=("numpy", "scipy", "numba"),
-    # the numpy reference rhs (tests, benchmarks): the FMU never imports it (tested)
-    exclude=("plant/numpy_rhs.py",
-             "scenes/*.json"),   # controller matrices (the plant reads only the TOML)
+    exclude=("scenes/*.json",),   # controller matrices (the plant reads only the TOML)
 )
 
 #: The FMUs of the project: the plant, and the default FMU of every registered controller law.

@@ -8,9 +8,9 @@ from scipy.integrate import solve_ivp
 
 from drillcosim.plant.integrators import exponential_matrices
 from drillcosim.plant.model import DrillstringModel
-from drillcosim.plant.numpy_rhs import rhs3d_numpy
 from drillcosim.plant.scene import load_scene
 from drillcosim.plant.simulator import PlantSimulator
+from support.numpy_rhs import rhs3d_numpy
 
 
 def _model(name: str, **ov) -> DrillstringModel:

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import layout as lay
-from .kernels import IP_FIELD, IP_HDR, IP_N, IP_NA, IP_NC, IP_NL, IP_NS, IP_UNB
+from drillcosim.plant import layout as lay
+from drillcosim.plant.kernels import IP_FIELD, IP_HDR, IP_N, IP_NA, IP_NC, IP_NL, IP_NS, IP_UNB
 
 __all__ = ["NumpyRhs", "cardan_matrices", "rhs3d_numpy"]
 
