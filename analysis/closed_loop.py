@@ -50,7 +50,8 @@ from drillcosim.plant.layout import GAUGE_R, HALF
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.params import _check_range
 from drillcosim.plant.signals import site_channels, strain
-from drillcosim.plant.simulator import PlantSimulator, StepResult
+from drillcosim.plant.simulator import PlantSimulator
+from drillcosim.plant.step_result import StepResult
 
 __all__ = ["INTERPOLATIONS", "StrainLaw", "ClosedLoopRun", "ClosedLoopSimulator"]
 

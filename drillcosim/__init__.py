@@ -14,7 +14,9 @@ One import namespace; the repository's top-level folders install as its subpacka
 (``pyproject.toml``, setuptools ``package-dir``):
 
 ================================  ==========================================================
-``drillcosim.plant``              pure physics: parameters, scenes, model, kernels, signal names
+``drillcosim.plant``              the plant's runtime: parameters, scenes, model, kernels, stepping
+``drillcosim.analysis``           about the plant: equilibrium, linearization, modes, the
+                                  continuous-time closed loop with a pure delay
 ``drillcosim.controller``         pure controller laws (strain P-feedback, top-drive PI)
 ``drillcosim.fmu_src``            thin pythonfmu adapters, the C FMI wrapper, the FMU build
 ``drillcosim.cosim.master``       the generic FMI co-simulation master (no drillstring code)
@@ -28,7 +30,7 @@ One import namespace; the repository's top-level folders install as its subpacka
 The API is loaded on first use (``import drillcosim`` stays cheap for the command line).
 """
 
-__version__ = "0.2.0"
+from ._version import __version__
 
 _API = ("ENGINES", "Result", "SceneConfig", "UserError", "build_fmus", "list_scenes",
         "load_scene", "modes", "simulate", "sweep")

@@ -147,7 +147,7 @@ def default_out() -> Path:
     """
     if _checkout():
         return ROOT / "build" / "fmus"
-    from drillcosim import __version__
+    from drillcosim._version import __version__
 
     return user_cache() / "fmus" / __version__
 
@@ -345,7 +345,7 @@ class FmuRecipe:
     @property
     def script_module(self) -> str:
         """str: import name of the adapter script inside the FMU, ``_dcs_<stem>_<version>``."""
-        from drillcosim import __version__
+        from drillcosim._version import __version__
 
         return f"_dcs_{self.script_path.stem}_{__version__.replace('.', '_')}"
 
@@ -355,7 +355,7 @@ class FmuRecipe:
         ``_dcs_<name>_<hash of base and attributes>_<version>`` (unique per layout)."""
         if not self.base:
             return self.script_module
-        from drillcosim import __version__
+        from drillcosim._version import __version__
 
         digest = hashlib.sha256(json.dumps([self.name, self.base, self.class_attributes])
                                 .encode()).hexdigest()[:10]
