@@ -45,12 +45,16 @@ KNOWN_CYCLES = {
 #: The size of a plant/ module (lines), and the modules above it with their one job.
 MAX_LINES = 400
 LONGER = {
-    "kernels.py": "the compiled right-hand side kernels (numba): 3D rigid bodies, contact, bit, "
-                  "top drive; one numba module so that they inline into one another",
-    "params.py": "the plant's typed, validated parameter tree (one dataclass per scene table "
-                 "with its one-line range errors)",
-    "integrators.py": "the fixed-step and exponential integrators and their method table "
-                      "(numba loops sharing one stage layout)",
+    "kernels.py": "the compiled right-hand side (numba): bodies, joints, contact, bit, top drive, "
+                  "loads in one module, whose functions inline into one another",
+    "params.py": "the typed, validated parameter tree: one frozen dataclass per scene table, "
+                 "each with its one-line range errors",
+    "integrators.py": "the fixed-step, exponential and adaptive integrators (numba loops over one "
+                      "stage layout) and their method table",
+    "compiled_step.py": "the plant's compiled communication step: the cfunc, its context and "
+                        "the Python object that turns its return codes into step results",
+    "scene.py": "scene TOML -> typed parameters, and the plant FMU's port table",
+    "observables.py": "the output kernels (numba): every output of both model kinds",
 }
 
 
