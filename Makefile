@@ -17,9 +17,10 @@ $(BIN)/python:
 	$(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
+# -qq: pip's errors only (setuptools' 10-line notice on every editable install is not for users)
 $(STAMP): $(BIN)/python pyproject.toml
-	$(BIN)/python -m pip install --quiet -e '.[test]'
-	touch $(STAMP)
+	$(BIN)/python -m pip install -qq -e '.[test]'
+	@touch $(STAMP)
 
 install: $(STAMP)
 

@@ -1,9 +1,10 @@
 """Before/after, side by side in one run: two checkouts of drillcosim, each with its own ``.venv``.
 
-    python benchmarks/bench_before_after.py --before /work/wt-before --after . \\
+    python benchmarks/bench_before_after.py --before BEFORE --after . \\
         [--stop-time 30] [--sweep-stop-time 10] [--calibrate-stop-time 30] [--repeat 3] \\
         [--out FILE]
 
+BEFORE is another checkout, e.g. ``git worktree add BEFORE <commit>`` and ``make`` there.
 Each task runs in a fresh process of the tree's own interpreter (``<tree>/.venv/bin/python``)
 in an empty folder, the trees interleaved, best of ``--repeat``; one warm-up round first
 (FMU builds, numba caches, unpacked FMUs, the native loop's library), not timed. The processes
@@ -24,7 +25,7 @@ run without ``PYTHONDONTWRITEBYTECODE`` (as a user's shell: byte-code caches on)
 * the calibration's ``refine`` stage on its first 2 sets (around today's set), 4 members each,
   in one process (``workers=0``).
 
-Ratios: main job / plant alone (issue 22 target <= 2.5x), default controller / C controller
+Ratios: main job / plant alone (target <= 2.5x), default controller / C controller
 (<= 1.1x), plots' share of the main job (<= 10 %), start-up minus the floor (<= 0.3 s), and
 after / before for every task.
 """

@@ -2,8 +2,8 @@
 integrator choice for the nonsmooth scenes.
 
 1. **Cost when off**, side by side: the paper's scenes through ``PlantSimulator`` on this tree
-   and on a base tree (``--base-tree``, e.g. ``git archive main | tar -x -C /tmp/base``), each in
-   its own subprocess, interleaved, best of ``--repeat``. Same rows as BENCHMARKS.md.
+   and on a base tree (``--base-tree BASE``, e.g. ``git archive <commit> | tar -x -C BASE``), each in
+   its own subprocess, interleaved, best of ``--repeat``. Rows as in docs/performance.md.
 2. **Speed when on**: real-time factors of the new scenes (``stick_slip`` on the axial-torsional
    chain: target >= 200x real time at 1 ms outputs).
 3. **Work-precision** on the nonsmooth scenes (``stick_slip``: the bit's regularized friction
@@ -11,8 +11,9 @@ integrator choice for the nonsmooth scenes.
    h* and fractions of it, DOPRI5 at several tolerances, against DOPRI5 at rtol 1e-11 (checked
    against 1e-10), errors as in ``bench_work_precision.py``.
 
-Run: ``python benchmarks/bench_extensions.py --base-tree /tmp/base [--quick]``; prints markdown
-(the rows of BENCHMARKS.md, "Physics extensions").
+Run: ``python benchmarks/bench_extensions.py --base-tree BASE [--quick]``; prints markdown
+(the section "Physics extensions" of BENCHMARKS.md; with ``--base-tree``, of
+docs/performance.md).
 """
 
 from __future__ import annotations

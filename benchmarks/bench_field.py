@@ -225,7 +225,7 @@ def side_by_side(quick: bool) -> list[str]:
     return ["### 3. Field scenes against paper_open_loop, plant alone", "",
             f"Wall time per simulated second through `plant.simulator.simulate` (RK4 at the "
             f"automatic step, 1 ms outputs of the scene's outputs), {T:g} s simulated, best of "
-            f"{rep}, the cases interleaved in one run. Target (issue 25): at most (bodies / 30) x "
+            f"{rep}, the cases interleaved in one run. Target: at most (bodies / 30) x "
             "1.2 times paper_open_loop.", "",
             "| case | bodies | h* [ms] | wall per simulated s [s] | x real time | vs paper | "
             "target | met |", "|---|---:|---:|---:|---:|---:|---:|---|", *rows, ""]

@@ -1,4 +1,4 @@
-"""The FMU boundary (issue 14.1): the plant FMU in fmpy next to the plant alone, and where the time goes.
+"""The FMU boundary: the plant FMU in fmpy next to the plant alone, and where the time goes.
 
     python benchmarks/bench_fmu_boundary.py [--stop-time 10] [--repeat 5]
         [--baseline DIR] [--out benchmarks/results/fmu_boundary.md]

@@ -1,4 +1,4 @@
-"""FMU- and master-level speed and memory (issue 5 targets), measured side by side in one run.
+"""FMU- and master-level speed and memory (against their targets), measured side by side in one run.
 
     python benchmarks/bench_fmu_master.py [--stop-time 30] [--out benchmarks/results/fmu_master.md]
 

@@ -5,7 +5,7 @@
 1. ``paper_closed_loop`` at its step (0.25 ms, Gauss-Seidel) through our master
    (:class:`cosim.master.execution.Execution` + the recorder at 1 ms), once with the plant and
    controller FMUs, once with the same models in process (:mod:`cosim.scenario.inprocess`):
-   real-time factors of the stepping loop and their ratio (issue 14 target: FMU >= 0.8x the
+   real-time factors of the stepping loop and their ratio (target: FMU >= 0.8x the
    in-process slaves). Configurations interleaved, ``--repeat`` times, best reported.
 2. Start-up of ``drillcosim run paper_closed_loop`` in fresh processes: time from the start of
    the interpreter to the first step, split into the interpreter itself (``python -c pass``),
@@ -13,7 +13,7 @@
    FMU extraction and ``Execution.initialize`` (instantiation: the FMUs' own imports, numba cache
    load, model build). Best of ``--repeat`` (target <= 1 s).
 3. The whole ``drillcosim run paper_closed_loop`` process for ``--whole-stop-time`` (default the
-   scene's 30 s; issue 14 target >= 8x real time): with plots, without, and without plots with
+   scene's 30 s; target >= 8x real time): with plots, without, and without plots with
    the C controller FMU. Best of ``--repeat``.
 4. Where a 0.25 ms step goes, each part timed alone in this process (mean of 4000 calls): the
    plant's compiled RK4 span, the plant's Python step with its checks and outputs, the

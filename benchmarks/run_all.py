@@ -27,6 +27,12 @@ for _p in (str(HERE), str(ROOT)):
 import bench_scaling as bs  # noqa: E402
 import bench_work_precision as wp  # noqa: E402
 
+#: the report's pointer to the hand-written log (the report is rewritten whole; the log never)
+LOG_NOTE = ("`drillcosim bench` writes this file whole (and the PNGs and tables of "
+            "benchmarks/results/). Measurements made by hand, such as before/after comparisons "
+            "and single benchmark scripts run with other options, are kept in the performance "
+            "log, [docs/performance.md](docs/performance.md), which the bench never writes.")
+
 
 def _git() -> str:
     try:
@@ -103,10 +109,11 @@ def _wp_table(res: dict) -> list[str]:
     return lines
 
 
-def report(quick: bool, out: Path) -> str:
-    """Run everything; return the markdown text (PNGs written to ``benchmarks/results``)."""
+def report(quick: bool, out: Path, resdir: Path = HERE / "results") -> str:
+    """Run everything; write the markdown report to ``out`` (whole) and the PNGs and per-script
+    tables to ``resdir`` (default ``benchmarks/results``); return the report. Nothing else is
+    written: the hand-written performance log (docs/performance.md) is never touched."""
     t_start = time.perf_counter()
-    resdir = HERE / "results"
     resdir.mkdir(parents=True, exist_ok=True)
     def step(name, fn):
         t0 = time.perf_counter()
@@ -126,7 +133,7 @@ def report(quick: bool, out: Path) -> str:
           f"paper_open_loop, full 3D, n = {w3['model'].n}")
     _plot(wa, resdir / "work_precision_axial_torsional.png",
           f"table1_axial_pulse, axial-torsional, n = {wa['model'].n}")
-    sections = _fmu_and_master_sections(quick)
+    sections = _fmu_and_master_sections(quick, resdir)
     took = time.perf_counter() - t_start
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
 
@@ -144,7 +151,7 @@ def report(quick: bool, out: Path) -> str:
           f"{os.cpu_count()} logical CPUs, Python {platform.python_version()}, load average "
           f"{load:.1f} at the end. The machine is "
           "shared: absolute times are noisy; ratios are measured side by side in this run "
-          "(candidates interleaved, best of k).", ""]
+          "(candidates interleaved, best of k).", "", LOG_NOTE, ""]
     L += ["## Targets", "",
           "| target | measured | met |", "|---|---|---|"]
     L.append(f"| paper_open_loop full 3D n=30, {rt['3d']['T']:g} s through PlantSimulator at 1 ms: "
@@ -279,14 +286,15 @@ def _ensemble_verdict(text: str) -> tuple[str, str] | None:
     return None
 
 
-def _fmu_and_master_sections(quick: bool) -> list[str]:
-    """The FMU- and master-level benchmarks, run as separate processes."""
+def _fmu_and_master_sections(quick: bool, resdir: Path) -> list[str]:
+    """The FMU- and master-level benchmarks, run as separate processes (their tables written
+    into ``resdir``)."""
     stop = "5" if quick else "30"
-    out = ROOT / "benchmarks" / "results" / "fmu_master.md"
+    out = resdir / "fmu_master.md"
     fm = _script(["benchmarks/bench_fmu_master.py", "--stop-time", stop, "--memory-stop-time",
                   stop, "--out", str(out)], 1800)
     fm = out.read_text() if out.exists() and not fm.startswith("(") else fm
-    out_b = ROOT / "benchmarks" / "results" / "fmu_boundary.md"
+    out_b = resdir / "fmu_boundary.md"
     fb = _script(["benchmarks/bench_fmu_boundary.py", "--stop-time", "3" if quick else "10",
                   "--repeat", "3" if quick else "5", "--out", str(out_b)], 1800)
     fb = out_b.read_text() if out_b.exists() and not fb.startswith("(") else fb

@@ -24,8 +24,6 @@ from .strain_feedback import (
 )
 from .top_drive import TopDriveController, TopDriveControllerParams
 
-__version__ = "0.1.0"
-
 __all__ = [
     "AXES",
     "CHANNELS",
@@ -44,7 +42,6 @@ __all__ = [
     "StrainController",
     "TopDriveController",
     "TopDriveControllerParams",
-    "__version__",
     "channels",
     "check_gain_matrix",
     "default_kind",

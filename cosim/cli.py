@@ -24,6 +24,7 @@ import errno
 import json
 import math
 import os
+import re
 import sys
 import threading
 import warnings
@@ -35,6 +36,32 @@ __all__ = ["main"]
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_USAGE = 2
+
+
+#: the API's keyword (a ConfigError's ``given_as``) -> the option of the command line that gives it
+_OPTION_OF = {"stop_time": "--stop-time", "step": "--step", "delay": "--delay", "gain": "--gain",
+              "overrides": "--set", "plant_fmu": "--plant-fmu",
+              "controller_fmu": "--controller-fmu"}
+#: a negative number, also in exponent notation (argparse takes "-1e-4" for an option)
+_NEGATIVE = re.compile(r"-(\d|\.\d)")
+
+
+def _error_text(exc: BaseException) -> str:
+    """A user error's one line; a value given on the command line is named by its option."""
+    option = _OPTION_OF.get(getattr(exc, "given_as", None) or "")
+    return f"{option}: {exc.detail}" if option else str(exc)
+
+
+def _negative_values_joined(argv: Sequence[str]) -> list[str]:
+    """``--opt -1e-4`` -> ``--opt=-1e-4``: argparse reads a negative number in exponent
+    notation after an option as an option of its own ("expected one argument")."""
+    out: list[str] = []
+    for arg in argv:
+        if out and _NEGATIVE.match(arg) and out[-1].startswith("--") and "=" not in out[-1]:
+            out[-1] = f"{out[-1]}={arg}"
+        else:
+            out.append(arg)
+    return out
 
 
 def _user_errors() -> tuple[type[BaseException], ...]:
@@ -163,7 +190,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
                                 delay=args.delay, gain=args.gain, overrides=_parse_set(args.set),
                                 plant_fmu=args.plant_fmu, controller_fmu=args.controller_fmu)
             built = build_system(config, args.engine, fmu_dir=args.fmu_dir)
-            feed = workers.feed(plot_settings(config), config.cosim.stop_time)
+            # the open-loop baseline of the figures: known now if cached, else run after
+            want_baseline = not (args.no_plots or args.no_baseline)
+            baseline = _baseline(config, cached_only=True) if want_baseline else None
+            feed = workers.feed(plot_settings(config, baseline), config.cosim.stop_time)
             result = simulate(built, progress=_progress(args), csv_path=out / "results.csv",
                               observers=[feed] if feed is not None else ())
         except CosimError as exc:  # failed before the first step: earlier files are kept
@@ -173,20 +203,37 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 return EXIT_USAGE
             print(f"drillcosim run: failed: {exc}", file=sys.stderr)
             return EXIT_FAILED
-        files = result.save(out, plots=not args.no_plots, workers=workers)
+        if want_baseline and baseline is None and len(result.data) >= 2:
+            baseline = _baseline(config, cached_only=False, progress=_progress(args))
+        files = result.save(out, plots=not args.no_plots, workers=workers, baseline=baseline)
     message = result.message(out, files)
     print(message, file=sys.stdout if result.completed else sys.stderr)
+    if args.profile:
+        print(result.profile_table())
     return EXIT_OK if result.completed else EXIT_FAILED
+
+
+def _baseline(config, cached_only: bool, progress: bool | None = None):
+    """The file of a closed-loop run's open-loop baseline: from the cache, or (not
+    ``cached_only``) run now, once; None without one."""
+    from drillcosim.cosim.scenario.baseline import baseline_cached, baseline_config, baseline_path
+
+    if baseline_config(config) is None:
+        return None
+    if not baseline_cached(config):
+        if cached_only:
+            return None
+        print("drillcosim run: running the open-loop baseline of the figures (once for this "
+              "scene and these settings, then cached; --no-baseline skips it)", file=sys.stderr)
+    return baseline_path(config, progress)
 
 
 def _cmd_ssp(args: argparse.Namespace) -> int:
     from drillcosim.api import load_scene
     from drillcosim.cosim.scenario.ssp_run import write_scene_ssp
 
-    over = _parse_set(args.set)
-    over.update({k: v for k, v in (("cosim.step", args.step), ("cosim.stop_time", args.stop_time))
-                 if v is not None})
-    config = load_scene(args.scene, overrides=over, plant_fmu=args.plant_fmu,
+    config = load_scene(args.scene, step=args.step, stop_time=args.stop_time,
+                        overrides=_parse_set(args.set), plant_fmu=args.plant_fmu,
                         controller_fmu=args.controller_fmu)
     written = write_scene_ssp(config, args.out, fmu_dir=args.fmu_dir,
                               omit_unsupported=args.omit_unsupported)
@@ -238,10 +285,13 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     print(f"ran {res.n_run} of {res.n_points} points ({res.n_skipped} already done) in "
           f"{res.wall_time:.1f} s")
     print(res.summary())
+    for line in res.notes:
+        print(f"note: {line}")
     if args.maps:
         from drillcosim.cosim.study.maps import plot_maps
 
-        for path in plot_maps(res.folder, predict=not args.no_prediction):
+        for path in plot_maps(res.folder, predict=not args.no_prediction,
+                              progress=_progress(args)):
             print(path)
     if res.n_errors:
         first = next(r for r in frame.to_dict("records") if r["status"] == "error")
@@ -350,8 +400,24 @@ def _add_engine_option(p: argparse.ArgumentParser) -> None:
                         "same numbers)")
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: print ``drillcosim <version>`` and exit 0 (the version is looked up only
+    then: :mod:`importlib.metadata` costs ~40 ms of every start otherwise)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str = argparse.SUPPRESS,
+                 default: str = argparse.SUPPRESS, help: str | None = None) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=default, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        from drillcosim._version import __version__
+
+        print(f"drillcosim {__version__}")  # to stdout, as argparse's own "version" action
+        parser.exit()
+
+
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="drillcosim", description=__doc__.splitlines()[0])
+    ap.add_argument("--version", action=_VersionAction, help="print the version and exit")
     sub = ap.add_subparsers(dest="command", required=True)
     p = sub.add_parser("modes", help="first axial, torsional and lateral modes of a scene")
     p.add_argument("scene", nargs="?", default="table1_lateral_step",
@@ -394,6 +460,13 @@ def _parser() -> argparse.ArgumentParser:
     _add_fmu_options(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--profile", action="store_true",
+                   help="print where the stepping loop's time went: per component its mean "
+                        "and longest step and share, the master's own share, the real-time "
+                        "factor (also in summary.json's telemetry)")
+    p.add_argument("--no-baseline", action="store_true",
+                   help="figures without the open-loop baseline (a closed-loop run's figures "
+                        "draw the scene with the controller off behind it; run once, cached)")
     p.set_defaults(func=_cmd_run)
     p = sub.add_parser("ssp", help="write a scene's system (FMUs included) as an SSP 1.0 file")
     p.add_argument("scene", help="scene name from scenes/ or a path")
@@ -524,7 +597,7 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``drillcosim`` console script; returns the exit code."""
     ap = _parser()
-    args = ap.parse_args(argv)
+    args = ap.parse_args(_negative_values_joined(sys.argv[1:] if argv is None else argv))
 
     def one_line(message, category, filename, lineno, file=None, line=None):
         if category.__module__.startswith("drillcosim."):
@@ -537,7 +610,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except _user_errors() as exc:
-        print(f"drillcosim {args.command}: error: {exc}", file=sys.stderr)
+        print(f"drillcosim {args.command}: error: {_error_text(exc)}", file=sys.stderr)
         return EXIT_USAGE
     except OSError as exc:  # read-only folder: bad input (2); disk full, I/O error: failure (1)
         print(f"drillcosim {args.command}: error: {exc}", file=sys.stderr)

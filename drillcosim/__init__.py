@@ -27,10 +27,10 @@ One import namespace; the repository's top-level folders install as its subpacka
 ``drillcosim.scenes``             the shipped scene files (package data)
 ================================  ==========================================================
 
-The API is loaded on first use (``import drillcosim`` stays cheap for the command line).
+The API is loaded on first use (``import drillcosim`` stays cheap for the command line), and so
+is ``__version__``: the installed distribution's version (:mod:`importlib.metadata`), whose one
+source is ``pyproject.toml``.
 """
-
-from ._version import __version__
 
 _API = ("ENGINES", "Result", "SceneConfig", "UserError", "build_fmus", "list_scenes",
         "load_scene", "modes", "simulate", "sweep")
@@ -38,6 +38,11 @@ __all__ = ["__version__", *_API]
 
 
 def __getattr__(name: str):
+    if name == "__version__":
+        from ._version import __version__ as found
+
+        globals()["__version__"] = found
+        return found
     if name in _API:
         from . import api  # the API's imports (numpy, fmpy, the master) only when used
 
@@ -46,4 +51,4 @@ def __getattr__(name: str):
 
 
 def __dir__() -> list[str]:
-    return sorted([*globals(), *_API])
+    return sorted({*globals(), "__version__", *_API})

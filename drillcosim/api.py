@@ -40,15 +40,23 @@ def list_scenes() -> list[str]:
     return _scene.list_scenes()
 
 
+#: the keyword shortcuts of :func:`load_scene` and :func:`simulate`: keyword -> key path
+SHORTCUTS = {"stop_time": "cosim.stop_time", "step": "cosim.step", "delay": "cosim.actuator_delay",
+             "gain": "controller.gain"}
+
+
 def _named(stop_time: float | None = None, step: float | None = None, delay: float | None = None,
            gain: float | None = None, overrides: Mapping[str, Any] | None = None
-           ) -> dict[str, Any]:
-    """The keyword shortcuts as key paths, then ``overrides`` (which win)."""
-    over = {path: value for path, value in (("cosim.stop_time", stop_time), ("cosim.step", step),
-                                            ("cosim.actuator_delay", delay),
-                                            ("controller.gain", gain)) if value is not None}
-    over.update(key_paths(overrides))
-    return over
+           ) -> tuple[dict[str, Any], dict[str, str]]:
+    """The keyword shortcuts as key paths, then ``overrides`` (which win); and for each key
+    path the keyword that gave it (``overrides`` for the mapping's), named in errors."""
+    values = {"stop_time": stop_time, "step": step, "delay": delay, "gain": gain}
+    over = {SHORTCUTS[k]: v for k, v in values.items() if v is not None}
+    given = {SHORTCUTS[k]: k for k, v in values.items() if v is not None}
+    more = key_paths(overrides)
+    over.update(more)
+    given.update(dict.fromkeys(more, "overrides"))
+    return over, given
 
 
 def load_scene(scene: str | Path = "paper_closed_loop", *, stop_time: float | None = None,
@@ -81,8 +89,9 @@ def load_scene(scene: str | Path = "paper_closed_loop", *, stop_time: float | No
     UserError
         One line naming the file or key and what is allowed.
     """
-    return load_config(scene, _named(stop_time, step, delay, gain, overrides),
-                       plant_fmu=plant_fmu, controller_fmu=controller_fmu)
+    over, given = _named(stop_time, step, delay, gain, overrides)
+    return load_config(scene, over, plant_fmu=plant_fmu, controller_fmu=controller_fmu,
+                       given_as=given)
 
 
 def simulate(scene: str | Path = "paper_closed_loop", *, stop_time: float | None = None,

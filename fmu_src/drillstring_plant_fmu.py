@@ -97,8 +97,8 @@ Error handling (the wrapper's status protocol, see ``fmu_src/slave_support``)
 ------------------------------------------------------------------------------
 * invalid parameter (out of range, wrong ``scene`` / ``model``, missing outputs):
   fmi2ExitInitializationMode -> fmi2Error with the message naming it; the instance stays
-  in initialization mode (a doStep is refused). Free (or ``fmi2Reset``) and use valid
-  parameters;
+  in initialization mode (a doStep is refused): correct the parameters and call it again,
+  or reset;
 * non-finite input, non-positive or too large step, wrong communication point ->
   fmi2Error from that doStep, state unchanged; doStep before initialization ->
   fmi2Error (checked by the wrapper itself);
@@ -108,7 +108,8 @@ Error handling (the wrapper's status protocol, see ``fmu_src/slave_support``)
   FMU is reset;
 * unknown value reference, wrong type, setting an output or a fixed parameter after
   initialization, an invalid FMU state -> fmi2Error from that get/set/setFMUstate
-  call itself (a get returns NaN / 0 / false / "" for it, a set ignores it);
+  call itself (a get returns NaN / 0 / false / "" for it; a set refused for one value
+  reference sets none of the call's values);
 * an unexpected exception -> fmi2Error, the instance stays usable. Never fmi2Fatal.
 
 The inputs and outputs live in the shared buffers ``self.inputs`` / ``self.outputs``: in
@@ -116,10 +117,12 @@ step mode the wrapper moves them without Python, and a doStep is one call of the
 step (:meth:`_fmi2_compiled_step`; its failure codes come back to
 :meth:`_fmi2_compiled_step_failed`, which reports the status and message ``do_step`` gives).
 
-FMU state: ``_get_fmu_state`` / ``_set_fmu_state`` add the simulator's time, state
-vector and held inputs (JSON-safe floats, so serialisation is bit-exact) to
-pythonfmu's registered variables; restoring a state whose parameters differ
-from the instance's rebuilds the model first.
+FMU state (the rules of ``slave_support.state``): the registered variables plus the
+simulator's time, state vector and held inputs, the divergence note and the start time
+(JSON-safe floats, so serialisation is bit-exact). Restoring a state whose parameters
+differ from the instance's builds their model first (refused, as at initialization, if
+they are invalid) and checks the state vector against it; nothing is applied unless all
+of it fits. A state of a running plant must carry its simulator state.
 """
 
 from __future__ import annotations
@@ -130,7 +133,7 @@ import math
 import sys
 import traceback
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import _dcs_slave_support_0_1_0 as support
 import numpy as np
@@ -138,9 +141,6 @@ import numpy as np
 #: Scene loaded unless the ``scene`` parameter names another one.
 DEFAULT_SCENE = "paper_open_loop"
 
-_SIM_KEY = "__dcs_plant_sim__"
-_MODE_KEY = "__dcs_mode__"
-_ERRORS_KEY = "__dcs_errors__"
 
 #: The plant package, from its stable copy (numba's cache needs a fixed path).
 _PLANT, _IMPORT_WARNING = support.vendored.import_vendored(
@@ -369,30 +369,35 @@ class DrillstringPlant(support.DcsSlave):
         sim = _with_spectral_memo(lambda: _sim_mod.PlantSimulator(
             model, None if step == 0.0 else step))
         sim.time = float(self._start_time)
-        self._out_index = np.array([model.output_names.index(n) for n in self.REAL_OUTPUTS])
-        self._in_index = np.array([model.input_names.index(n) for n in declared],
-                                  dtype=np.int64)
-        self._u = np.zeros(model.n_inputs)
-        self._all_inputs = list(declared) == list(model.input_names)
-        return sim
+        return _Built(sim, np.array([model.output_names.index(n) for n in self.REAL_OUTPUTS]),
+                      np.array([model.input_names.index(n) for n in declared], dtype=np.int64),
+                      np.zeros(model.n_inputs), list(declared) == list(model.input_names))
+
+    def _adopt(self, built: _Built | None, key: tuple[Any, ...] | None) -> None:
+        """Take a built simulator (None: none) as the instance's, for the parameters ``key``."""
+        self._built_key = key
+        self._init_error = None
+        self._sim = None
+        if built is not None:
+            self._sim = built.sim
+            self._out_index, self._in_index = built.out_index, built.in_index
+            self._u, self._all_inputs = built.u, built.all_inputs
 
     def _build(self) -> None:
         """(Re)build the simulator when the parameters changed; log a failure once."""
         key = self._key()
         if key == self._built_key:
             return
-        self._built_key = key
-        self._sim = None
-        self._init_error = None
+        self._adopt(None, key)
         try:
-            self._sim = self._make_simulator()
+            self._adopt(self._make_simulator(), key)
         except ValueError as exc:  # SceneError is a ValueError
             self._init_error = f"invalid parameter: {exc}"
         except Exception:  # noqa: BLE001 - a bug: keep its traceback for every later doStep
             self._init_error = f"internal error while building the model:\n{traceback.format_exc()}"
         if self._init_error is not None:
             self._error(f"initialization failed: {self._init_error}; every doStep will be "
-                        f"rejected (re-instantiate or reset with valid parameters)")
+                        f"rejected (correct the parameters, reset or re-instantiate)")
         else:
             self._write_outputs()
 
@@ -412,8 +417,12 @@ class DrillstringPlant(support.DcsSlave):
         self._mode = "initialization"
 
     def exit_initialization_mode(self) -> None:
-        self._mode = "step"
-        self._build()  # a failure is logged as fmi2Error; see "Error handling"
+        fresh = self._key() != self._built_key
+        self._build()  # a fresh failure is logged as fmi2Error; see "Error handling"
+        if self._init_error is None:
+            self._mode = "step"
+        elif not fresh:  # the same parameters again: the same failure
+            self._error(f"initialization failed: {self._init_error}")
 
     def do_step(self, current_time: float, step_size: float) -> None:
         t, h = current_time, step_size
@@ -474,14 +483,8 @@ class DrillstringPlant(support.DcsSlave):
         return self._outcome(self._step.finish(code, t, h), t, h)
 
     # ----------------------------------------------------------------- access
-    def _access_problem(self, vr: int, kind: type, call: str) -> str | None:
-        problem = super()._access_problem(vr, kind, call)
-        var = self.vars.get(vr)
-        if problem is None and (call.startswith("set") and self._mode == "step"
-                                and var.causality == support.Fmi2Causality.parameter):
-            problem = (f"{var.name} (value reference {vr}) is a fixed parameter: it cannot be "
-                       f"set after initialization")
-        return problem
+    def _fixed_parameters_locked(self) -> bool:
+        return self._mode == "step"
 
     def _accessible(self, vr: int, kind: type, call: str) -> bool:
         ok = super()._accessible(vr, kind, call)
@@ -491,32 +494,75 @@ class DrillstringPlant(support.DcsSlave):
         return ok
 
     # ------------------------------------------------------------- FMU state
-    def _get_fmu_state(self) -> dict[str, Any]:
-        state = super()._get_fmu_state()
+    def _internal_state(self) -> dict[str, Any]:
         sim = None
         if self._sim is not None:
             t, y, u = self._sim.get_state()
             sim = [float(t), y.tolist(), u.tolist()]
-        state[_SIM_KEY] = sim
-        state[_MODE_KEY] = self._mode
-        state[_ERRORS_KEY] = [self._halted, self._start_time]
-        return state
+        return {"sim": sim, "halted": self._halted, "start_time": self._start_time}
 
-    def _set_fmu_state(self, state: dict[str, Any]) -> None:
-        try:
-            state = dict(state)  # the importer may set the same state again: do not mutate it
-            sim = state.pop(_SIM_KEY)
-            mode = state.pop(_MODE_KEY)
-            halted, start_time = state.pop(_ERRORS_KEY)
-            super()._set_fmu_state(state)
-            self._mode, self._halted, self._start_time = mode, halted, float(start_time)
-            if sim is not None:
-                self._build()  # no-op unless the restored parameters differ
-                if self._sim is not None:
-                    t, y, u = sim
-                    self._sim.set_state((t, np.array(y, dtype=float), np.array(u, dtype=float)))
-        except Exception as exc:  # noqa: BLE001 - a foreign state is the importer's error
-            self._error(f"fmi2SetFMUstate: invalid state: {exc!r}")
+    def _restore_internal(self, internal: dict[str, Any]) -> str | None:
+        """The simulator of the state's parameters (built first if they differ from the
+        instance's: refused as at initialization if they are invalid) and its time, state vector
+        and held inputs, checked against that model; applied only when all fit."""
+        sim, halted = internal.get("sim"), internal.get("halted")
+        start_time = internal.get("start_time")
+        if set(internal) != {"sim", "halted", "start_time"} or not (
+                halted is None or isinstance(halted, str)):
+            return f"not a state of this FMU (internal part {sorted(internal)})"
+        problem = support.state.number_problem("start_time", start_time)
+        if problem is None and sim is None and self._mode == "step":
+            problem = "a state of a running plant without its simulator state"
+        if problem is None and sim is not None:
+            problem = _sim_problem(sim, finite=halted is None)
+        if problem is not None:
+            return problem
+        key, built = self._key(), None
+        if sim is not None and (key != self._built_key or self._sim is None):
+            try:
+                built = self._make_simulator()
+            except ValueError as exc:
+                return f"invalid parameter: {exc}"
+        if sim is not None:
+            target = built.sim if built is not None else self._sim
+            t, y, u = sim
+            if (len(y), len(u)) != (target.y.size, target.u.size):
+                params = ", ".join(f"{n} = {v!r}" for n, _s, _f, v in self._set_through_fmi())
+                return (f"its simulator state has {len(y)} values and {len(u)} inputs; the "
+                        f"{target.model.kind} model of its parameters (scene {self.scene!r}"
+                        f"{', ' if params else ''}{params}) has {target.y.size} and "
+                        f"{target.u.size}")
+        # every check passed: apply
+        if built is not None:
+            self._adopt(built, key)
+        elif sim is None:
+            self._adopt(None, None)  # as before the first build: built again when needed
+        if sim is not None:
+            self._sim.set_state((float(t), np.array(y, dtype=float), np.array(u, dtype=float)))
+        self._halted, self._start_time = halted, float(start_time)
+        return None
+
+
+class _Built(NamedTuple):
+    """A simulator made for the instance's parameters, with the indexes of the FMU's inputs and
+    outputs in the model's vectors (:meth:`DrillstringPlant._make_simulator`)."""
+
+    sim: Any
+    out_index: np.ndarray
+    in_index: np.ndarray
+    u: np.ndarray
+    all_inputs: bool
+
+
+def _sim_problem(sim: Any, finite: bool) -> str | None:
+    """Why ``sim`` is not [time, state vector, inputs] of numbers (finite ones unless the state
+    is of a diverged, halted instance), or None."""
+    if not (isinstance(sim, list) and len(sim) == 3 and isinstance(sim[1], list)
+            and isinstance(sim[2], list)):
+        return "its simulator state is not [time, state vector, inputs]"
+    return (support.state.numbers_problem("its state vector", sim[1], finite)
+            or support.state.numbers_problem("its held inputs", sim[2], finite)
+            or support.state.number_problem("its time", sim[0]))
 
 
 DrillstringPlant._tables(_INPUT_ROWS, _OUTPUT_ROWS)

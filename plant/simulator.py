@@ -367,8 +367,13 @@ class PlantSimulator:
         return self.time, self.y.copy(), self.u.copy()
 
     def set_state(self, state: tuple[float, np.ndarray, np.ndarray]) -> None:
-        """Restore a state from :meth:`get_state`."""
+        """Restore a state from :meth:`get_state`: all of it, or (ValueError: a state vector or
+        inputs of another length) nothing."""
         t, y, u = state
+        y, u = np.asarray(y, dtype=float), np.asarray(u, dtype=float)
+        if y.shape != self.y.shape or u.shape != self.u.shape:
+            raise ValueError(f"a state of {y.size} values and {u.size} inputs; this model has "
+                             f"{self.y.size} and {self.u.size}")
         self.time = float(t)
         self.y[:] = y
         self.u[:] = u

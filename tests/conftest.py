@@ -144,9 +144,10 @@ def host(tmp_path_factory: pytest.TempPathFactory) -> Path:
     import shutil
 
     from support import c_host
+    from support.required import missing
 
     if shutil.which("gcc") is None:
-        pytest.skip("no gcc")
+        missing("gcc", "not on PATH")
     return c_host.compile_host(tmp_path_factory.mktemp("c_host"))
 
 

@@ -109,9 +109,10 @@ def test_binary_needs_no_python(c_controller_fmu) -> None:
         names = zf.namelist()
         binary = zf.read("binaries/linux64/StrainControllerC.so")
     assert b"libpython" not in binary and b"Py_Initialize" not in binary
-    assert not any(n.startswith("resources/") for n in names)
+    assert [n for n in names if n.startswith("resources/")] == ["resources/dcs_build.json"]
     assert {"sources/model.c", "sources/fmi2_cosimulation.c", "sources/dcs_registry.c",
-            "sources/dcs_registry.h", "sources/fmi2Functions.h"} <= set(names)
+            "sources/dcs_registry.h", "sources/dcs_state_format.c", "sources/dcs_state_format.h",
+            "sources/dcs_build.h", "sources/fmi2Functions.h"} <= set(names)
 
 
 @pytest.fixture(scope="module")

@@ -15,9 +15,11 @@ from pathlib import Path
 
 import pytest
 
+from support.required import import_module
+
 pytestmark = [pytest.mark.interop]
 
-pytest.importorskip("libcosimpy")
+import_module("libcosimpy")
 
 SCRIPT = textwrap.dedent("""
     import json, sys

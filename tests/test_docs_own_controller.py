@@ -1,4 +1,4 @@
-"""docs/your_own_controller.md runs as written (issue 31, item 3).
+"""docs/your_own_controller.md runs as written.
 
 The page's blocks run in order in an empty folder: ```` ```lang file=NAME ```` writes NAME,
 a ``run`` flag runs it with this interpreter, and each ``$`` line of a ``console`` block runs

@@ -1,5 +1,5 @@
-"""Today's scenes give bit-identical outputs to main's plant (issue 25: "today's scenes are
-unchanged").
+"""Today's scenes give bit-identical outputs to the plant before the field-scale extension
+("today's scenes are unchanged").
 
 The second implementation is main's own plant: the package ``plant/`` at :data:`BASE` (the main
 commit the field branch last merged, before the field-scale plant), taken from this clone's git
@@ -35,9 +35,10 @@ from drillcosim.cosim.scenario.config import load_config
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.scene import load_scene
 from drillcosim.plant.simulator import PlantSimulator, simulate
+from support.required import missing
 
 ROOT = Path(__file__).resolve().parents[1]
-#: main when the field branch last merged it (issues 22-24, 26), without the field-scale plant
+#: the main line when the field-scale work last merged it, without the field-scale plant
 BASE = "d30ca1b00e05bf1b8ad0d0ce76d3b9a61b7329e4"
 STEPS = 120  # communication steps with inputs
 ALONE = 0.1  # s, the plant alone through the recording loop
@@ -58,7 +59,7 @@ def base_plant() -> tuple[tuple[ModuleType, ModuleType, ModuleType], Path]:
     """main's plant (imported as ``plant_<sha>``): its scene, model and simulator modules; its
     scenes folder."""
     if not _have_base():
-        pytest.skip(f"needs this repository's git history (commit {BASE[:12]})")
+        missing("git-history", f"git, or commit {BASE[:12]} in this clone's history")
     name = f"plant_{BASE[:12]}"
     home = user_cache() / "baseline" / BASE[:12]
     if not (home / name / "__init__.py").exists():

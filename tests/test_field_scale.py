@@ -1,4 +1,4 @@
-"""Field-scale strings (issue 25): sections, a curved hole, drilling fluid, checked against
+"""Field-scale strings: sections, a curved hole, drilling fluid, checked against
 independent models: a soft-string torque-and-drag model (tests/support/soft_string.py), the
 Dawson-Paslay buckling load, the exact frequency equation of a two-section rod, Archimedes and
 the added mass of a confined cylinder, energy conservation."""

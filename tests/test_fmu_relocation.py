@@ -1,6 +1,6 @@
 """The FMUs on "another machine": built by an interpreter that is gone, run by a plain C host.
 
-Issue 12: an FMU must not need the building machine. Here the FMUs are built by a throw-away
+An FMU must not need the building machine. Here the FMUs are built by a throw-away
 venv (the building interpreter, the last discovery candidate), that venv is renamed away, and a
 different venv with the packages sits elsewhere on ``PATH`` (offline: its site-packages holds a
 ``.pth`` line pointing at this environment's site-packages). A plain C host (no Python in its
@@ -25,6 +25,7 @@ import pytest
 from fmpy import read_model_description, simulate_fmu
 
 from support import c_host
+from support.required import missing
 
 pytestmark = [pytest.mark.slow, pytest.mark.needs_cc]
 
@@ -51,7 +52,7 @@ def _host_env(tmp: Path, path: str, **extra: str) -> dict[str, str]:
 @pytest.fixture(scope="module")
 def relocated(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     if shutil.which("gcc") is None:
-        pytest.skip("no gcc")
+        missing("gcc", "not on PATH")
     base = tmp_path_factory.mktemp("relocation")
     # the building interpreter: sees this environment's packages, drillcosim included (the
     # checkout's editable finder is the one .pth import line that must run there)

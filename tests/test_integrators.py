@@ -6,11 +6,13 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from drillcosim.plant import layout as lay
 from drillcosim.plant.integrators import exponential_matrices
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.scene import load_scene
 from drillcosim.plant.simulator import PlantSimulator
-from support.numpy_rhs import rhs3d_numpy
+from drillcosim.plant.uniform_pipe import lateral_reference_frequency
+from support.numpy_rhs import body_constants, rhs3d_numpy
 
 
 def _model(name: str, **ov) -> DrillstringModel:
@@ -31,9 +33,17 @@ def _random_state(m: DrillstringModel, rng: np.random.Generator) -> np.ndarray:
     {},
     {"gravity": 9.81, "top_drive": {"torsional_stiffness": 1e6}, "bit": {"torque": 100.0},
      "contact": {"damping": 1e3}},
+    {"damping": {"lateral_model": "joint"}, "pipe": {"shear_coefficient": 0.6, "length": 72.0},
+     "stabilizers": {"damping": 5e3}, "top_drive": {"lateral_stiffness": 1e8}},
 ])
 def test_numpy_rhs_equals_numba_kernel(overrides):
+    """The numpy reference derives its body and joint constants from the parameters itself
+    (body_constants): they equal the model's packed ones, and its right-hand side equals the
+    kernel's to 1e-12 of each block's scale on random states (contact active)."""
     m = _model("paper_open_loop", **overrides)
+    q = body_constants(m.params, lateral_reference_frequency(m.params))
+    for key, value in q.items():
+        assert value == pytest.approx(m.p[getattr(lay, key)], rel=1e-13, abs=0.0), key
     rng = np.random.default_rng(1)
     n = m.n
     for _ in range(5):
@@ -41,7 +51,7 @@ def test_numpy_rhs_equals_numba_kernel(overrides):
         m.u[:] = rng.normal(0.0, 1e3, m.u.size)
         t = float(rng.uniform(0.0, 3.0))
         a = m.rhs(t, y)
-        b = rhs3d_numpy(t, y, m.p, m.ip, m.fp, m.u)
+        b = rhs3d_numpy(t, y, q, m.ip, m.fp, m.u, m.p[lay.ZBIT0])
         for k in range(4):  # per block, relative to the block's scale
             blk = slice(3 * n * k, 3 * n * (k + 1))
             assert np.abs(a[blk] - b[blk]).max() <= 1e-12 * np.abs(a[blk]).max()

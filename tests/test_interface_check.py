@@ -9,6 +9,7 @@ has runs, the unserved plant inputs keep their start value, and a warning names 
 
 from __future__ import annotations
 
+import re
 import shutil
 import zipfile
 from collections.abc import Callable
@@ -151,7 +152,7 @@ def test_a_target_connected_twice_is_refused(project_fmus, c_controller_fmu) -> 
 
 def test_a_law_key_a_foreign_controller_lacks_is_not_required_an_override_of_it_is(
         project_fmus, c_controller_fmu, tmp_path) -> None:
-    """Issue 31: the scene file's law keys a foreign FMU does not declare are not required of
+    """The scene file's law keys a foreign FMU does not declare are not required of
     it (a warning names them); an override of one would change nothing: a problem."""
     no_lag = variant(c_controller_fmu, tmp_path / "NoLag.fmu",
                      lambda r: _drop(r, {"lag_time_constant", "enabled", "mode"}))
@@ -239,3 +240,35 @@ def test_a_plant_without_a_scene_parameter_is_warned_about(project_fmus, tmp_pat
         ss = _build(closed_loop, plant_fmu=plant,
                           controller_fmu=project_fmus["StrainController"])
     assert ss.system.fmu("plant").parameters == {}
+
+
+@pytest.mark.parametrize("name, value, words", [
+    ("kx", 3, "has no variable 'kx' to set"),
+    ("mode", 0.5, "'mode' is Integer; got float 0.5"),
+    ("mode", 3, "'mode' = 3 is outside its declared range [0, 1]"),
+])
+def test_a_foreign_fmus_own_parameters_are_checked_from_every_door(
+        project_fmus, tmp_path, capsys, name, value, words) -> None:
+    """A foreign controller FMU's own parameter, from the API's ``overrides``, from ``--set``
+    and from a scene's ``[controller.parameters]``: checked against its modelDescription before
+    the first step (the project's strain controller given as a file is a foreign FMU; it
+    declares ``mode`` Integer in [0, 1]); the CLI exits 2 with no traceback."""
+    import drillcosim
+    from drillcosim.cosim.master.errors import UserError
+
+    plant, c_controller_fmu = project_fmus["DrillstringPlant"], project_fmus["StrainController"]
+    key = f"controller.parameters.{name}"
+    with pytest.raises(UserError, match=re.escape(words)):
+        drillcosim.simulate("paper_closed_loop", stop_time=0.01, overrides={key: value},
+                            plant_fmu=plant, controller_fmu=c_controller_fmu)
+    scene = tmp_path / "mine.toml"
+    shutil.copy(c_controller_fmu, tmp_path / "C.fmu")
+    scene.write_text(f'extends = "paper_closed_loop"\n[controller]\nenabled = true\n'
+                     f'fmu = "C.fmu"\n[controller.parameters]\n{name} = {value}\n')
+    for argv in (["run", "paper_closed_loop", "--controller-fmu", str(c_controller_fmu),
+                  "--set", f"{key}={value}"], ["run", str(scene)]):
+        assert main([*argv, "--stop-time", "0.01", "--no-plots", "--out",
+                     str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err
+        assert words in err and "Traceback" not in err
+    assert not (tmp_path / "out" / "results.csv").exists()

@@ -28,6 +28,7 @@ import pytest
 
 from support.closed_loop import ClosedLoop
 from support.engines import CSV_RESOLUTION, compare, ecos_binary, run_ecos_cli, run_ecos_library
+from support.required import import_module, missing
 
 pytestmark = [pytest.mark.interop]
 
@@ -36,7 +37,10 @@ pytestmark = [pytest.mark.interop]
 def ecos(tmp_path_factory) -> Path:
     exe, info = ecos_binary(tmp_path_factory.mktemp("ecos_bin"))
     if exe is None:
-        pytest.skip(info)
+        if "libtbb" in info:
+            missing("libtbb12", info)
+        import_module("ecospy")
+        pytest.fail(info, pytrace=False)  # ecospy is there but its engine cannot run
     return exe
 
 

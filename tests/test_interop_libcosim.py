@@ -24,10 +24,11 @@ from drillcosim.cosim.scenario.build import build_system
 from drillcosim.cosim.scenario.config import load_config
 from support.closed_loop import ClosedLoop
 from support.engines import compare, run_libcosim
+from support.required import import_module
 
 pytestmark = [pytest.mark.interop]
 
-pytest.importorskip("libcosimpy")
+import_module("libcosimpy")
 
 
 def _check(loop: ClosedLoop, tmp_path: Path, record_property, label: str) -> None:

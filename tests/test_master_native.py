@@ -12,6 +12,7 @@ import ctypes
 import math
 from collections.abc import Callable
 
+import numba
 import numpy as np
 import pytest
 
@@ -25,6 +26,7 @@ from drillcosim.cosim.master.native.runner import LOOP_ENV, NativeLoop
 from drillcosim.cosim.master.recorder import Recorder
 from drillcosim.cosim.master.slave import CompiledCalls, Slave
 from drillcosim.cosim.master.system import Connection, FmuSpec, SystemSpec
+from support.required import missing
 
 pytestmark = pytest.mark.needs_cc
 
@@ -243,7 +245,6 @@ def test_the_library_is_built_into_the_user_cache(tmp_path, monkeypatch):
 
 
 # --- a compiled in-process slave (contract item 10, CompiledCalls) ---------------------------
-numba = pytest.importorskip("numba")
 U, X, N, FAIL_AT, PY_EVERY, N_PY = range(6)
 LEAVE_TO_PYTHON = 1
 
@@ -454,11 +455,11 @@ def test_the_loop_runs_clean_under_address_and_undefined_sanitizers(fmus, tmp_pa
 
     clang = shutil.which("clang")
     if clang is None:
-        pytest.skip("clang not installed")
+        missing("clang-asan", "clang is not on PATH")
     runtime = subprocess.run([clang, "-print-file-name=libclang_rt.asan-x86_64.so"],
                              capture_output=True, text=True).stdout.strip()
     if not os.path.isfile(runtime):
-        pytest.skip("clang's address-sanitizer runtime not installed")
+        missing("clang-asan", "clang's address-sanitizer runtime is not installed")
     lib = tmp_path / "steps_sanitized.so"
     subprocess.run([clang, "-std=c99", "-O1", "-g", "-Wall", "-Wextra", "-Werror", "-shared",
                     "-fPIC", "-ffp-contract=off", "-fsanitize=address,undefined",

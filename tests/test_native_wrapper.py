@@ -28,6 +28,7 @@ from fmpy.validation import validate_fmu
 from drillcosim.fmu_src.build import REGISTRY, FmuRecipe, build_one, shipped_modules
 from drillcosim.fmu_src.wrapper import compile_wrapper
 from support import c_host
+from support.required import import_module, missing
 
 pytestmark = [pytest.mark.needs_cc]
 
@@ -538,7 +539,7 @@ def test_fmu_state_get_set_serialize_bit_identical(name: str, native_dir: Path) 
 # ------------------------------------------------------------------------ third parties
 @pytest.mark.interop
 def test_libcosim_runs_native_fmus_like_our_master(native_dir: Path, tmp_path: Path) -> None:
-    pytest.importorskip("libcosimpy")
+    import_module("libcosimpy")
     from drillcosim.cosim.master.master import Master
     from drillcosim.cosim.master.ssp import export_ssp
     from drillcosim.cosim.scenario.build import build_system
@@ -714,7 +715,7 @@ def test_a_python_host_of_an_unsupported_version_gets_one_clear_message(
         native_dir: Path, tmp_path: Path) -> None:
     other = unsupported_python_version()
     if other is None:
-        pytest.skip("no Python 3 outside 3.10-3.13 on this machine")
+        missing("python3-unsupported", "no Python 3 outside 3.10-3.13 on this machine")
     d = c_host.unzip(native_dir / "StrainController.fmu", tmp_path / "unzip")
     proc = subprocess.run([other, "-c", VERSION_SCRIPT,
                            str(d / "binaries/linux64/StrainController.so"),

@@ -45,7 +45,7 @@ def test_kicked_collar_rolls_backward_at_minus_omega_r_over_c():
     assert np.all(v["body6_whirl_direction"][last] == -1.0)
     assert np.all(v["body6_contact_force"][last] > 0.0)  # on the wall the whole time
     assert whirl.std() < 1e-3 * abs(whirl.mean())  # a steady orbit
-    # issue 17: within a few percent of -Omega r / c (measured 1.3 %: the wall yields 0.1 mm)
+    # rolling whirl: within a few percent of -Omega r / c (measured 1.3 %: the wall yields 0.1 mm)
     assert whirl.mean() == pytest.approx(-omega * r / c, rel=0.02)
     # rolling without slip on the actual orbit radius (c + penetration): measured 0.24 %
     assert whirl.mean() == pytest.approx(np.mean(-omega * r / rho), rel=0.005)

@@ -1,5 +1,4 @@
-"""One port table per component: no code outside the tables formats or parses a variable name
-(issue 31, item 1).
+"""One port table per component: no code outside the tables formats or parses a variable name.
 
 The tables are ``plant/signals.py`` (with ``plant/scene.py``'s parameter table, whose names it
 forms there) and ``controller/ports.py``; everything else asks them. This test reads every
@@ -61,7 +60,7 @@ def test_no_code_outside_the_tables_formats_or_parses_a_variable_name() -> None:
 
 
 def test_the_patterns_catch_what_they_are_for() -> None:
-    """The searches find the forms issue 31 listed (so a pass above means something)."""
+    """The searches find the forms the plug-in rework removed (so a pass above means something)."""
     for bad in ('column(data, PLANT, f"body{b}_X")', 'f"strain{s}_{a}"',
                 'f"actuator{s}_force_{a}"', 'f"gain_matrix_{i}_{j}"',
                 'f"{side}_limit_{o}"'):
@@ -102,3 +101,32 @@ def test_the_default_plant_table_is_the_default_scenes() -> None:
     scene = load_scene("paper_open_loop").plant
     assert scene.contact_bodies == PlantParams().contact_bodies
     assert scene.actuator_joints == PlantParams().actuator_joints
+
+
+#: A vendored package's module name (``_dcs_plant_0_1_0``, ``_dcs_pythonfmu_0_7_0``, ...).
+VENDORED = re.compile(r"\b_dcs_[a-z_]+?_\d+_\d+_\d+\b")
+
+
+def _code_lines(path: Path) -> list[str]:
+    """The lines of ``path`` outside docstrings, without comments."""
+    lines, in_doc = [], False
+    for line in path.read_text(encoding="utf-8").splitlines():
+        quotes = line.count('"""')
+        if in_doc or quotes:
+            in_doc = in_doc != (quotes % 2 == 1)
+            continue
+        lines.append(line.split("#", 1)[0])
+    return lines
+
+
+def test_a_vendored_module_name_is_spelled_once_per_file() -> None:
+    """Code names a vendored package at most once per file (its import; build.py's rule
+    ``vendored(folder)`` makes the names), not at every use."""
+    found = []
+    for path in _sources():
+        names = [m for line in _code_lines(path) for m in VENDORED.findall(line)]
+        found += [f"{path.relative_to(ROOT)}: {n} x{names.count(n)}" for n in set(names)
+                  if names.count(n) > 1]
+    assert not found, "\n".join(found)
+    assert VENDORED.findall('import _dcs_slave_support_0_1_0 as support') == [
+        "_dcs_slave_support_0_1_0"]

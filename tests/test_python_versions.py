@@ -2,7 +2,8 @@
 and in a C host with a Python of every other supported version on this machine.
 
 For each version 3.10 to 3.13 other than this interpreter's (found as ``~/.pyenv/versions/3.X.*``
-or ``python3.X`` on PATH; skipped with the reason when absent):
+or ``python3.X`` on PATH; each is a row of ``.ci/required-tools``: absent, a failure under CI,
+else a skip naming it):
 
 * a fresh venv with only fmpy, numpy, scipy and numba (cached under the user cache, keyed by the
   interpreter, its version and the requirements: a second run reuses it; ``pip --no-compile``
@@ -39,12 +40,15 @@ from drillcosim.fmu_src.build import REGISTRY, shipped_modules, user_cache
 from drillcosim.fmu_src.wrapper import HERE as WRAPPER_DIR
 from drillcosim.fmu_src.wrapper import compile_shared, compile_wrapper, python_range
 from support import c_host
+from support.required import missing
 
 HERE = Path(__file__).resolve().parent
 RUN = HERE / "support" / "version_run.py"
 REQUIREMENTS = ("fmpy", "numpy", "scipy", "numba")
 LOW, HIGH = python_range()
 MINORS = tuple(range(LOW, HIGH + 1))
+#: the supported versions other than this interpreter's (which made the reference run)
+OTHERS = tuple(m for m in MINORS if m != sys.version_info.minor)
 CANONICAL_PLANT = dict(next(r for r in REGISTRY if r.name == "DrillstringPlant").vendored)["plant"]
 RTOL = 1e-12  #: of each signal's peak
 
@@ -62,13 +66,11 @@ def find_python(minor: int) -> str | None:
     return None
 
 
-def python_or_skip(minor: int) -> str:
-    if minor == sys.version_info.minor:
-        pytest.skip(f"3.{minor} is this interpreter: it made the reference run")
+def python_or_missing(minor: int) -> str:
+    """CPython 3.<minor>: a required tool (a failure under CI when absent, else a skip)."""
     exe = find_python(minor)
     if exe is None:
-        pytest.skip(f"no CPython 3.{minor} on this machine (looked for ~/.pyenv/versions/"
-                    f"3.{minor}.* and python3.{minor} on PATH)")
+        missing(f"python3.{minor}", f"looked for ~/.pyenv/versions/3.{minor}.* and python3.{minor} on PATH")
     return exe
 
 
@@ -188,7 +190,7 @@ def version_runs(project_fmus: dict[str, Path], host: Path,
     """Each other version's venv and runs, two versions at a time (the first use of a version
     compiles the plant's numba kernels for it: ~15 s of CPU each; a fresh venv ~10 s)."""
     where = tmp_path_factory.mktemp("versions")
-    found = {m: find_python(m) for m in MINORS if m != sys.version_info.minor}
+    found = {m: find_python(m) for m in OTHERS}
 
     def work(minor: int, exe: str) -> dict:
         return run_version(venv_for(exe), project_fmus, host, where / f"3.{minor}")
@@ -202,11 +204,11 @@ def version_runs(project_fmus: dict[str, Path], host: Path,
 @pytest.mark.slow
 @pytest.mark.interop
 @pytest.mark.needs_cc
-@pytest.mark.parametrize("minor", MINORS)
+@pytest.mark.parametrize("minor", OTHERS)
 def test_the_fmus_run_in_python_and_c_hosts_of_each_version(
         minor: int, version_runs: dict[int, Future], project_fmus: dict[str, Path],
         reference: dict, c_reference: dict[str, np.ndarray]) -> None:
-    exe = python_or_skip(minor)
+    exe = python_or_missing(minor)
     got = version_runs[minor].result(timeout=1800)
     python = venv_for(exe)  # made by the run: only its path here
     assert got["fmpy"]["python"].startswith(f"3.{minor}.")
@@ -248,12 +250,12 @@ def test_the_wrapper_compiles_against_each_versions_headers(minor: int, tmp_path
     (dcs_python.h) equal the full API's ``Py_buffer`` of that version."""
     exe = sys.executable if minor == sys.version_info.minor else find_python(minor)
     if exe is None:
-        pytest.skip(f"no CPython 3.{minor} on this machine")
+        missing(f"python3.{minor}", f"looked for ~/.pyenv/versions/3.{minor}.* and python3.{minor} on PATH")
     include = subprocess.run([exe, "-c", "import sysconfig; print(sysconfig.get_paths()"
                               "['include'])"], capture_output=True, text=True,
                              check=True).stdout.strip()
     if not (Path(include) / "Python.h").is_file():
-        pytest.skip(f"no headers of CPython 3.{minor} ({include})")
+        missing(f"python3.{minor}", f"its headers are not in {include}")
     compile_wrapper(tmp_path / "w.so", include=include)  # warnings are errors
     header = (WRAPPER_DIR / "dcs_python.h").read_text()
     start = header.index("/* Py_buffer of the stable ABI")

@@ -3,16 +3,16 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from test_master_mechanics import plant_loop
 
 from drillcosim.cosim.master.master import Master
+from support.required import import_module
 
 
 def test_fmpy_plot_result_accepts_the_recorded_array(fmus):
     """fmpy.util.plot_result = create_plotly_figure + show/write: the figure gets one trace per
     recorded variable with our time axis and values."""
-    pytest.importorskip("plotly")
+    import_module("plotly")
     from fmpy.util import create_plotly_figure
 
     res = Master(plant_loop(fmus, {})).simulate(0.2, outputs=["plant.x", "ctrl.y"],

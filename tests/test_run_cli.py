@@ -22,7 +22,7 @@ from drillcosim.cosim.scenario.scene_fmus import ensure_recipes, recipe_named
 from drillcosim.cosim.scenario.simulate import simulate
 from drillcosim.cosim.scenario.summary import SUMMARY_KEYS
 
-PNGS = ("orbit.png", "orbit_steady.png", "deflection_contact.png", "actuators.png")
+PNGS = ("orbit.png", "deflection_contact.png", "actuators.png")
 #: Fixed co-simulation settings, so the tests do not follow tuning of the scene files.
 COSIM = ["--set", "cosim.step=1e-3", "--set", 'cosim.algorithm="jacobi"',
          "--no-progress"]
@@ -30,10 +30,9 @@ COSIM = ["--set", "cosim.step=1e-3", "--set", 'cosim.algorithm="jacobi"',
 
 @pytest.fixture(scope="module")
 def fmu_dir() -> Path:
-    try:
-        paths = ensure_recipes([recipe_named(n) for n in ("DrillstringPlant", "StrainController")])
-    except (FileNotFoundError, RuntimeError) as exc:
-        pytest.skip(f"plant/controller FMUs unavailable: {exc}")
+    """The plant and controller FMUs the CLI finds (built when stale): a broken build is an error
+    of every test here, not a skip."""
+    paths = ensure_recipes([recipe_named(n) for n in ("DrillstringPlant", "StrainController")])
     return paths["DrillstringPlant"].parent
 
 

@@ -44,6 +44,7 @@ from drillcosim.fmu_src.build_c import MODEL_IDENTIFIER, compile_library
 from drillcosim.fmu_src.wrapper import HERE as WRAPPER_DIR
 from drillcosim.fmu_src.wrapper import compile_shared, compile_wrapper, install_native_wrapper
 from support import bad_handles, c_host
+from support.required import missing
 
 pytestmark = [pytest.mark.needs_cc, pytest.mark.slow]
 
@@ -61,11 +62,11 @@ EXAMPLES = {"StrainController": 150, MODEL_IDENTIFIER: 300, "DrillstringPlant": 
 def asan_runtime() -> Path:
     """The shared ASan (+UBSan) runtime of clang; skips without clang or the runtime."""
     if shutil.which("clang") is None:
-        pytest.skip("clang is not installed (.ci/run installs Debian's clang)")
+        missing("clang-asan", "clang is not on PATH")
     path = Path(subprocess.run(["clang", "-print-file-name=libclang_rt.asan-x86_64.so"],
                                capture_output=True, text=True).stdout.strip())
     if not path.is_absolute() or not path.is_file():
-        pytest.skip("clang's AddressSanitizer runtime libclang_rt.asan-x86_64.so is missing")
+        missing("clang-asan", "clang's AddressSanitizer runtime libclang_rt.asan-x86_64.so is missing")
     return path
 
 

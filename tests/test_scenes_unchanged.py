@@ -1,5 +1,5 @@
 """Nothing moves: every shipped scene gives bit-identical outputs on today's plant and
-controllers and on those of a reference commit (issue 31, item 6).
+controllers and on those of a reference commit.
 
 The second implementation is the reference commit's own ``plant/`` and ``controller/``, taken
 from this clone's git history (:mod:`support.baseline`) and imported under other names. Each
@@ -17,7 +17,7 @@ equal to NaN), and so must how the run ended.
 
 The reference is a small table, :data:`REFERENCE` (scene -> commit, :data:`BASE` for the
 others): a change that moves a scene's numbers on purpose moves that scene's row to its own
-commit (the field-corrections issue 34 does, for the hoisting and field scenes).
+commit (a correction of the field physics would, for the hoisting and field scenes).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from drillcosim.cosim.scenario.simulate import simulate
 from drillcosim.plant.signals import PLANT
 from support.baseline import ROOT, Baseline, baseline_packages, have_commit, scenes_at
 
-#: The commit before issue 31 (main at 7845e95).
+#: The commit before controllers became plug-ins (7845e95).
 BASE = "7845e9590345d585957ff0445135eeb60138a650"
 #: Scenes whose reference is another commit (a change that moves them on purpose).
 REFERENCE: dict[str, str] = {}

@@ -25,6 +25,7 @@ from drillcosim.cosim.master.ssp import export_ssp
 from drillcosim.cosim.master.ssp_import import SspError, read_ssp
 from drillcosim.cosim.scenario.build import build_system
 from drillcosim.cosim.scenario.config import load_config
+from support.required import import_module
 
 A, W, K, X0, H, STOP = 2.0, 5.0, 3.0, 0.25, 0.01, 1.0
 
@@ -343,7 +344,7 @@ def test_cli_refuses_a_bad_ssp_with_exit_2_in_one_line(fmus, tmp_path, capsys) -
 
 @pytest.mark.interop
 def test_libcosim_runs_the_hand_written_ssp_like_our_import(fmus, tmp_path) -> None:
-    pytest.importorskip("libcosimpy")
+    import_module("libcosimpy")
     from support.engines import compare, run_libcosim
 
     ssp = make_ssp(tmp_path / "hand.ssp", fmus)

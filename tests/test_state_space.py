@@ -40,7 +40,6 @@ def test_law_equals_scipy_dlsim():
 
 def compiled(law):
     """The law's compiled step on fresh buffers (numba loaded: it is in the test process)."""
-    pytest.importorskip("numba")
     inputs, outputs = np.zeros(len(law.params.inputs)), np.zeros(len(law.params.outputs))
     step = law.compiled_step(inputs, outputs)
     assert step is not None

@@ -237,12 +237,13 @@ def test_killed_sweep_resumes_and_skips_finished_points(tmp_path):
 # --- order independence -------------------------------------------------------------------
 def _table(folder: Path) -> list[dict]:
     """Both files of a sweep folder, read raw (no repair), checked equal; sorted by key,
-    without the wall time (the one column that differs between runs)."""
+    without the wall times (the columns that differ between runs)."""
     import pyarrow.parquet as pq
 
     lines = list(csv.reader(open(folder / "results.csv")))
     assert lines[0] == list(COLUMNS)
-    text = {"key", "scene", "engine", "kind", "varied", "status", "verdict", "reason"}
+    text = {"key", "scene", "engine", "kind", "varied", "status", "verdict", "prediction_note",
+            "benefit_note", "reason"}
     from_csv = [{c: (v if c in text else (float(v) if v else math.nan))
                  for c, v in zip(COLUMNS, line)} for line in lines[1:]]
     from_parquet = pq.read_table(folder / "results.parquet").to_pylist()
@@ -253,7 +254,8 @@ def _table(folder: Path) -> list[dict]:
             assert a[c] == b[c] or (a[c] != a[c] and b[c] != b[c]), (a["key"], c, a[c], b[c])
     rows = sorted(from_csv, key=lambda r: r["key"])
     for r in rows:
-        r.pop("wall_time")
+        for c in ("wall_time", "startup_time", "stepping_time", "worker_startup"):
+            r.pop(c)
     return rows
 
 
@@ -473,7 +475,7 @@ def test_small_sweep_on_a_dask_local_cluster(tmp_path):
     from drillcosim.cosim.study.maps import plot_maps
 
     paths = plot_maps(tmp_path, predict=False)
-    assert [p.name for p in paths] == ["stability_map.png", "benefit_map.png"]
+    assert [p.name for p in paths] == ["stability_map.png", "benefit_map.png", "growth_rate.png"]
     assert all(p.stat().st_size > 10_000 for p in paths)
 
 

@@ -1,5 +1,4 @@
-"""Sweeps over any scene key (``--vary``), planned once into typed point configurations
-(issue 31, items 3 and 5).
+"""Sweeps over any scene key (``--vary``), planned once into typed point configurations.
 
 * ``sweep_spec`` validates the scene once and derives every point's configuration from it
   (``derive_config``); the points carry them, and running them reads no scene file again;
@@ -54,6 +53,31 @@ def test_points_carry_their_typed_configuration() -> None:
     for p in closed:
         ref = by_key[reference_key(p.key)]
         assert dict(ref.vary) == {"gravity": dict(p.vary)["gravity"]}
+
+
+def test_loop_points_keep_the_base_plant_and_equal_a_fresh_load(monkeypatch) -> None:
+    """A point that changes only loop settings (delay, gain, the controllers' period) keeps
+    the base configuration's plant (validated once per sweep) and is the configuration a fresh
+    load of the same overrides gives; a plant-side value makes the plant anew."""
+    from drillcosim.cosim.scenario import config as config_module
+
+    base = config_module.load_config(SCENE, {"cosim.stop_time": 0.5})
+    loop = {"cosim.actuator_delay": 5e-4, "controller.gain": 3e8, "cosim.step": 2.5e-4,
+            "cosim.controller_sample_period": 5e-4, "controller.lag_time_constant": 1e-3}
+    fresh = config_module.load_config(SCENE, {"cosim.stop_time": 0.5, **loop})
+    made = []
+    real = config_module.scene_from_dict
+    monkeypatch.setattr(config_module, "scene_from_dict",
+                        lambda *a, **k: made.append(1) or real(*a, **k))
+    derived = config_module.derive_config(base, loop)
+    assert not made and derived.scene is base.scene
+    assert repr(derived) == repr(fresh) and derived.overrides == fresh.overrides
+    # the strain controller switched off (the plant model's choice reads it), a plant key
+    for over in ({"controller.enabled": False}, {"gravity": 0.0}):
+        other = config_module.derive_config(base, over)
+        assert made and repr(other) == repr(config_module.load_config(
+            SCENE, {"cosim.stop_time": 0.5, **over}))
+        made.clear()
 
 
 def test_running_the_points_reads_no_scene_again(tmp_path, monkeypatch) -> None:

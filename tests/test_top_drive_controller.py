@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,6 +28,7 @@ from drillcosim.cosim.study.sweep import execute_points, execute_sweep
 from drillcosim.cosim.study.table import ResultTable, read_table
 from support.torsional import bit_torque, sampled_loop_growth, two_dof
 
+ROOT = Path(__file__).resolve().parents[1]
 KEY = "top_drive_controller.p_gain"
 
 
@@ -204,12 +206,14 @@ def test_linearized_two_dof_loop_threshold_brackets_the_sweep() -> None:
     slope = (bit_torque(plant.bit, 2.0 + d, 5e4) - bit_torque(plant.bit, 2.0 - d, 5e4)) / (2 * d)
     assert slope < 0
 
-    def growth(p_gain: float) -> float:
+    def matrix(p_gain: float) -> np.ndarray:
         ts = np.array([m.k, -m.k, m.c, -m.c, 0.0])       # states alpha, theta, Omega, omega, x
         tm = np.array([0.0, 0.0, -p_gain, 0.0, tc["i_gain"]]) + tc["torque_feedback"] * ts
         acc = minv @ np.vstack([tm - ts, ts - np.array([0, 0, 0, slope, 0])])
-        a = np.vstack([[0, 0, 1, 0, 0], [0, 0, 0, 1, 0], acc, [0, 0, -1, 0, 0]])
-        ev = np.linalg.eigvals(a)
+        return np.vstack([[0, 0, 1, 0, 0], [0, 0, 0, 1, 0], acc, [0, 0, -1, 0, 0]])
+
+    def growth(p_gain: float) -> float:
+        ev = np.linalg.eigvals(matrix(p_gain))
         return float(ev[np.abs(ev) > 1e-9].real.max())  # the rigid rotation (0) left out
 
     assert growth(150.0) > 0 > growth(1000.0)
@@ -217,7 +221,17 @@ def test_linearized_two_dof_loop_threshold_brackets_the_sweep() -> None:
     while hi - lo > 1e-3:
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if growth(mid) > 0 else (lo, mid)
-    assert hi == pytest.approx(212.4, abs=0.5)  # docs/physics.md section 5
+    # the same threshold by Routh-Hurwitz, not by eigenvalues: P enters the loop matrix as a
+    # rank-one term, so the characteristic polynomial s (s^4 + a1 s^3 + a2 s^2 + a3 s + a4)
+    # has coefficients affine in P, and the quartic leaves the left half plane where its
+    # Hurwitz determinant a3 (a1 a2 - a3) - a1^2 a4 (a cubic in P) changes sign
+    c0, c1 = (np.poly(matrix(p))[1:5] for p in (0.0, 1.0))
+    a1, a2, a3, a4 = (np.poly1d([c1[i] - c0[i], c0[i]]) for i in range(4))
+    crossing = [r.real for r in (a3 * (a1 * a2 - a3) - a1 * a1 * a4).roots
+                if abs(r.imag) < 1e-9 and 150.0 < r.real < 1000.0]
+    assert len(crossing) == 1 and hi == pytest.approx(crossing[0], abs=2e-3)
+    # docs/physics.md section 5 quotes it (P_c at I = 1000 N m/rad)
+    assert f"| {crossing[0]:.1f} |" in (ROOT / "docs" / "physics.md").read_text()
 
 
 @pytest.mark.slow

@@ -38,6 +38,7 @@ from __future__ import annotations
 import ctypes
 import math
 from collections.abc import Callable, Mapping, Sequence
+from time import perf_counter
 
 from .delays import DelayLine
 from .errors import DivergenceError
@@ -121,6 +122,9 @@ class _Algorithm:
         self.newest: list[int] = []
         self.lines: list[DelayLine] = []
         self.y_names: list[str] = []
+        #: per component (in stepping order) [step total, step max, exchange total, steps]
+        #: [s, s, s, 1]: the wall time of its calls, kept by both loops (:meth:`timings`)
+        self.timing = (ctypes.c_double * 4)()
 
     def setup(self, system: SystemSpec, slaves: Mapping[str, Slave],
               time_of: Callable[[int], float],
@@ -143,6 +147,7 @@ class _Algorithm:
         H = system.base_step
         self.plans = [_Plan(i, slaves[n], system.fmu(n).sample_period_ticks, H)
                       for i, n in enumerate(order)]
+        self.timing = (ctypes.c_double * (4 * max(1, len(self.plans))))()
         by_name = {p.name: p for p in self.plans}
         for ref in [c.source for c in system.connections] + list(read_outputs):
             fmu, var = split_variable(ref, "output")
@@ -241,6 +246,37 @@ class _Algorithm:
     def do_step(self, tick: int) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
 
+    def reset_timing(self) -> None:
+        """Zero the components' call times (:attr:`timing`): the stepping loop starts."""
+        ctypes.memset(self.timing, 0, ctypes.sizeof(self.timing))
+
+    def timings(self) -> dict[str, dict[str, float]]:
+        """Per component (by name): ``steps``, ``step_total_s``, ``step_max_s`` and
+        ``exchange_s`` (its set-inputs and get-outputs calls) since :meth:`reset_timing`."""
+        w = self.timing
+        return {p.name: {"steps": int(w[4 * p.index + 3]), "step_total_s": w[4 * p.index],
+                         "step_max_s": w[4 * p.index + 1], "exchange_s": w[4 * p.index + 2]}
+                for p in self.plans}
+
+    def _timed_step(self, f: tuple, t: float) -> int:
+        """Plan ``f``'s step from ``t``, its wall time added to :attr:`timing`."""
+        t0 = perf_counter()
+        st = f[3](t, f[2])
+        dt = perf_counter() - t0
+        w, k = self.timing, 4 * f[0]
+        w[k] += dt
+        if dt > w[k + 1]:
+            w[k + 1] = dt
+        w[k + 3] += 1.0
+        return st
+
+    def _timed_read(self, f: tuple) -> int:
+        """Plan ``f``'s get-outputs call, its wall time added to :attr:`timing`."""
+        t0 = perf_counter()
+        st = f[4]()
+        self.timing[4 * f[0] + 2] += perf_counter() - t0
+        return st
+
     def _apply_inputs(self, f: tuple, tick: int, t: float) -> None:
         """Write plan ``f``'s inputs for its step from ``tick`` (held / extrapolated / delayed).
 
@@ -253,7 +289,9 @@ class _Algorithm:
             u[d] = y[s]
         for d, line, horizons, p in f[8]:
             u[d] = line.value(horizons[tick % p])
+        t0 = perf_counter()
         st = f[5]()
+        self.timing[4 * f[0] + 2] += perf_counter() - t0
         if st > 1:
             self.plans[f[0]].slave.fail(st, "fmi2SetReal", t)
 
@@ -270,7 +308,7 @@ class JacobiAlgorithm(_Algorithm):
         for f in self.flat:
             if tick % f[1]:
                 continue
-            st = f[3](t, f[2])
+            st = self._timed_step(f, t)
             if st > 1:
                 self.plans[f[0]].slave.fail(st, "fmi2DoStep", t)
         k1 = tick + 1
@@ -279,7 +317,7 @@ class JacobiAlgorithm(_Algorithm):
         for f in self.flat:
             if k1 % f[1]:
                 continue
-            st = f[4]()
+            st = self._timed_read(f)
             if st > 1:
                 self.plans[f[0]].slave.fail(st, "fmi2GetReal", time_of(k1))
             newest[f[0]] = k1
@@ -309,10 +347,10 @@ class GaussSeidelAlgorithm(_Algorithm):
             if tick % p:
                 continue
             self._apply_inputs(f, tick, t)
-            st = f[3](t, f[2])
+            st = self._timed_step(f, t)
             if st > 1:
                 self.plans[f[0]].slave.fail(st, "fmi2DoStep", t)
-            st = f[4]()
+            st = self._timed_read(f)
             if st > 1:
                 self.plans[f[0]].slave.fail(st, "fmi2GetReal", time_of(tick + p))
             newest[f[0]] = tick + p

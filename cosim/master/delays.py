@@ -27,9 +27,7 @@ Coupling (applied to the delayed signal):
 
 from __future__ import annotations
 
-import math
-
-_EPS = 1e-9
+from .timegrid import split_ticks
 
 
 class DelayLine:
@@ -48,11 +46,7 @@ class DelayLine:
     __slots__ = ("n", "f", "depth", "buf", "pos", "linear", "delay", "sample_period")
 
     def __init__(self, delay: float, sample_period: float, linear: bool = False):
-        ratio = delay / sample_period
-        n = math.floor(ratio + _EPS)
-        f = ratio - n
-        if f < _EPS:
-            f = 0.0
+        n, f = split_ticks(delay, sample_period)
         self.delay = delay
         self.sample_period = sample_period
         self.n = n

@@ -23,7 +23,6 @@ from __future__ import annotations
 import shutil
 from collections.abc import Mapping
 from dataclasses import dataclass
-from fractions import Fraction
 from pathlib import Path
 from typing import Protocol
 
@@ -32,6 +31,7 @@ from .algorithms import GaussSeidelAlgorithm, JacobiAlgorithm, _Algorithm, make_
 from .errors import CosimError
 from .slave import FmuSlave, Slave
 from .system import SystemSpec, split_variable
+from .timegrid import grid_ticks, seconds, step_fraction
 from .unpack import unpack
 
 
@@ -82,10 +82,8 @@ class Execution:
         self.system = system
         self.base_step = system.base_step
         self.start_time = system.start_time
-        frac = Fraction(system.base_step).limit_denominator(10**12)
-        if float(frac) != system.base_step:
-            frac = Fraction(system.base_step)
-        self._num, self._den = frac.numerator, frac.denominator
+        #: the base step as an exact fraction [s] (:func:`.timegrid.step_fraction`)
+        self.base_fraction = step_fraction(system.base_step)
         self.tick = 0
         self.observers: list = []
         self.manipulators: list = []
@@ -122,22 +120,20 @@ class Execution:
     # -- time -----------------------------------------------------------------
     def time_of(self, tick: int) -> float:
         """Time of tick ``tick`` [s]: ``start + tick * H`` rounded once."""
-        return self.start_time + tick * self._num / self._den
+        return seconds(tick, self.base_fraction, self.start_time)
 
     @property
     def time(self) -> float:
         """Current simulated time [s]."""
-        return self.start_time + self.tick * self._num / self._den
+        return seconds(self.tick, self.base_fraction, self.start_time)
 
     def ticks_until(self, stop_time: float) -> int:
         """Tick of ``stop_time``; ``ValueError`` unless it is on the base-step grid."""
-        exact = (Fraction(stop_time) - Fraction(self.start_time)) / Fraction(self._num,
-                                                                              self._den)
-        k = round(exact)
-        if abs(exact - k) > Fraction(1, 10**6):
+        k = grid_ticks(stop_time - self.start_time, self.base_step)
+        if k is None:
             raise ValueError(f"stop_time: a multiple of base_step = {self.base_step} s after "
                              f"start_time, got {stop_time} s")
-        return int(k)
+        return k
 
     # -- hooks ----------------------------------------------------------------
     def add_observer(self, observer: Observer) -> None:

@@ -108,8 +108,8 @@ def read_interface(instance: str, path: str | Path) -> FmuInterface:
     ------
     FileNotFoundError
         No such file.
-    ValueError
-        The file is not an FMU with a readable modelDescription (one line).
+    UserError
+        The file is not an FMU with a readable modelDescription (one line; a ValueError).
     """
     path = Path(path)
     if not path.is_file():
@@ -117,7 +117,7 @@ def read_interface(instance: str, path: str | Path) -> FmuInterface:
     try:
         md = read_model_description(str(path), validate=False)
     except Exception as exc:  # noqa: BLE001 - zip, XML or schema errors: one line
-        raise ValueError(f"FMU '{instance}': cannot read the modelDescription of '{path}': "
+        raise UserError(f"FMU '{instance}': cannot read the modelDescription of '{path}': "
                          f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
                          ) from None
     ports: dict[str, Port] = {}

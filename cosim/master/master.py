@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +23,7 @@ from .execution import Execution
 from .recorder import Recorder
 from .slave import Slave
 from .system import SystemSpec
+from .timegrid import integer_multiple
 
 
 @dataclass(frozen=True)
@@ -52,6 +53,10 @@ class Result:
         Set if the run stopped on a non-finite output.
     csv_path : Path or None
         The result file, if one was written.
+    timings : dict
+        Where the stepping loop's wall time went: per component (by name) ``steps``,
+        ``step_total_s``, ``step_max_s`` (its step calls) and ``exchange_s`` (its set-inputs
+        and get-outputs calls) [s]; :meth:`profile` summarizes it.
     """
 
     data: np.ndarray
@@ -60,6 +65,33 @@ class Result:
     end_time: float
     diverged: Divergence | None = None
     csv_path: Path | None = None
+    timings: dict[str, dict[str, float]] = field(default_factory=dict)
+
+    def profile(self) -> dict[str, Any]:
+        """The run's telemetry: per component the mean and longest step [s], its calls' total
+        and share of the stepping loop's wall time; the master's own share (exchange, delay
+        lines, recording, observers: the rest) and the real-time factor.
+
+        Returns
+        -------
+        dict
+            ``{"components": {name: {"steps", "step_mean_s", "step_max_s", "exchange_s",
+            "total_s", "share"}}, "master_s", "master_share", "wall_time_s",
+            "real_time_factor"}`` (shares of the wall time, [1]).
+        """
+        wall = self.wall_time
+        comps = {}
+        for name, t in self.timings.items():
+            total = t["step_total_s"] + t["exchange_s"]
+            comps[name] = {"steps": t["steps"],
+                           "step_mean_s": t["step_total_s"] / t["steps"] if t["steps"]
+                           else float("nan"),
+                           "step_max_s": t["step_max_s"], "exchange_s": t["exchange_s"],
+                           "total_s": total, "share": total / wall if wall > 0 else float("nan")}
+        master = wall - sum(c["total_s"] for c in comps.values())
+        return {"components": comps, "master_s": master,
+                "master_share": master / wall if wall > 0 else float("nan"),
+                "wall_time_s": wall, "real_time_factor": self.real_time_factor}
 
 
 class Master:
@@ -129,8 +161,8 @@ class Master:
         if output_interval is not None and output_ticks is not None:
             raise ValueError("output_interval and output_ticks: give one of them")
         if output_interval is not None:
-            interval = round(output_interval / H)
-            if interval < 1 or abs(interval * H - output_interval) > 1e-9 * output_interval:
+            interval = integer_multiple(output_interval, H)
+            if interval is None:
                 raise ValueError(f"output_interval: a positive integer multiple of "
                                  f"base_step = {H} s, got {output_interval} s")
         recorder = Recorder(outputs, interval, csv_path, flush_every)
@@ -150,6 +182,8 @@ class Master:
                 execution.add_observer(ProgressObserver(stop, disable=None if progress
                                                         is None else not progress))
             execution.initialize()
+            if hasattr(execution.algorithm, "reset_timing"):
+                execution.algorithm.reset_timing()
             wall0 = time.perf_counter()
             execution.simulate_until(stop)
         except DivergenceError as err:
@@ -170,9 +204,14 @@ class Master:
         sim = (execution.time - execution.start_time) if execution is not None else 0.0
         stepped = execution is not None and execution.tick > 0
 
+        timings = {}
+        if execution is not None and hasattr(execution.algorithm, "timings") \
+                and execution.initialized:
+            timings = execution.algorithm.timings()
+
         def result() -> Result:
             return Result(recorder.data, wall, sim / wall if wall > 0 else float("inf"), end,
-                          diverged, recorder.csv_path)
+                          diverged, recorder.csv_path, timings)
 
         try:
             if execution is not None:

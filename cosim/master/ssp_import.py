@@ -54,7 +54,8 @@ from xml.etree import ElementTree as ET
 from .errors import UserError
 from .interface import FmuInterface, check_system, read_interface
 from .ssp import NS
-from .system import Connection, FmuSpec, ParameterValue, SystemSpec, integer_multiple
+from .system import Connection, FmuSpec, ParameterValue, SystemSpec
+from .timegrid import integer_multiple
 
 __all__ = ["SspError", "SspSystem", "read_ssp"]
 

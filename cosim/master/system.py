@@ -14,6 +14,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .timegrid import integer_multiple
+
 ALGORITHMS = ("jacobi", "gauss_seidel")
 COUPLINGS = ("zoh", "linear")
 ParameterValue = float | int | bool | str
@@ -199,15 +201,6 @@ def _check_keys(d: Mapping, allowed: Sequence[str], where: str) -> None:
         if key not in allowed:
             raise ValueError(f"{where}: unknown key '{key}'{_did_you_mean(key, allowed)}; "
                              f"allowed: {list(allowed)}")
-
-
-def integer_multiple(period: float, step: float) -> int | None:
-    """``period / step`` [-] if it is a positive integer (within 1e-9 relative), else None."""
-    ratio = period / step
-    n = round(ratio)
-    if n < 1 or abs(ratio - n) > 1e-9 * max(1.0, ratio):
-        return None
-    return n
 
 
 def _ticks(period: float, step: float, where: str) -> int:

@@ -10,7 +10,7 @@ and validates everything, once, into a :class:`SceneConfig`:
   has none);
 * ``cosim`` - the co-simulation settings (:class:`CosimSettings`): the base step [s], and the
   stop time, the controllers' period and the recording interval as integer numbers of base
-  steps (decided here, by one rule: :func:`cosim.master.system.integer_multiple`);
+  steps (decided here, by one rule: :func:`cosim.master.timegrid.grid_ticks`);
 * ``fmu_files`` - FMU files a user chose for an instance (``[plant] fmu``, ...), and
   ``plant_parameters`` - a foreign plant FMU's own parameters (``[plant.parameters]``).
 
@@ -36,16 +36,18 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
 import sys
+import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
-from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
 from drillcosim.controller import TABLES
 from drillcosim.cosim.master.errors import UserError
-from drillcosim.cosim.master.system import ALGORITHMS, COUPLINGS, integer_multiple
+from drillcosim.cosim.master.system import ALGORITHMS, COUPLINGS
+from drillcosim.cosim.master.timegrid import grid_ticks, integer_multiple, seconds
 from drillcosim.plant.scene import (
     PLANT_KEYS,
     SECTIONS,
@@ -91,7 +93,23 @@ TOP_VALUES = tuple(k for k in PLANT_KEYS if k not in SECTIONS)
 
 class ConfigError(UserError):
     """A scene, a key or a value that is not allowed: one line naming the file or the override,
-    the key, and what is allowed."""
+    the key, and what is allowed.
+
+    Attributes
+    ----------
+    given_as : str or None
+        How the value blamed was given when not by the scene file: the name
+        :func:`load_config` got for it in ``given_as`` (the API's keyword, e.g. ``stop_time``,
+        ``overrides``, ``controller_fmu``), or ``override``. The message is then
+        ``"<given_as>: <detail>"``; a command line names its own option with :attr:`detail`.
+    detail : str
+        The message without the ``given_as`` prefix (the whole message when None).
+    """
+
+    def __init__(self, message: str, given_as: str | None = None) -> None:
+        super().__init__(f"{given_as}: {message}" if given_as else message)
+        self.given_as = given_as
+        self.detail = message
 
 
 def _suggest(word: str, choices: Sequence[str]) -> str:
@@ -262,10 +280,7 @@ class CosimSettings:
     def seconds(self, ticks: int) -> float:
         """``ticks`` base steps in seconds, as the master counts time (an exact rational
         product, rounded once: 120000 steps of 0.25 ms are 30.0 s)."""
-        frac = Fraction(self.step).limit_denominator(10**12)
-        if float(frac) != self.step:
-            frac = Fraction(self.step)
-        return float(frac * ticks)
+        return seconds(ticks, self.step)
 
     @property
     def stop_time(self) -> float:
@@ -314,6 +329,8 @@ class _Source:
     path: Path
     plant_fmu: Path | None = None
     controller_fmu: Path | None = None
+    #: how each override was given (key path -> name, :func:`load_config`'s ``given_as``)
+    given: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -425,10 +442,22 @@ def _cosim(table: Mapping[str, Any], instances: Sequence[str], source: str) -> C
         interval = _number(f"{where} output_interval", table["output_interval"], positive=True)
         output_ticks = partial.ticks(interval, f"{where} output_interval")
     else:
-        output_ticks = max(1, math.ceil(1e-3 / step - 1e-9))
+        # the fewest steps that span 1 ms (exactly 1 ms where it is on the grid)
+        output_ticks = max(1, grid_ticks(1e-3, step) or math.ceil(1e-3 / step))
     return CosimSettings(step, stop_ticks, partial.algorithm, partial.order, partial.coupling,
                          partial.actuator_delay, partial.sensor_delay, controller_ticks,
                          output_ticks)
+
+
+def _not_an_fmu(path: Path) -> str | None:
+    """Why the file ``path`` is not an FMU (None: a zip archive with a ``modelDescription.xml``;
+    its content is read when the system is built)."""
+    if not zipfile.is_zipfile(path):
+        return "not an FMU (an FMU is a zip archive with a modelDescription.xml)"
+    with zipfile.ZipFile(path) as archive:
+        if "modelDescription.xml" not in archive.namelist():
+            return "not an FMU: the zip archive has no modelDescription.xml"
+    return None
 
 
 def _fmu_file(table_name: str, table: Mapping[str, Any], source: str) -> Path | None:
@@ -444,13 +473,16 @@ def _fmu_file(table_name: str, table: Mapping[str, Any], source: str) -> Path | 
         path = src.resolve().parent / path
     if not path.is_file():
         raise ConfigError(f"{source}: [{table_name}] fmu = {value!r}: no file '{path}'")
+    if (why := _not_an_fmu(path)) is not None:
+        raise ConfigError(f"{source}: [{table_name}] fmu = {value!r}: {why}")
     return path
 
 
 def load_config(scene: str | Path = "paper_closed_loop",
                 overrides: Mapping[str, Any] | None = None, *,
                 plant_fmu: str | Path | None = None, controller_fmu: str | Path | None = None,
-                folder: Path | None = None) -> SceneConfig:
+                folder: Path | None = None,
+                given_as: Mapping[str, str] | None = None) -> SceneConfig:
     """Read a scene, apply overrides, validate everything once.
 
     Parameters
@@ -464,6 +496,11 @@ def load_config(scene: str | Path = "paper_closed_loop",
         they take precedence over the scene's ``[plant] fmu`` / ``[controller] fmu``.
     folder : Path, optional
         Where scene names are looked up (default: the shipped scenes).
+    given_as : mapping, optional
+        How each override was given (key path -> name, e.g. ``{"cosim.stop_time":
+        "stop_time"}``; ``plant.fmu`` / ``controller.fmu`` for ``plant_fmu`` /
+        ``controller_fmu``): an error about an overridden value names it so (default:
+        ``override``, ``plant_fmu``, ``controller_fmu``), not the scene file.
 
     Returns
     -------
@@ -474,20 +511,27 @@ def load_config(scene: str | Path = "paper_closed_loop",
     ConfigError
         Any bad input, one line naming the file or override, the key and what is allowed.
     """
+    over = key_paths(overrides)
+    given = {"plant.fmu": "plant_fmu", "controller.fmu": "controller_fmu",
+             **{p: "override" for p in over}, **(given_as or {})}
     try:
         data, path = read_scene_tables(scene, folder)
     except SceneError as exc:
         raise ConfigError(str(exc)) from None
-    return _from_tables(_Source(data, path, _fmu_arg(plant_fmu), _fmu_arg(controller_fmu)),
-                        key_paths(overrides))
+    return _from_tables(_Source(data, path, _fmu_arg(plant_fmu), _fmu_arg(controller_fmu),
+                                given), over)
 
 
 def derive_config(base: SceneConfig, overrides: Mapping[str, Any], *,
                   controller_fmu: bool = True) -> SceneConfig:
     """``base`` with more key-path overrides (they win over ``base.overrides``): the typed
     configuration of a sweep point, made from the scene tables ``base`` was made of (no file
-    is read again), every value validated here, once. ``controller_fmu=False`` leaves out the
-    controller FMU given as an argument (an open-loop reference runs without it).
+    is read again), every new value validated here, once. Where the overrides touch only the
+    co-simulation and the law tables (and leave the strain controller on or off as in
+    ``base``, which the plant model's choice reads), the point keeps ``base.scene``, the plant
+    validated once for the whole sweep; the loop settings and laws are made anew and checked
+    against it. ``controller_fmu=False`` leaves out the controller FMU given as an argument
+    (an open-loop reference runs without it).
 
     Raises
     ------
@@ -495,22 +539,61 @@ def derive_config(base: SceneConfig, overrides: Mapping[str, Any], *,
         An unknown key path or a bad value (one line).
     """
     origin = base.origin if controller_fmu else replace(base.origin, controller_fmu=None)
-    return _from_tables(origin, {**base.overrides, **key_paths(overrides)})
+    new = key_paths(overrides)
+    over = {**base.overrides, **new}
+    loop_only = all(p.split(".", 1)[0] in ("cosim", *TABLES) for p in new)
+    enabled = new.get(f"{CONTROLLER}.enabled", base.controller.enabled)
+    if loop_only and enabled is base.controller.enabled:
+        return _from_tables(origin, over, scene=base.scene)
+    return _from_tables(origin, over)
 
 
 def _fmu_arg(path: str | Path | None) -> Path | None:
     return None if not path else Path(path)
 
 
-def _from_tables(origin: _Source, over: dict[str, Any]) -> SceneConfig:
-    """The configuration of the scene tables ``origin.tables`` with the overrides ``over``."""
-    plant_fmu, controller_fmu = origin.plant_fmu, origin.controller_fmu
+def _from_tables(origin: _Source, over: dict[str, Any], scene: Scene | None = None
+                 ) -> SceneConfig:
+    """The configuration of the scene tables ``origin.tables`` with the overrides ``over``
+    (``scene``: the plant of these tables, made already)."""
+    source = str(origin.path)
+    given = {**{p: "override" for p in over}, **origin.given}
     try:
         data = _apply(origin.tables, over)
-        sc = scene_from_dict(data, name=origin.path.stem, source=str(origin.path))
+        if scene is None:
+            scene = scene_from_dict(data, name=origin.path.stem, source=source)
+        return _validate(data, scene, over, origin, given)
+    except ConfigError as exc:
+        if exc.given_as:  # named already
+            raise
+        raise _name_override(str(exc), source, over, given) from None
     except SceneError as exc:
-        raise ConfigError(str(exc)) from None
+        raise _name_override(str(exc), source, over, given) from None
+
+
+#: ``[table] key`` or ``table.key`` / ``key`` followed by `` = ``: the key a message blames
+_BLAMED = re.compile(r"\[(\w+)\] (\w+)\b|(\w+(?:\.\w+)?) =")
+
+
+def _name_override(message: str, source: str, over: Mapping[str, Any],
+                   given: Mapping[str, str]) -> ConfigError:
+    """The error of ``message``; one that blames the scene file ``source`` for a key whose
+    value is an override names how the override was given instead (``given``)."""
+    prefix = f"{source}: "
+    match = _BLAMED.match(message, len(prefix)) if message.startswith(prefix) else None
+    if match is None:
+        return ConfigError(message)
+    path = f"{match[1]}.{match[2]}" if match[1] else match[3]
+    if path not in over:
+        return ConfigError(message)
+    return ConfigError(f"{path}{message[match.end(2 if match[1] else 3):]}", given[path])
+
+
+def _validate(data: dict[str, Any], sc: Scene, over: Mapping[str, Any], origin: _Source,
+              given: Mapping[str, str]) -> SceneConfig:
+    """The typed configuration of the scene ``sc`` (its tables ``data``, overrides applied)."""
     source = sc.source
+    plant_fmu, controller_fmu = origin.plant_fmu, origin.controller_fmu
     tables = {key: data.get(key, {}) for key in ("plant", *TABLES, "cosim")}
     for key in tables["plant"]:
         if key not in ("fmu", "parameters"):
@@ -549,13 +632,16 @@ def _from_tables(origin: _Source, over: dict[str, Any]) -> SceneConfig:
                           "scene's controller is off: set controller.enabled=true")
     instances = (PLANT, *enabled)
     files: dict[str, Path] = {}
-    for instance, given in ((PLANT, plant_fmu), (CONTROLLER, controller_fmu), (TOP_DRIVE, None)):
+    for instance, fmu in ((PLANT, plant_fmu), (CONTROLLER, controller_fmu), (TOP_DRIVE, None)):
         if instance not in instances:
             continue
-        if given:
-            if not Path(given).is_file():
-                raise ConfigError(f"{instance} FMU: no file '{given}'")
-            files[instance] = Path(given)
+        if fmu:
+            name = given[f"{instance}.fmu"]
+            if not Path(fmu).is_file():
+                raise ConfigError(f"no file '{fmu}'", name)
+            if (why := _not_an_fmu(Path(fmu))) is not None:
+                raise ConfigError(f"'{fmu}' is {why}", name)
+            files[instance] = Path(fmu)
         elif (chosen := _fmu_file(instance, tables[instance], source)) is not None:
             files[instance] = chosen
     for instance, setting in ((PLANT, plant_parameters), *((t, c.parameters)

@@ -29,8 +29,9 @@ from pathlib import Path
 from typing import Any
 
 from drillcosim.controller import Law, default_kind, kinds, law_named
-from drillcosim.controller.state_space import MULTIPLE_RTOL, load_state_space
+from drillcosim.controller.state_space import load_state_space
 from drillcosim.cosim.master.errors import UserError
+from drillcosim.cosim.master.timegrid import integer_multiple
 
 __all__ = ["EXTRA_KEYS", "ControllerSetting", "check_fmu_parameters", "law_keys",
            "parse_controller", "table_keys"]
@@ -154,8 +155,7 @@ def _matrices(where: str, table: Mapping[str, Any], source: str, period: float
     except ValueError as exc:
         raise _Error(f"{where} matrices: {exc}") from None
     ts = params.sample_period
-    k = period / ts
-    if abs(k - round(k)) > MULTIPLE_RTOL * max(1.0, k) or round(k) < 1:
+    if integer_multiple(period, ts) is None:
         raise _Error(f"{where} matrices {path.name}: sample period {ts!r} s does not "
                      f"divide the controllers' period {period!r} s (cosim.step or "
                      "cosim.controller_sample_period): allowed a whole number of samples")

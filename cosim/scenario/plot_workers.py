@@ -40,9 +40,9 @@ import numpy as np
 __all__ = ["FIGURES", "GROUPS", "PlotFeed", "PlotWorkers"]
 
 #: The figures of a run in :func:`.plots.plot_run`'s order (file names without ``.png``).
-FIGURES = ("orbit", "orbit_steady", "deflection_contact", "actuators", "axial_torsional")
+FIGURES = ("orbit", "deflection_contact", "actuators", "axial_torsional")
 #: The figures each worker draws (about equal drawing times at the end of a run).
-GROUPS = (("deflection_contact", "orbit_steady", "axial_torsional"), ("actuators", "orbit"))
+GROUPS = (("deflection_contact", "axial_torsional"), ("actuators", "orbit"))
 #: Thread-count variables of the BLAS libraries numpy may load, set to 1 for the workers
 #: (unless the user set them).
 _ONE_THREAD = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
@@ -70,7 +70,7 @@ class PlotWorkers:
             n = 0
         self.procs: list[subprocess.Popen] = []
         # one BLAS thread: the figures need none, and OpenBLAS's thread pool costs each worker
-        # ~0.1 s of CPU at numpy's import (CPU the run loses on 2 cores; BENCHMARKS.md)
+        # ~0.1 s of CPU at numpy's import (CPU the run loses on 2 cores; docs/performance.md)
         env = {**os.environ, **{k: os.environ.get(k, "1") for k in _ONE_THREAD}}
         for _ in range(n):
             try:
@@ -132,11 +132,13 @@ class PlotWorkers:
 
     def plot_run(self, data: np.ndarray, out_dir: str | Path, clearance: float,
                  spans: Mapping[int, Mapping] | None = None, n_sites: int = 2, title: str = "",
-                 switch_on_time: float | None = None) -> list[Path]:
+                 switch_on_time: float | None = None, baseline: str | None = None,
+                 revolution: float | None = None) -> list[Path]:
         """:func:`.plots.plot_run`, its figures drawn by the workers (see the module
         docstring); the paths in that function's order."""
         settings = {"clearance": clearance, "spans": dict(spans) if spans else None,
-                    "n_sites": n_sites, "title": title, "switch_on_time": switch_on_time}
+                    "n_sites": n_sites, "title": title, "switch_on_time": switch_on_time,
+                    "baseline": baseline, "revolution": revolution}
         sent = []
         if self.groups:
             if self._settings != settings:
@@ -263,7 +265,7 @@ def main() -> int:
     if hasattr(os, "nice"):
         # below the run: on 2 cores the workers' imports and early draws otherwise take CPU
         # from the master (main job with plots, 30 s, quiet machine: 2.67-2.89 s at nice 10
-        # vs 3.00-3.29 s at 0, 2.42-2.61 s without plots; BENCHMARKS.md)
+        # vs 3.00-3.29 s at 0, 2.42-2.61 s without plots; docs/performance.md)
         os.nice(10)
     state: dict[str, Any] = {"gen": 0, "n": 0, "t_end": None}
     ready = threading.Condition()

@@ -7,14 +7,15 @@ writes (:meth:`Result.save`):
   ``time,plant.body11_X,...`` (readable by ``numpy.loadtxt(..., delimiter=",", skiprows=1)``;
   17 significant digits: the numbers of the run, exactly);
 * ``summary.json`` - :attr:`Result.summary` (:mod:`.summary`);
-* the PNGs of :meth:`Result.plot` (:mod:`.plots`): ``orbit.png``, ``orbit_steady.png``,
-  ``deflection_contact.png``, ``actuators.png`` (``axial_torsional.png`` for the chain).
+* the figures of :meth:`Result.plot` (:mod:`.plots`, matplotlib figures) as PNGs: ``orbit.png``,
+  ``deflection_contact.png``, ``actuators.png`` (``axial_torsional.png`` for the chain), a
+  closed-loop run against its open-loop baseline (:mod:`.baseline`).
 """
 
 from __future__ import annotations
 
 import base64
-import tempfile
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -23,11 +24,12 @@ from typing import Any
 import numpy as np
 
 from drillcosim.cosim.master.files import AtomicFile
+from drillcosim.plant.signals import CONTROLLER
 
 from .config import SceneConfig
 from .summary import span_info, summarize, write_json
 
-__all__ = ["Figures", "Result", "plot_settings", "seconds_text"]
+__all__ = ["Figures", "Result", "plot_settings", "run_title", "seconds_text"]
 
 
 def seconds_text(seconds: float) -> str:
@@ -35,21 +37,64 @@ def seconds_text(seconds: float) -> str:
     return f"{seconds:.3g}" if seconds < 1000 else f"{seconds:.0f}"
 
 
-def plot_settings(config: SceneConfig) -> dict[str, Any]:
+def run_title(config: SceneConfig) -> str:
+    """A run's figure title: the scene, the strain controller's gain [N/strain] (or that it is
+    off) and switch-on time, the actuator delay [ms] and the communication step [ms]."""
+    ctrl, st = config.controller, config.cosim
+    gain = getattr(ctrl.params, "gain", None)
+    if not ctrl.enabled:
+        law = "controller off"
+    elif ctrl.matrices is not None:
+        law = f"state-space controller {ctrl.matrices.name}"
+    elif CONTROLLER in config.fmu_files:
+        law = f"controller FMU {config.fmu_files[CONTROLLER].name}"
+    elif gain is None:
+        law = f"{ctrl.kind} law"
+    else:
+        k = f"{gain:.3g}".replace("e+0", "e").replace("e+", "e").replace("e-0", "e-")
+        law = (f"{'' if ctrl.kind == 'proportional' else ctrl.kind.upper() + ' '}K = {k} N/strain"
+               + (f" from {config.switch_on_time:g} s" if config.switch_on_time else ""))
+    return (f"{config.name}: {law}, actuator delay {st.actuator_delay * 1e3:g} ms, "
+            f"step H = {st.step * 1e3:g} ms")
+
+
+def plot_settings(config: SceneConfig, baseline: str | Path | None = None) -> dict[str, Any]:
     """The keyword arguments of :func:`.plots.plot_run` for a run of ``config`` besides its
-    rows and folder: clearance [m], spans, sites, title, controller switch-on time [s]."""
+    rows and folder: clearance [m], spans, sites, title (:func:`run_title`), controller
+    switch-on time [s], the baseline's file (:func:`.baseline.baseline_path`) and the top
+    drive's period [s]."""
+    speed = config.scene.plant.top_drive.rotary_speed
     return {"clearance": config.scene.plant.contact.clearance,
-            "spans": span_info(config.scene), "n_sites": config.n_sites, "title": config.name,
-            "switch_on_time": config.switch_on_time or None}
+            "spans": span_info(config.scene), "n_sites": config.n_sites,
+            "title": run_title(config),
+            "switch_on_time": config.switch_on_time or None,
+            "baseline": None if baseline is None else str(baseline),
+            "revolution": 2 * math.pi / speed if speed > 0 else None}
 
 
-class Figures(list):
-    """PNG files of a run (a list of paths); a notebook shows them inline."""
+class Figures(dict):
+    """A run's figures: file name without ``.png`` -> ``matplotlib.figure.Figure`` (restyle or
+    overlay them; :meth:`save` writes the PNGs); a notebook shows them inline."""
+
+    def save(self, folder: str | Path) -> list[Path]:
+        """Write ``<name>.png`` of every figure into ``folder`` (created; files atomic)."""
+        from .plots import save_figure
+
+        out = Path(folder)
+        out.mkdir(parents=True, exist_ok=True)
+        return [save_figure(fig, out / f"{name}.png", dpi=fig.dpi, compress_level=1)
+                for name, fig in self.items()]
 
     def _repr_html_(self) -> str:
-        return "".join(f'<img src="data:image/png;base64,'
-                       f'{base64.b64encode(Path(p).read_bytes()).decode()}" title="{Path(p).name}"/>'
-                       for p in self)
+        import io
+
+        html = []
+        for name, fig in self.items():
+            buf = io.BytesIO()
+            fig.savefig(buf, format="png", dpi=fig.dpi)
+            html.append(f'<img src="data:image/png;base64,'
+                        f'{base64.b64encode(buf.getvalue()).decode()}" title="{name}"/>')
+        return "".join(html)
 
 
 @dataclass(frozen=True, eq=False)
@@ -82,6 +127,10 @@ class Result:
     components : dict
         What ran each instance (:meth:`.build.BuiltSystem.components`: the FMU file, GUID,
         model name, generation tool, drillcosim version and the parameters set).
+    profile : dict
+        Where the stepping loop's time went (:meth:`cosim.master.master.Result.profile`): per
+        component the mean and longest step [s] and its share, the master's own share, the
+        real-time factor; ``summary.json``'s ``telemetry``, :meth:`profile_table`.
     """
 
     config: SceneConfig
@@ -95,6 +144,7 @@ class Result:
     failure: dict[str, Any] | None = None
     csv_path: Path | None = None
     components: dict[str, Any] = field(default_factory=dict)
+    profile: dict[str, Any] = field(default_factory=dict)
 
     @property
     def completed(self) -> bool:
@@ -141,38 +191,76 @@ class Result:
         summary["cosim"] = cfg.cosim.as_dict()
         summary["engine"] = self.engine
         summary["components"] = self.components
+        summary["telemetry"] = self.profile
         return summary
+
+    def profile_table(self) -> str:
+        """:attr:`profile` as a text table (``drillcosim run --profile``): per component its
+        steps, mean and longest step [us], exchange calls [s] and share of the stepping loop;
+        then the master's own share and the real-time factor."""
+        p = self.profile
+        if not p:
+            return "no telemetry (the run did not step)"
+        lines = [f"{'component':<22}{'steps':>9}{'mean step':>12}{'max step':>12}"
+                 f"{'exchange':>11}{'share':>8}",
+                 f"{'':<22}{'':>9}{'[us]':>12}{'[us]':>12}{'[s]':>11}{'[%]':>8}"]
+        for name, c in p["components"].items():
+            lines.append(f"{name:<22}{c['steps']:>9d}{1e6 * c['step_mean_s']:>12.2f}"
+                         f"{1e6 * c['step_max_s']:>12.1f}{c['exchange_s']:>11.3f}"
+                         f"{100 * c['share']:>8.1f}")
+        lines.append(f"{'master (exchange, recording, observers)':<66}"
+                     f"{100 * p['master_share']:>8.1f}")
+        lines.append(f"stepping loop {p['wall_time_s']:.3g} s for {self.end_time:g} s simulated: "
+                     f"real-time factor {p['real_time_factor']:.3g}")
+        return "\n".join(lines)
 
     @property
     def _switch_on_time(self) -> float | None:
         return self.config.switch_on_time
 
-    def plot(self, folder: str | Path | None = None, workers=None) -> Figures:
-        """Draw the run's figures as PNGs into ``folder`` (default: a new temporary folder).
+    def baseline(self) -> Path | None:
+        """The file of this run's open-loop baseline (:func:`.baseline.baseline_path`: taken
+        from the cache, or run once now); None for a run without the strain controller."""
+        from .baseline import baseline_path
 
-        ``workers``: a :class:`.plot_workers.PlotWorkers` started with the run (``drillcosim
-        run`` does), which draws the figures in parallel; default: drawn in this process.
+        return baseline_path(self.config)
+
+    def plot(self, baseline: bool = True) -> Figures:
+        """The run's figures (:mod:`.plots`), as matplotlib figures.
+
+        Parameters
+        ----------
+        baseline : bool
+            Draw the open-loop baseline behind the run (:meth:`baseline`; a closed-loop run
+            only).
 
         Returns
         -------
         Figures
-            The PNG paths (a notebook shows them); none when fewer than two rows were recorded.
+            ``{"orbit": Figure, "deflection_contact": Figure, "actuators": Figure}`` (the
+            axial-torsional chain: ``{"axial_torsional": Figure}``); empty when fewer than two
+            rows were recorded.
         """
         if len(self.data) < 2:
             return Figures()
-        if workers is None:
-            from .plots import plot_run  # matplotlib: imported only when plotting
-        else:
-            plot_run = workers.plot_run
+        from .plots import run_figures  # matplotlib: imported only when plotting
 
-        out = Path(folder) if folder is not None else Path(tempfile.mkdtemp(prefix="drillcosim_"))
-        out.mkdir(parents=True, exist_ok=True)
-        return Figures(plot_run(self.data, out, **plot_settings(self.config)))
+        settings = plot_settings(self.config, self.baseline() if baseline else None)
+        figures = Figures()
+        for name, fig in run_figures(self.data, **settings).items():
+            fig.update(self.data)
+            figures[name] = fig.fig
+        return figures
 
-    def save(self, folder: str | Path, plots: bool = True, workers=None) -> list[Path]:
+    def save(self, folder: str | Path, plots: bool = True, workers=None,
+             baseline: bool | str | Path | None = True) -> list[Path]:
         """Write ``results.csv``, ``summary.json`` and (``plots``) the PNGs into ``folder``
         (created if missing; each file written atomically). A ``results.csv`` the run streamed
-        into ``folder`` is kept as it is. ``workers``: as for :meth:`plot`.
+        into ``folder`` is kept as it is.
+
+        ``workers``: a :class:`.plot_workers.PlotWorkers` started with the run (``drillcosim
+        run`` does), which draws the figures in parallel; default: drawn in this process.
+        ``baseline``: as for :meth:`plot`, or the baseline's file (:meth:`baseline`; None: none).
 
         Returns
         -------
@@ -189,8 +277,15 @@ class Result:
                 fh.write(",".join(self.data.dtype.names) + "\n")
                 np.savetxt(fh, flat, delimiter=",", fmt="%.17g")
         files = [csv, write_json(self.summary, out / "summary.json")]
-        if plots:
-            files += list(self.plot(out, workers))
+        if plots and len(self.data) >= 2:
+            if baseline is True:
+                baseline = self.baseline()
+            settings = plot_settings(self.config, baseline or None)
+            if workers is None:
+                from .plots import plot_run  # matplotlib: imported only when plotting
+            else:
+                plot_run = workers.plot_run
+            files += list(plot_run(self.data, out, **settings))
         return files
 
     def message(self, folder: Path | None = None, files: list[Path] | None = None) -> str:

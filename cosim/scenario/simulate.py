@@ -114,4 +114,4 @@ def simulate(built: BuiltSystem, stop_time: float | None = None, *,
     return Result(built.config, built.engine, result.data,
                   {"time": "s", **{n: built.units[n] for n in names}}, stop, result.end_time,
                   result.wall_time, result.real_time_factor, failure, result.csv_path,
-                  built.components())
+                  built.components(), result.profile())

@@ -25,7 +25,7 @@ from pathlib import Path
 
 from drillcosim.cosim.master.ssp import SspExport, export_ssp, unsupported_features
 from drillcosim.cosim.master.ssp_import import read_ssp
-from drillcosim.cosim.master.system import integer_multiple
+from drillcosim.cosim.master.timegrid import integer_multiple
 
 from .build import build_system
 from .config import ConfigError, SceneConfig

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from drillcosim.cosim.master.errors import UserError
-from drillcosim.cosim.master.system import integer_multiple
+from drillcosim.cosim.master.timegrid import integer_multiple
 from drillcosim.cosim.scenario.build import ENGINES
 
 __all__ = ["DEFAULT_GAIN_KEY", "GAIN_TABLES", "LOOP_KEYS", "Point", "SweepSpec", "check_gain_key",

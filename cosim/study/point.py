@@ -58,11 +58,11 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
-from scipy.signal import butter, sosfilt
 
 from drillcosim.cosim.master.limits import OutputLimit
 from drillcosim.cosim.scenario.build import ENGINES, build_system
 from drillcosim.cosim.scenario.config import ConfigError, SceneConfig, key_paths, load_config
+from drillcosim.cosim.scenario.result import Result
 from drillcosim.cosim.scenario.simulate import simulate
 from drillcosim.cosim.scenario.summary import span_info, stick_slip_metrics
 from drillcosim.plant.signals import (
@@ -78,10 +78,12 @@ from drillcosim.plant.signals import (
 )
 
 from .grid import DEFAULT_GAIN_KEY, check_gain_key
+from .highpass import butter_highpass, sosfilt
+from .prediction import point_prediction
 from .verdict import scene_judging_window
 
 __all__ = ["ENGINES", "PointOptions", "default_gain_key", "error_row", "measure_point", "metrics",
-           "point_config", "simulate_point"]
+           "point_config", "run_point", "simulate_point"]
 
 SPANS = ("long", "short")
 
@@ -183,7 +185,7 @@ def metrics(data: np.ndarray, spans: Mapping[int, str], n_sites: int, opts: Poin
         dt = float(np.median(np.diff(t)))
         nyq = math.pi / dt
         if opts.highpass < 0.9 * nyq:
-            sos = butter(4, opts.highpass / nyq, "highpass", output="sos")
+            sos = butter_highpass(4, opts.highpass / nyq)
             strains = [sosfilt(sos, s) for s in strains]
     out["growth_rate"] = out["growth_noise"] = math.nan  # no strains: no strain-loop growth
     if strains and len(t):
@@ -203,10 +205,16 @@ def metrics(data: np.ndarray, spans: Mapping[int, str], n_sites: int, opts: Poin
         out["stick_slip_severity"] = torsional["stick_slip_severity"]
         out["stick_fraction"] = torsional["stick_fraction"]
     for span in SPANS:
-        out[f"rms_{span}"] = math.nan
+        out[f"rms_{span}"] = out[f"rms_rise_{span}"] = math.nan
         out[f"peak_deflection_{span}"] = math.nan
+    out["contact_time"] = 0.0
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    in_contact = np.zeros(len(t), bool)
     for body, kind in spans.items():
         col = "long" if kind == "only" else kind
+        contact = ref(PLANT, body_signal(body, "contact_force"))
+        if contact in names:
+            in_contact |= np.asarray(data[contact], dtype=float) > 0.0
         name = ref(PLANT, body_signal(body, "radial_deflection"))
         if name not in names or not len(t):
             continue
@@ -214,7 +222,20 @@ def metrics(data: np.ndarray, spans: Mapping[int, str], n_sites: int, opts: Poin
         out[f"peak_deflection_{col}"] = float(np.max(r))
         if not diverged:
             out[f"rms_{col}"] = float(np.sqrt(np.mean(r[t >= t_rms] ** 2)))
+            out[f"rms_rise_{col}"] = _rms_rise(t, r, t_rms)
+    out["contact_time"] = float(np.count_nonzero(in_contact)) * dt
     return out
+
+
+def _rms_rise(t: np.ndarray, r: np.ndarray, t_rms: float) -> float:
+    """RMS of ``r`` over the second half of ``[t_rms, t_end]`` over its RMS over the first half
+    [1] (NaN if either half is empty or the first is 0)."""
+    mid = 0.5 * (t_rms + t[-1])
+    first, second = r[(t >= t_rms) & (t < mid)], r[t >= mid]
+    if not first.size or not second.size:
+        return math.nan
+    a = float(np.sqrt(np.mean(first**2)))
+    return float(np.sqrt(np.mean(second**2))) / a if a > 0 else math.nan
 
 
 def default_gain_key(scene: str, overrides: Mapping[str, Any] | None = None) -> str:
@@ -276,6 +297,15 @@ def simulate_point(config: SceneConfig, opts: PointOptions, engine: str = "fmu",
         A failure before the run's first step (bad parameters, a missing FMU); a failure while
         stepping ends the run as diverged (its reason names the slave's own message).
     """
+    res, reason = run_point(config, opts, engine, fmu_dir, initial_offset)
+    return res.data, reason
+
+
+def run_point(config: SceneConfig, opts: PointOptions, engine: str = "fmu",
+              fmu_dir: str | None = None, initial_offset: np.ndarray | None = None
+              ) -> tuple[Result, str]:
+    """:func:`simulate_point`, returning the run's :class:`~cosim.scenario.result.Result`
+    (its timings too) instead of its data."""
     if initial_offset is not None and engine != "inprocess":
         raise ConfigError("initial_offset: a perturbed initial state needs engine 'inprocess' "
                           "(the in-process plant)")
@@ -294,12 +324,12 @@ def simulate_point(config: SceneConfig, opts: PointOptions, engine: str = "fmu",
     res = simulate(built, observers=[OutputLimit(forces, opts.force_cap)] if forces else ())
     f = res.failure
     if f is None:
-        return res.data, ""
+        return res, ""
     if f["value"] is None:
-        return res.data, f"diverged at t = {f['time_s']:.6g} s: {f['message']}"
-    return res.data, (f"diverged at t = {f['time_s']:.6g} s: {f['quantity']} = {f['value']:.3g}"
-                      + (f" exceeds the force cap {opts.force_cap:g} N"
-                         if math.isfinite(f["value"]) else ""))
+        return res, f"diverged at t = {f['time_s']:.6g} s: {f['message']}"
+    return res, (f"diverged at t = {f['time_s']:.6g} s: {f['quantity']} = {f['value']:.3g}"
+                 + (f" exceeds the force cap {opts.force_cap:g} N"
+                    if math.isfinite(f["value"]) else ""))
 
 
 def error_row(exc: BaseException, wall_time: float = math.nan) -> dict[str, Any]:
@@ -366,7 +396,9 @@ def measure_point(scene: str, gain: float, delay: float, step: float, stop_time:
     if config is None:
         config = point_config(scene, gain, delay, step, stop_time, open_loop, overrides,
                               gain_key)
-    data, reason = simulate_point(config, opts, engine, fmu_dir)
+    res, reason = run_point(config, opts, engine, fmu_dir)
+    run_time = time.perf_counter() - wall0
+    data = res.data
     t = data["time"]
     end = float(t[-1]) if len(t) else 0.0
     diverged = bool(reason)
@@ -378,6 +410,11 @@ def measure_point(scene: str, gain: float, delay: float, step: float, stop_time:
     strain_loop = gain_key.startswith(f"{CONTROLLER}.")
     row["min_stop_time"] = (math.nan if open_loop or not strain_loop
                             else _min_stop_time(scene, overrides, opts))
+    row["predicted_growth_rate"], row["prediction_note"] = math.nan, ""
+    if strain_loop and not open_loop:
+        row["predicted_growth_rate"], row["prediction_note"] = point_prediction(config)
+    row["stepping_time"] = res.wall_time
+    row["startup_time"] = run_time - res.wall_time
     row["wall_time"] = time.perf_counter() - wall0
     return row
 

@@ -50,6 +50,7 @@ import math
 import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -59,6 +60,7 @@ from drillcosim.analysis.linearize import linearize
 from drillcosim.cosim.master.algorithms import newest_sample_tick
 from drillcosim.cosim.master.delays import DelayLine
 from drillcosim.cosim.master.system import ALGORITHMS
+from drillcosim.cosim.scenario.cache import cached_arrays, source_hash
 from drillcosim.cosim.scenario.config import ConfigError, SceneConfig, load_config
 
 __all__ = [
@@ -354,13 +356,21 @@ def modal_bases(lam: np.ndarray, V: np.ndarray, keep: np.ndarray
     return real_basis(keep), real_basis(~keep)
 
 
-def coupled_plant(scene: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+def coupled_plant(scene: Any, cache: bool = True
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
     """The scene's plant linearized (full 3D, top-drive frame) and reduced to the loop's modes.
+
+    One linearization per plant and operating point: the result is a function of the plant's
+    parameters (the operating point is theirs: :func:`plant.linearize.operating_params`) and
+    of the code, kept on disk by content (:func:`cosim.scenario.cache.cached_arrays`, key: the
+    parameters, the sources of ``plant/`` and of this module, numpy's and scipy's versions).
 
     Parameters
     ----------
     scene : Scene
         A loaded :class:`plant.scene.Scene`.
+    cache : bool
+        Read and write the on-disk cache (False: always compute).
 
     Returns
     -------
@@ -370,8 +380,21 @@ def coupled_plant(scene: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nd
     stable_step : float
         The plant model's own stable RK4 step [s].
     """
-    lin = linearize(scene.plant, "full3d")
-    return (*reduce_loop(lin.A, lin.B, lin.C), lin.model.stable_step())
+    def compute() -> dict[str, np.ndarray]:
+        lin = linearize(scene.plant, "full3d")
+        A, B, C, dropped = reduce_loop(lin.A, lin.B, lin.C)
+        return {"A": A, "B": B, "C": C, "dropped": dropped,
+                "stable_step": np.float64(lin.model.stable_step())}
+
+    if cache:
+        import drillcosim.plant as plant_package
+
+        code = source_hash(str(Path(plant_package.__file__).parent), __file__)
+        got = cached_arrays("loop_models", {"plant": repr(scene.plant), "model": "full3d",
+                                            "code": code}, compute)
+    else:
+        got = compute()
+    return got["A"], got["B"], got["C"], got["dropped"], float(got["stable_step"])
 
 
 def spectral_radius(M: np.ndarray) -> float:
@@ -425,6 +448,7 @@ class LoopModel:
     dropped: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=complex))
     _cache: dict[float, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict,
                                                                repr=False)
+    _modal: dict[str, Any] = field(default_factory=dict, repr=False)   # cosim.study.boundary
 
     @classmethod
     def from_scene(cls, scene: str | Any = "paper_closed_loop",

@@ -19,6 +19,7 @@ computed from the finished rows whatever order they finished in.
 from __future__ import annotations
 
 import json
+import math
 import multiprocessing
 import os
 import time
@@ -46,7 +47,7 @@ from drillcosim.plant.signals import CONTROLLER, TOP_DRIVE
 
 from .grid import DEFAULT_GAIN_KEY, Point, SweepSpec, check_gain_key
 from .point import PointOptions, error_row, measure_point, point_config
-from .table import ResultTable, verdict_counts
+from .table import ResultTable, notes, verdict_counts
 from .verdict import scene_judging_window
 
 __all__ = ["StudyPoint", "SweepOutcome", "SweepSpec", "check_points", "describe_components",
@@ -89,6 +90,9 @@ class SweepOutcome:
     counts : dict of str -> int
         Points of this sweep per verdict (:data:`cosim.study.verdict.VERDICTS`), from the
         table after the run: the same for any completion order and after a resume.
+    notes : tuple of str
+        One line each: points whose verdict differs from the linear prediction, points whose
+        benefit cannot be judged (:func:`cosim.study.table.notes`).
     """
 
     folder: Path
@@ -97,6 +101,7 @@ class SweepOutcome:
     n_run: int
     wall_time: float
     counts: dict[str, int]
+    notes: tuple[str, ...] = ()
 
     @property
     def n_errors(self) -> int:
@@ -116,13 +121,34 @@ def point_row(point: StudyPoint, measure: Measure = measure_point) -> dict[str, 
     Module-level and free of closures, so it pickles to process-pool and dask
     workers. ``point`` is a :class:`cosim.study.grid.Point` or any :class:`StudyPoint`.
     """
+    started = _worker_startup()
     wall0 = time.perf_counter()
     try:
         row = dict(measure(**point.kwargs()))
     except Exception as exc:  # one bad point never stops the sweep
         row = error_row(exc, time.perf_counter() - wall0)
+    row["worker_startup"] = started
     row.update(point.identity())
     return row
+
+
+#: This process has run a point already (:func:`_worker_startup`).
+_STARTED = False
+
+
+def _worker_startup() -> float:
+    """Seconds from this process's start to its first point (interpreter, imports, unpickling
+    the point) [s]; NaN for its later points and where the start time is unknown."""
+    global _STARTED
+    if _STARTED:
+        return math.nan
+    _STARTED = True
+    try:
+        import psutil  # a dependency of dask.distributed
+
+        return time.time() - psutil.Process().create_time()
+    except Exception:  # noqa: BLE001 - no psutil, or no process table: unknown
+        return math.nan
 
 
 def _lost_row(point: StudyPoint, reason: str) -> dict[str, Any]:
@@ -181,6 +207,8 @@ def _dask(points: Sequence[StudyPoint], measure: Measure, scheduler: Any
 
 
 def _inline(points: Sequence[StudyPoint], measure: Measure) -> Iterator[dict[str, Any]]:
+    global _STARTED
+    _STARTED = True                 # this process is no worker: no worker start-up
     for p in points:
         yield point_row(p, measure)
 
@@ -324,9 +352,9 @@ def execute_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int |
                            progress=progress, retry_errors=retry_errors,
                            meta={"sweep.json": meta})
     keys = {p.key for p in points}
-    counts = verdict_counts(r for r in table.rows if r["key"] in keys)
+    mine = [r for r in table.rows if r["key"] in keys]
     return SweepOutcome(Path(out_dir), len(points), len(points) - n_run, n_run,
-                        time.perf_counter() - wall0, counts)
+                        time.perf_counter() - wall0, verdict_counts(mine), tuple(notes(mine)))
 
 
 def sweep_spec(scene: str | Path, gains: Sequence[float] | None = None,

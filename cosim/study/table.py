@@ -20,7 +20,13 @@ depends on; a reader never writes (it may run while a sweep appends).
 
 ``benefit_<span> = 1 - rms_<span> / rms_<span>(open loop)`` (1 = all deflection removed,
 0 = none, < 0 = worse); ``growth_excess = growth_rate - growth_rate(open loop)`` [1/s];
-``verdict`` and ``stable`` (1 stable, 0 unstable, NaN otherwise): :mod:`cosim.study.verdict`.
+``verdict`` and ``stable`` (1 stable, 0 unstable, NaN otherwise), ``agrees_with_prediction`` (1, 0,
+NaN: not compared) with its ``prediction_note``, and ``benefit_note`` (why a benefit cannot be
+judged, "" if it can): :mod:`cosim.study.verdict`. Measured besides the metrics
+(:func:`cosim.study.point.measure_point`): ``predicted_growth_rate`` [1/s], ``contact_time`` [s],
+``rms_rise_<span>`` [1], and the point's ``wall_time`` split into ``startup_time`` (configuration,
+build, FMU instantiation and initialization) and ``stepping_time`` [s], plus ``worker_startup``
+[s] (the worker process's start, imports included, before its first point; NaN for the others).
 """
 
 from __future__ import annotations
@@ -35,24 +41,30 @@ from typing import Any
 
 from drillcosim.cosim.master.files import atomic_write
 
-from .verdict import VERDICTS, judge
+from .verdict import VERDICTS, benefit_note, compare_with_prediction, judge
 
-__all__ = ["COLUMNS", "DERIVED", "ResultTable", "derive", "read_table", "rows_csv", "verdict_counts"]
+__all__ = ["COLUMNS", "DERIVED", "ResultTable", "derive", "notes", "read_table", "rows_csv",
+           "verdict_counts"]
 
 #: Column order of the table (units: gain that of the sweep's gain key (N/strain for the strain
 #: gain), times s, deflections m, force N, power W, growth rates 1/s, stick-slip measures 1;
 #: ``varied``: the point's values of the sweep's other axes, JSON by key path).
 COLUMNS: tuple[str, ...] = (
     "key", "scene", "engine", "kind", "gain", "delay", "step", "stop_time", "varied", "status",
-    "verdict", "stable", "growth_rate", "growth_noise", "growth_excess", "divergence_time",
-    "end_time", "min_stop_time", "rms_long", "rms_short", "benefit_long", "benefit_short",
+    "verdict", "stable", "growth_rate", "growth_noise", "growth_excess",
+    "predicted_growth_rate", "agrees_with_prediction", "prediction_note", "divergence_time",
+    "end_time", "min_stop_time", "contact_time", "rms_long", "rms_short", "benefit_long",
+    "benefit_short", "rms_rise_long", "rms_rise_short", "benefit_note",
     "peak_deflection_long", "peak_deflection_short", "peak_force", "peak_power",
-    "stick_slip_severity", "stick_fraction", "wall_time", "reason",
+    "stick_slip_severity", "stick_fraction", "wall_time", "startup_time", "stepping_time",
+    "worker_startup", "reason",
 )
-#: Columns computed from the rows by :func:`derive` (``reason`` too, for completed runs).
-DERIVED: tuple[str, ...] = ("verdict", "stable", "growth_excess", "benefit_long",
-                            "benefit_short")
-_TEXT = {"key", "scene", "engine", "kind", "varied", "status", "verdict", "reason"}
+#: Columns computed from the rows by :func:`derive` (``reason`` too, for completed runs;
+#: ``prediction_note`` where the point has a prediction).
+DERIVED: tuple[str, ...] = ("verdict", "stable", "growth_excess", "agrees_with_prediction",
+                            "benefit_long", "benefit_short", "benefit_note")
+_TEXT = {"key", "scene", "engine", "kind", "varied", "status", "verdict", "prediction_note",
+         "benefit_note", "reason"}
 SPANS = ("long", "short")
 _STABLE = {"stable": 1.0, "unstable": 0.0}
 
@@ -115,7 +127,13 @@ def derive(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
         if d["status"] == "ok":
             d["reason"] = reason
         d["growth_excess"] = excess
+        d["agrees_with_prediction"] = math.nan
+        d["benefit_note"] = ""
+        if d["kind"] == "closed_loop":
+            d["agrees_with_prediction"], d["prediction_note"] = compare_with_prediction(
+                d, verdict, excess)
         ok_ref = ref is not None and ref.get("status") == "ok"
+        judged = []
         for s in SPANS:
             b = math.nan
             if d["kind"] == "open_loop":
@@ -124,8 +142,31 @@ def derive(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
                 rc, ro = d[f"rms_{s}"], ref.get(f"rms_{s}", math.nan)
                 if isinstance(rc, float) and isinstance(ro, float) and ro > 0:
                     b = 1.0 - rc / ro
+                    judged.append(s)
             d[f"benefit_{s}"] = b
+        d["benefit_note"] = benefit_note(ref, judged) if judged else ""
         out.append(d)
+    return out
+
+
+def notes(rows: Iterable[Mapping[str, Any]]) -> list[str]:
+    """One line each: the closed-loop points whose verdict differs from the linear prediction
+    (counted by reason), and those whose benefit cannot be judged (the first reason)."""
+    closed = [r for r in rows if r["kind"] == "closed_loop"]
+    out = []
+    differ: dict[str, int] = {}
+    for r in closed:
+        if r["agrees_with_prediction"] == 0.0:
+            why = str(r["prediction_note"]).split(":", 1)[0]
+            differ[why] = differ.get(why, 0) + 1
+    if differ:
+        out.append(f"{sum(differ.values())} of {len(closed)} points differ from the linear "
+                   f"prediction ({', '.join(f'{n} {w}' for w, n in differ.items())}; "
+                   "prediction_note in the table)")
+    unjudged = [r for r in closed if r["benefit_note"]]
+    if unjudged:
+        out.append(f"benefit not judged at {len(unjudged)} of {len(closed)} points: "
+                   f"{unjudged[0]['benefit_note']}")
     return out
 
 

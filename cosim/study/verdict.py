@@ -22,6 +22,19 @@ The rules, in this order (``docs/delay_study.md``, "Verdicts"):
 The open-loop run itself gets ``reference`` (``unstable`` if it diverged). The verdict of a row is
 a function of that row and its reference row only: :func:`judge` is what the results table
 (:mod:`cosim.study.table`) applies to every row whenever a row is added.
+
+Against the linear prediction (:func:`compare_with_prediction`): a verdict ``stable`` agrees with a
+predicted growth rate <= 0, ``unstable`` with one > 0; where they differ, the reason in this order:
+the predicted growth is *below the margin* (0 < rate <= :data:`GROWTH_MARGIN`: the verdict's rule
+cannot call it unstable), *wall contact* (the run touched the wellbore: a nonlinearity the
+prediction leaves out), else none known. ``undecided`` and ``error`` rows are not compared (*too
+short to judge* when the run ends before the judging window), nor rows without a prediction
+(*prediction unavailable*).
+
+The control benefit (:func:`benefit_note`) is judged only when the open-loop reference has built up
+its vibration: its RMS deflection over the second half of the RMS window at most
+:data:`BENEFIT_RISE` times that over the first half (a benefit measured while the reference still
+grows is a property of the window, not of the controller).
 """
 
 from __future__ import annotations
@@ -29,19 +42,22 @@ from __future__ import annotations
 import functools
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import scipy.linalg
+from threadpoolctl import threadpool_limits
 
 from drillcosim.cosim.scenario.config import key_paths, load_config
 
 from .stability import coupled_plant
 
-__all__ = ["GROWTH_MARGIN", "NOISE_FACTOR", "SETTLE_TIME_CONSTANTS", "VERDICTS", "JudgingWindow",
-           "judge", "judging_window", "scene_judging_window"]
+__all__ = ["BENEFIT_RISE", "GROWTH_MARGIN", "NOISE_FACTOR", "PREDICTION_NOTES",
+           "SETTLE_TIME_CONSTANTS", "VERDICTS", "JudgingWindow", "benefit_note",
+           "compare_with_prediction", "judge", "judging_window", "rule_text",
+           "scene_judging_window"]
 
 #: A closed-loop run is unstable when its strain-envelope growth rate exceeds the open-loop
 #: run's by more than this [1/s] (the forced whirl builds up over the first seconds in every
@@ -54,6 +70,12 @@ NOISE_FACTOR = 2.0
 SETTLE_TIME_CONSTANTS = 3.0
 #: Verdict values of the results table.
 VERDICTS = ("stable", "unstable", "undecided", "reference", "error")
+#: The benefit of a span is judged when the open-loop reference's RMS deflection over the second
+#: half of the RMS window is at most this many times that over its first half [1].
+BENEFIT_RISE = 1.5
+#: Why a verdict and the prediction are not compared or differ (``prediction_note`` starts so).
+PREDICTION_NOTES = ("below the margin", "wall contact", "unexplained", "too short to judge",
+                    "undecided", "prediction unavailable", "error")
 
 
 @dataclass(frozen=True)
@@ -142,7 +164,9 @@ def _cached_window(scene: str, overrides: str, highpass: float, fit_fraction: fl
     start_up = max(config.scene.plant.top_drive.ramp_time,
                    getattr(config.controller.params, "switch_on_time", 0.0))
     A = coupled_plant(config.scene)[0]
-    return judging_window(scipy.linalg.eigvals(A), start_up, highpass, fit_fraction)
+    with threadpool_limits(1):      # ~240 states: one BLAS thread (6x faster on a busy machine)
+        lam = scipy.linalg.eigvals(A)
+    return judging_window(lam, start_up, highpass, fit_fraction)
 
 
 def scene_judging_window(scene: str, overrides: Mapping[str, Any] | None = None,
@@ -226,3 +250,75 @@ def judge(row: Mapping[str, Any], reference: Mapping[str, Any] | None
     return "undecided", (f"{about}: more than the noise, less than the {GROWTH_MARGIN:g} 1/s "
                          "margin (a slow instability or another forced build-up: run longer, "
                          "compare with the prediction)"), excess
+
+
+def rule_text(stop_time: float) -> dict[str, str]:
+    """The verdicts' rules in words for runs of ``stop_time`` [s] (the maps' legend)."""
+    m = f"{GROWTH_MARGIN:g} 1/s"
+    return {"stable": f"stable: no envelope growth above {m} (over open loop) within "
+                      f"{stop_time:g} s",
+            "unstable": f"unstable: envelope grows > {m} faster than open loop",
+            "diverged": "unstable: diverged (non-finite, out of range or force cap)",
+            "undecided": "undecided: within the noise of the margin, or run too short",
+            "error": "error (the point failed)"}
+
+
+def compare_with_prediction(row: Mapping[str, Any], verdict: str, excess: float
+                            ) -> tuple[float, str]:
+    """Does the verdict agree with the linear prediction (rules: module docstring)?
+
+    Parameters
+    ----------
+    row : mapping
+        A closed-loop row: ``predicted_growth_rate`` [1/s] (NaN: none), ``prediction_note``
+        (why none), ``contact_time`` [s], ``end_time``, ``min_stop_time`` [s].
+    verdict : str
+        The row's verdict (:func:`judge`).
+    excess : float
+        The measured growth excess [1/s] (NaN: none).
+
+    Returns
+    -------
+    agrees : float
+        1 (agrees), 0 (differs), NaN (not compared).
+    note : str
+        "" when they agree; else one of :data:`PREDICTION_NOTES` and the numbers.
+    """
+    predicted = _number(row, "predicted_growth_rate")
+    if verdict == "error":
+        return math.nan, "error"
+    if not math.isfinite(predicted):
+        note = str(row.get("prediction_note", "") or "")
+        return math.nan, note if note.startswith("prediction unavailable") else \
+            "prediction unavailable"
+    p = f"predicted {predicted:+.3g} 1/s"
+    if verdict == "undecided":
+        if _number(row, "end_time") < _number(row, "min_stop_time"):
+            return math.nan, f"too short to judge ({p})"
+        return math.nan, f"undecided ({p})"
+    if (verdict == "unstable") == (predicted > 0):
+        return 1.0, ""
+    measured = "diverged" if row.get("status") == "diverged" else (
+        f"measured excess {excess:.3g} 1/s" if math.isfinite(excess) else "no measured growth")
+    if verdict == "stable" and 0 < predicted <= GROWTH_MARGIN:
+        return 0.0, (f"below the margin: {p} is at most the {GROWTH_MARGIN:g} 1/s the verdict "
+                     f"needs ({measured})")
+    contact = _number(row, "contact_time")
+    if contact > 0:
+        return 0.0, (f"wall contact: {contact:.3g} s in contact with the wellbore, which the "
+                     f"linear prediction leaves out ({p}, {measured})")
+    return 0.0, f"unexplained: {p}, {measured}"
+
+
+def benefit_note(reference: Mapping[str, Any] | None, spans: Sequence[str] = ("long", "short")
+                 ) -> str:
+    """Why the benefit of ``spans`` cannot be judged against ``reference`` (the open-loop row),
+    "" if it can (rule: module docstring); the spans whose reference is still building up."""
+    if reference is None or reference.get("status") != "ok":
+        return "no completed open-loop reference"
+    rising = [f"{rise:.3g}x ({span} span)" for span in spans
+              if (rise := _number(reference, f"rms_rise_{span}")) > BENEFIT_RISE]
+    if not rising:
+        return ""
+    return (f"too short to judge the benefit: the open-loop RMS deflection still rises "
+            f"{', '.join(rising)} within the RMS window (> {BENEFIT_RISE:g}x); run longer")

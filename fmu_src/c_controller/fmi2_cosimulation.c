@@ -4,13 +4,19 @@
  * physics, this file the FMI API. The calling-sequence rules are one table of state masks
  * (MASK_fmi2XXX below) checked by BEGIN(), not ifs repeated per function.
  *
- * Statuses: a problem the caller can correct (parameter out of range at
- * fmi2ExitInitializationMode, a non-finite input or time at fmi2DoStep, an unknown value
- * reference, a variable that may not be set now, a call out of sequence) returns fmi2Error
- * with one log message naming it (category logStatusError, always sent to the logger).
- * After fmi2Error the instance accepts only fmi2Reset, fmi2SetFMUstate, fmi2FreeFMUstate,
- * fmi2FreeInstance and the logging/version calls (FMI 2.0 section 2.1.3). fmi2Fatal is never
- * returned. Memory: calloc/free (canNotUseMemoryManagementFunctions = true).
+ * Statuses (the rules of every drillcosim FMU, docs/reliability.md): a problem the caller can
+ * correct (parameter out of range at fmi2ExitInitializationMode, a non-finite input or time at
+ * fmi2DoStep, an unknown value reference, a variable that may not be set now, a call out of
+ * sequence, an FMU state refused) returns fmi2Error with one log message naming it (category
+ * logStatusError, always sent to the logger) and changes nothing: a set call is checked whole
+ * before any value is written; the instance stays in its state and usable (a corrected retry
+ * is OK), as the native wrapper's FMUs. fmi2Fatal is never returned. Memory: calloc/free
+ * (canNotUseMemoryManagementFunctions = true).
+ *
+ * FMU state: everything of ModelData, the phase (the FMI state it was taken in) included. It is
+ * restored only in the phase it was taken in, and only if it passes the checks its parameters
+ * would get (check_state); then all of it, else nothing. Serialized: the format every drillcosim
+ * FMU shares (dcs_state_format.h: identity, SHA-256) around the payload of put_data/get_data.
  *
  * Handles: an fmi2Component or fmi2FMUstate a host passes in is used only if it is in the
  * registry of live ones this library gave out (dcs_registry.c, shared with the native wrapper):
@@ -18,7 +24,7 @@
  * without touching memory that may be gone. An unknown component: fmi2Error and no message
  * (no instance, no logger), fmi2FreeInstance ignores it; an unknown state: fmi2Error naming it.
  * A handle leaves its registry before it is freed, so a second free finds nothing to free.
- * Serialized states (bytes) are checked by size, magic number and version instead.
+ * Serialized states (bytes) are checked by their format instead (dcs_state_format.c).
  */
 #include <math.h>
 #include <stdarg.h>
@@ -27,20 +33,22 @@
 #include <string.h>
 
 #include "config.h"
+#include "dcs_build.h"
 #include "dcs_registry.h"
+#include "dcs_state_format.h"
 #include "fmi2Functions.h"
 #include "model.h"
 
 /* ------------------------------------------------------------------------ states */
+/* One bit each, the phases of the state format (DCS_PHASE_*). */
 typedef enum {
-    Instantiated = 1 << 0,
-    InitializationMode = 1 << 1,
-    StepComplete = 1 << 2,
-    Terminated = 1 << 3,
-    Error = 1 << 4
+    Instantiated = DCS_PHASE_INSTANTIATED,
+    InitializationMode = DCS_PHASE_INITIALIZATION_MODE,
+    StepComplete = DCS_PHASE_STEP_COMPLETE,
+    Terminated = DCS_PHASE_TERMINATED
 } ModelState;
 
-#define ANY_STATE (Instantiated | InitializationMode | StepComplete | Terminated | Error)
+#define ANY_STATE (Instantiated | InitializationMode | StepComplete | Terminated)
 #define RUNNING (InitializationMode | StepComplete | Terminated)
 
 #define MASK_fmi2SetDebugLogging ANY_STATE
@@ -92,14 +100,17 @@ typedef struct {
     char message[512];
 } Instance;
 
-#define SERIAL_MAGIC 0x44435343u /* "DCSC" */
-#define SERIAL_VERSION 1u
-
+/* An FMU state: a copy of the instance's data. */
 typedef struct {
-    unsigned magic;
-    unsigned version;
     ModelData d;
 } SerialState;
+
+/* The payload of a serialized state: ModelData but the phase (in the format's header), field
+ * by field in this order, doubles as IEEE 754 binary64 and ints as int32, little-endian:
+ * strain[4], force[4], params (gain, force_limit, symmetric_force_limit, switch_on_time,
+ * lag_time_constant, mode, enabled), applied (the same), law (force[4], decay_dt, decay), time. */
+#define PARAMS_BYTES (5 * 8 + 2 * 4)
+#define PAYLOAD_BYTES (8 * N_CHANNELS * 2 + 2 * PARAMS_BYTES + 8 * (N_CHANNELS + 2) + 8)
 
 /* The live handles of this library (of every instance): valid only if listed. */
 static DcsRegistry g_instances = DCS_REGISTRY_INIT;
@@ -144,6 +155,7 @@ static void log_message(Instance *inst, fmi2Status status, const char *category,
 
 #define LOG_ERROR(inst, ...) log_message((inst), fmi2Error, "logStatusError", __VA_ARGS__)
 
+/* fmi2Error with one message; the instance is left as it is (nothing was changed). */
 static fmi2Status fail(Instance *inst, const char *call, const char *fmt, ...)
 {
     char text[sizeof inst->message];
@@ -152,19 +164,12 @@ static fmi2Status fail(Instance *inst, const char *call, const char *fmt, ...)
     vsnprintf(text, sizeof text, fmt, args);
     va_end(args);
     LOG_ERROR(inst, "%s: %s", call, text);
-    inst->d.state = Error;
     return fmi2Error;
 }
 
 static const char *state_name(ModelState s)
 {
-    switch (s) {
-    case Instantiated: return "Instantiated";
-    case InitializationMode: return "InitializationMode";
-    case StepComplete: return "StepComplete";
-    case Terminated: return "Terminated";
-    default: return "Error";
-    }
+    return dcs_phase_name((unsigned)s);
 }
 
 /* The check of every function: c must be a live instance (looked up, not read), and its
@@ -202,15 +207,53 @@ static int tunables_differ(const LawParams *a, const LawParams *b)
            a->switch_on_time != b->switch_on_time;
 }
 
-/* Whether a parameter may be set now: fixed ones only before initialization ends. */
-static int settable(Instance *inst, const char *call, fmi2ValueReference vr, int fixed)
+/* Why value reference vr may not be set now through call (type: 'R', 'I', 'B', 'S'), in
+ * inst->message, or 0 if it may. A set call checks every value reference before it writes any. */
+static int set_problem(Instance *inst, fmi2ValueReference vr, char type)
 {
-    if (fixed && inst->d.state == StepComplete) {
-        fail(inst, call, "value reference %u is a fixed parameter: it can be set only before "
-             "fmi2ExitInitializationMode", vr);
+    char have = 0;
+    int fixed = 0, output = 0;
+    switch (vr) {
+    case vr_strain1_C: case vr_strain1_E: case vr_strain2_C: case vr_strain2_E:
+    case vr_gain: case vr_force_limit: case vr_symmetric_force_limit: case vr_switch_on_time:
+        have = 'R';
+        break;
+    case vr_actuator1_force_C: case vr_actuator1_force_E:
+    case vr_actuator2_force_C: case vr_actuator2_force_E:
+        have = 'R';
+        output = 1;
+        break;
+    case vr_lag_time_constant: have = 'R'; fixed = 1; break;
+    case vr_mode: have = 'I'; fixed = 1; break;
+    case vr_enabled: have = 'B'; fixed = 1; break;
+    default: break;
+    }
+    const char *kind = type == 'R' ? "Real" : type == 'I' ? "Integer" : type == 'B' ? "Boolean"
+                                                                                 : "String";
+    if (have != type) {
+        snprintf(inst->message, sizeof inst->message, "no %s variable has value reference %u",
+                 kind, vr);
+    } else if (output) {
+        snprintf(inst->message, sizeof inst->message, "value reference %u is an output and "
+                 "cannot be set", vr);
+    } else if (fixed && inst->d.state != Instantiated && inst->d.state != InitializationMode) {
+        snprintf(inst->message, sizeof inst->message, "value reference %u (%s) is a fixed "
+                 "parameter: it can be set only before fmi2ExitInitializationMode", vr,
+                 vr == vr_mode ? "mode" : vr == vr_enabled ? "enabled" : "lag_time_constant");
+    } else {
         return 0;
     }
     return 1;
+}
+
+/* The first value reference of vr[] that may not be set (message in inst->message), or nvr. */
+static size_t first_refused(Instance *inst, const fmi2ValueReference vr[], size_t nvr, char type)
+{
+    size_t i = 0;
+    while (i < nvr && !set_problem(inst, vr[i], type)) {
+        i++;
+    }
+    return i;
 }
 
 /* ------------------------------------------------------------------------ common */
@@ -311,8 +354,8 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
     BEGIN(fmi2ExitInitializationMode)
     if (law_check_params(&inst->d.params, inst->message, sizeof inst->message)) {
-        return fail(inst, "fmi2ExitInitializationMode", "invalid parameter: %s; reset or "
-                    "re-instantiate with valid parameters", inst->message);
+        return fail(inst, "fmi2ExitInitializationMode", "invalid parameter: %s; correct it "
+                    "and call fmi2ExitInitializationMode again (or reset)", inst->message);
     }
     inst->d.applied = inst->d.params;
     law_reset(&inst->d.law);
@@ -366,26 +409,18 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
                        const fmi2Real value[])
 {
     BEGIN(fmi2SetReal)
+    if (first_refused(inst, vr, nvr, 'R') < nvr) {
+        return fail(inst, "fmi2SetReal", "%s (nothing of this call was set)", inst->message);
+    }
     ModelData *d = &inst->d;
     for (size_t i = 0; i < nvr; i++) {
         switch (vr[i]) {
-        case vr_strain1_C: case vr_strain1_E: case vr_strain2_C: case vr_strain2_E:
-            d->strain[vr[i] - vr_strain1_C] = value[i];
-            break;
         case vr_gain: d->params.gain = value[i]; break;
         case vr_force_limit: d->params.force_limit = value[i]; break;
         case vr_symmetric_force_limit: d->params.symmetric_force_limit = value[i]; break;
         case vr_switch_on_time: d->params.switch_on_time = value[i]; break;
-        case vr_lag_time_constant:
-            if (!settable(inst, "fmi2SetReal", vr[i], 1)) return fmi2Error;
-            d->params.lag_time_constant = value[i];
-            break;
-        case vr_actuator1_force_C: case vr_actuator1_force_E:
-        case vr_actuator2_force_C: case vr_actuator2_force_E:
-            return fail(inst, "fmi2SetReal", "value reference %u is an output and cannot be "
-                        "set", vr[i]);
-        default:
-            return fail(inst, "fmi2SetReal", "no Real variable has value reference %u", vr[i]);
+        case vr_lag_time_constant: d->params.lag_time_constant = value[i]; break;
+        default: d->strain[vr[i] - vr_strain1_C] = value[i]; break; /* an input (checked) */
         }
     }
     return fmi2OK;
@@ -410,13 +445,11 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
                           const fmi2Integer value[])
 {
     BEGIN(fmi2SetInteger)
+    if (first_refused(inst, vr, nvr, 'I') < nvr) {
+        return fail(inst, "fmi2SetInteger", "%s (nothing of this call was set)", inst->message);
+    }
     for (size_t i = 0; i < nvr; i++) {
-        if (vr[i] != vr_mode) {
-            return fail(inst, "fmi2SetInteger", "no Integer variable has value reference %u",
-                        vr[i]);
-        }
-        if (!settable(inst, "fmi2SetInteger", vr[i], 1)) return fmi2Error;
-        inst->d.params.mode = value[i];
+        inst->d.params.mode = value[i]; /* the only Integer (checked) */
     }
     return fmi2OK;
 }
@@ -440,13 +473,11 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
                           const fmi2Boolean value[])
 {
     BEGIN(fmi2SetBoolean)
+    if (first_refused(inst, vr, nvr, 'B') < nvr) {
+        return fail(inst, "fmi2SetBoolean", "%s (nothing of this call was set)", inst->message);
+    }
     for (size_t i = 0; i < nvr; i++) {
-        if (vr[i] != vr_enabled) {
-            return fail(inst, "fmi2SetBoolean", "no Boolean variable has value reference %u",
-                        vr[i]);
-        }
-        if (!settable(inst, "fmi2SetBoolean", vr[i], 1)) return fmi2Error;
-        inst->d.params.enabled = value[i] ? 1 : 0;
+        inst->d.params.enabled = value[i] ? 1 : 0; /* the only Boolean (checked) */
     }
     return fmi2OK;
 }
@@ -469,8 +500,8 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 {
     BEGIN(fmi2SetString)
     (void)value;
-    if (nvr > 0) {
-        return fail(inst, "fmi2SetString", "no String variable has value reference %u", vr[0]);
+    if (first_refused(inst, vr, nvr, 'S') < nvr) {
+        return fail(inst, "fmi2SetString", "%s (nothing of this call was set)", inst->message);
     }
     return fmi2OK;
 }
@@ -610,6 +641,101 @@ static SerialState *state_to_fill(fmi2FMUstate *FMUstate)
     return s;
 }
 
+/* Whether the data of a state may be restored into inst, checked as its parameters would be
+ * (law_check_params, as fmi2ExitInitializationMode) once the state is past initialization; why
+ * not in inst->message. */
+static int state_problem(Instance *inst, const ModelData *d)
+{
+    char *msg = inst->message;
+    const size_t size = sizeof inst->message;
+    if (d->state != inst->d.state) {
+        snprintf(msg, size, "a state taken in %s cannot be restored in %s (a state is restored "
+                 "only in the phase it was taken in)", state_name(d->state),
+                 state_name(inst->d.state));
+        return 1;
+    }
+    if (d->state == StepComplete || d->state == Terminated) {
+        char why[300];
+        if (law_check_params(&d->params, why, sizeof why) ||
+            law_check_params(&d->applied, why, sizeof why)) {
+            snprintf(msg, size, "invalid parameter: %s", why);
+            return 1;
+        }
+        if (d->params.lag_time_constant != d->applied.lag_time_constant ||
+            d->params.mode != d->applied.mode || d->params.enabled != d->applied.enabled) {
+            snprintf(msg, size, "its fixed parameters differ from those its law runs with");
+            return 1;
+        }
+    }
+    for (int i = 0; i < N_CHANNELS; i++) {
+        if (!isfinite(d->law.force[i])) {
+            snprintf(msg, size, "its lag state of channel %d is not finite (%.17g)", i + 1,
+                     d->law.force[i]);
+            return 1;
+        }
+    }
+    if (!isfinite(d->time) || !isfinite(d->law.decay) ||
+        !(isnan(d->law.decay_dt) || (isfinite(d->law.decay_dt) && d->law.decay_dt >= 0.0))) {
+        snprintf(msg, size, "its time or cached lag decay is not a valid number");
+        return 1;
+    }
+    if ((d->params.enabled != 0 && d->params.enabled != 1) ||
+        (d->applied.enabled != 0 && d->applied.enabled != 1)) {
+        snprintf(msg, size, "its enabled flag is neither 0 nor 1");
+        return 1;
+    }
+    return 0;
+}
+
+static unsigned char *put_params(unsigned char *p, const LawParams *q)
+{
+    dcs_put_f64(p, q->gain);
+    dcs_put_f64(p + 8, q->force_limit);
+    dcs_put_f64(p + 16, q->symmetric_force_limit);
+    dcs_put_f64(p + 24, q->switch_on_time);
+    dcs_put_f64(p + 32, q->lag_time_constant);
+    dcs_put_u32(p + 40, (uint32_t)q->mode);
+    dcs_put_u32(p + 44, (uint32_t)q->enabled);
+    return p + PARAMS_BYTES;
+}
+
+static const unsigned char *get_params(const unsigned char *p, LawParams *q)
+{
+    q->gain = dcs_get_f64(p);
+    q->force_limit = dcs_get_f64(p + 8);
+    q->symmetric_force_limit = dcs_get_f64(p + 16);
+    q->switch_on_time = dcs_get_f64(p + 24);
+    q->lag_time_constant = dcs_get_f64(p + 32);
+    q->mode = (int)(int32_t)dcs_get_u32(p + 40);
+    q->enabled = (int)(int32_t)dcs_get_u32(p + 44);
+    return p + PARAMS_BYTES;
+}
+
+/* The payload of d (PAYLOAD_BYTES, see SerialState). */
+static void put_data(unsigned char *p, const ModelData *d)
+{
+    for (int i = 0; i < N_CHANNELS; i++, p += 8) dcs_put_f64(p, d->strain[i]);
+    for (int i = 0; i < N_CHANNELS; i++, p += 8) dcs_put_f64(p, d->force[i]);
+    p = put_params(p, &d->params);
+    p = put_params(p, &d->applied);
+    for (int i = 0; i < N_CHANNELS; i++, p += 8) dcs_put_f64(p, d->law.force[i]);
+    dcs_put_f64(p, d->law.decay_dt);
+    dcs_put_f64(p + 8, d->law.decay);
+    dcs_put_f64(p + 16, d->time);
+}
+
+static void get_data(const unsigned char *p, ModelData *d)
+{
+    for (int i = 0; i < N_CHANNELS; i++, p += 8) d->strain[i] = dcs_get_f64(p);
+    for (int i = 0; i < N_CHANNELS; i++, p += 8) d->force[i] = dcs_get_f64(p);
+    p = get_params(p, &d->params);
+    p = get_params(p, &d->applied);
+    for (int i = 0; i < N_CHANNELS; i++, p += 8) d->law.force[i] = dcs_get_f64(p);
+    d->law.decay_dt = dcs_get_f64(p);
+    d->law.decay = dcs_get_f64(p + 8);
+    d->time = dcs_get_f64(p + 16);
+}
+
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
     BEGIN(fmi2GetFMUstate)
@@ -620,19 +746,9 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
     if (!s) {
         return fail(inst, "fmi2GetFMUstate", "out of memory");
     }
-    s->magic = SERIAL_MAGIC;
-    s->version = SERIAL_VERSION;
     s->d = inst->d;
     *FMUstate = s;
     return fmi2OK;
-}
-
-/* Whether the bytes of a serialized state (copied into s) are one of this FMU's. */
-static int valid_serial_state(const SerialState *s)
-{
-    return s->magic == SERIAL_MAGIC && s->version == SERIAL_VERSION &&
-           (s->d.state == Instantiated || s->d.state == InitializationMode ||
-            s->d.state == StepComplete || s->d.state == Terminated);
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
@@ -642,7 +758,11 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
     if (!s) {
         return fail(inst, "fmi2SetFMUstate", "not a state of this FMU");
     }
-    inst->d = s->d;
+    if (state_problem(inst, &s->d)) {
+        return fail(inst, "fmi2SetFMUstate", "refused: %s; the instance is unchanged",
+                    inst->message);
+    }
+    inst->d = s->d; /* all of it, checked */
     return fmi2OK;
 }
 
@@ -661,6 +781,13 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
     return fmi2OK;
 }
 
+/* Bytes of a serialized state of this FMU. */
+static size_t serialized_size(void)
+{
+    return dcs_state_size_for(strlen(MODEL_IDENTIFIER_STRING), strlen(DCS_BUILD_ID),
+                              PAYLOAD_BYTES);
+}
+
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size)
 {
     BEGIN(fmi2SerializedFMUstateSize)
@@ -670,7 +797,7 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, si
     if (!size) {
         return fail(inst, "fmi2SerializedFMUstateSize", "size must not be NULL");
     }
-    *size = sizeof(SerialState);
+    *size = serialized_size();
     return fmi2OK;
 }
 
@@ -682,11 +809,15 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate,
     if (!s) {
         return fail(inst, "fmi2SerializeFMUstate", "not a state of this FMU");
     }
-    if (!serializedState || size < sizeof *s) {
-        return fail(inst, "fmi2SerializeFMUstate", "need a buffer of %zu bytes, got %zu",
-                    sizeof *s, serializedState ? size : (size_t)0);
+    if (!serializedState || size < serialized_size()) {
+        return fail(inst, "fmi2SerializeFMUstate", "need a buffer of %lu bytes, got %lu",
+                    (unsigned long)serialized_size(),
+                    (unsigned long)(serializedState ? size : 0));
     }
-    memcpy(serializedState, s, sizeof *s);
+    unsigned char payload[PAYLOAD_BYTES];
+    put_data(payload, &s->d);
+    dcs_state_seal((unsigned char *)serializedState, (unsigned)s->d.state,
+                   MODEL_IDENTIFIER_STRING, DCS_BUILD_ID, payload, sizeof payload);
     return fmi2OK;
 }
 
@@ -694,15 +825,22 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
                                    size_t size, fmi2FMUstate *FMUstate)
 {
     BEGIN(fmi2DeSerializeFMUstate)
+    DcsStateView view;
+    if (!FMUstate) {
+        return fail(inst, "fmi2DeSerializeFMUstate", "FMUstate must not be NULL");
+    }
+    if (dcs_state_open((const unsigned char *)serializedState, size, MODEL_IDENTIFIER_STRING,
+                       DCS_BUILD_ID, &view, inst->message, sizeof inst->message)) {
+        return fail(inst, "fmi2DeSerializeFMUstate", "refused: %s", inst->message);
+    }
+    if (view.payload_len != PAYLOAD_BYTES) {
+        return fail(inst, "fmi2DeSerializeFMUstate", "refused: a payload of %lu bytes, not %d",
+                    (unsigned long)view.payload_len, PAYLOAD_BYTES);
+    }
     SerialState tmp;
-    if (!serializedState || !FMUstate || size != sizeof tmp) {
-        return fail(inst, "fmi2DeSerializeFMUstate", "not a serialized state of this FMU "
-                    "(%zu bytes, expected %zu)", size, sizeof tmp);
-    }
-    memcpy(&tmp, serializedState, sizeof tmp);
-    if (!valid_serial_state(&tmp)) {
-        return fail(inst, "fmi2DeSerializeFMUstate", "not a serialized state of this FMU");
-    }
+    memset(&tmp, 0, sizeof tmp);
+    get_data(view.payload, &tmp.d);
+    tmp.d.state = (ModelState)view.phase;
     SerialState *s = state_to_fill(FMUstate);
     if (!s) {
         return fail(inst, "fmi2DeSerializeFMUstate", "out of memory");

@@ -19,14 +19,18 @@ run on our C wrapper (``fmu_src/wrapper``), whose status protocol this class spe
   and writes outputs in place (``out=``, ``[:] =``), never rebinds them. The wrapper takes them
   once through :meth:`DcsSlave._fmi2_real_buffers` and then moves those values in step mode
   without calling Python (one Python call per doStep).
-* **FMU state.** ``_fmu_state_from_bytes`` never raises: bytes that are not a state of ours give
-  a marker that the adapter's ``_set_fmu_state`` rejects with fmi2Error.
+* **Guarded set, all or nothing.** Every value reference of a set call is checked before any
+  value is written: one refused variable (among them a fixed parameter after initialization,
+  :meth:`DcsSlave._fixed_parameters_locked`) makes the whole call fmi2Error, one logged line,
+  nothing written (inputs of the same call included).
+* **FMU state** (:mod:`.state`): the registered variables plus :meth:`DcsSlave._internal_state`;
+  ``fmi2SetFMUstate`` checks it as a parameter set (:meth:`DcsSlave._restore_internal`) and
+  applies all of it or nothing (fmi2Error naming why).
 """
 
 from __future__ import annotations
 
 import importlib
-import json
 import math
 import sys
 from collections.abc import Callable
@@ -44,11 +48,14 @@ from _dcs_pythonfmu_0_7_0 import (
     Integer,
     Real,
     String,
+    enums,
 )
-from _dcs_pythonfmu_0_7_0.enums import Fmi2Status
 
+from . import state as fmu_state
 from . import vendored
 from .native import provide
+
+Fmi2Status = enums.Fmi2Status
 
 __all__ = ["DcsSlave", "DefaultExperiment", "Fmi2Status", "LawSlave", "XmlReal", "ranges_of",
            "units_of", "vendored"]
@@ -193,7 +200,16 @@ class DcsSlave(Fmi2Slave):
         if call.startswith("set") and var.causality not in (Fmi2Causality.input,
                                                             Fmi2Causality.parameter):
             return f"{var.name} (value reference {vr}) is an {var.causality.name}: not settable"
+        if (call.startswith("set") and var.variability == Fmi2Variability.fixed
+                and self._fixed_parameters_locked()):
+            return (f"{var.name} (value reference {vr}) is a fixed parameter: it cannot be set "
+                    f"after initialization")
         return None
+
+    def _fixed_parameters_locked(self) -> bool:
+        """Whether the instance is past ``fmi2ExitInitializationMode`` (fixed parameters then
+        refuse a set). Adapters with fixed parameters override it."""
+        return False
 
     def _accessible(self, vr: int, kind: type, call: str) -> bool:
         """Whether ``call`` may access ``vr``; if not, the call is fmi2Error naming why."""
@@ -211,9 +227,12 @@ class DcsSlave(Fmi2Slave):
     def _set(self, vrs: list[int], values: list[Any], kind_name: str) -> None:
         kind, convert, _neutral = _KINDS[kind_name]
         call = f"set{kind_name}"
+        problems = [p for p in (self._access_problem(vr, kind, call) for vr in vrs) if p]
+        if problems:  # the whole call is refused: nothing written
+            return self._error(f"{call}: {'; '.join(problems)} (nothing of this call was set)")
         for vr, value in zip(vrs, values):
-            if self._accessible(vr, kind, call):
-                self.vars[vr].setter(convert(value))
+            self.vars[vr].setter(convert(value))
+        return None
 
     def get_real(self, vrs: list[int]) -> list[float]:
         return self._get(vrs, "Real")
@@ -240,14 +259,34 @@ class DcsSlave(Fmi2Slave):
         self._set(vrs, values, "String")
 
     # ------------------------------------------------------------- FMU state
-    @staticmethod
-    def _fmu_state_from_bytes(state: bytes) -> dict[str, Any]:
-        """Decode a serialized state; bytes that are none give a marker _set_fmu_state rejects."""
+    def _get_fmu_state(self) -> dict[str, Any]:
+        return fmu_state.capture(self)
+
+    def _set_fmu_state(self, state: dict[str, Any]) -> None:
+        problem = fmu_state.restore(self, state)
+        if problem is not None:
+            self._error(f"fmi2SetFMUstate: refused: {problem}; the instance is unchanged")
+
+    def _fmu_state_to_bytes(self, state: dict[str, Any]) -> bytes:
+        return fmu_state.encode(state)
+
+    def _fmu_state_from_bytes(self, payload: bytes) -> dict[str, Any] | None:
+        """The state of a payload (the wrapper checked the rest); None and fmi2Error if it is
+        not one."""
         try:
-            out = json.loads(state.decode("utf-8"))
-            return out if isinstance(out, dict) else {"__invalid_state__": repr(out)[:80]}
-        except Exception as exc:  # noqa: BLE001 - bad bytes are the importer's error: fmi2Error
-            return {"__invalid_state__": repr(exc)}
+            return fmu_state.decode(payload)
+        except ValueError as exc:
+            self._error(f"fmi2DeSerializeFMUstate: refused: {exc}")
+            return None
+
+    def _internal_state(self) -> dict[str, Any]:
+        """What the instance keeps besides its variables (JSON-safe); adapters extend it."""
+        return {}
+
+    def _restore_internal(self, internal: dict[str, Any]) -> str | None:
+        """Check ``internal`` (the variables of the state are already written) and apply it only
+        if every check passes: why it is refused, or None. The base has nothing to restore."""
+        return None if not internal else f"unexpected internal state {sorted(internal)}"
 
 
 class LawSlave(DcsSlave):
@@ -262,11 +301,12 @@ class LawSlave(DcsSlave):
     :meth:`_step_law` (one step: read ``self.inputs``, write ``self.outputs``; ValueError for bad
     inputs). The rules (the status protocol of :class:`DcsSlave`):
 
-    * invalid parameters at ``fmi2ExitInitializationMode``: fmi2Error naming them, every doStep
-      refused until a reset or a new instance;
-    * a fixed parameter changed after initialization, an invalid tunable one, a bad input:
-      fmi2Error from that doStep, state unchanged;
-    * FMU state: the registered variables plus the law's state and the initialization flags;
+    * invalid parameters at ``fmi2ExitInitializationMode``: fmi2Error naming them; the instance
+      stays in initialization mode (no doStep) until corrected parameters initialize it;
+    * a fixed parameter set after initialization: fmi2Error from that set call, nothing set;
+    * an invalid tunable parameter, a bad input: fmi2Error from that doStep, state unchanged;
+    * FMU state: the registered variables plus the law's state; after initialization a state's
+      parameters must pass the checks of initialization (they reach the law at the next doStep);
     * compiled step (the wrapper's accelerator, ``fmu_src/wrapper``): the law's, made at the
       first request after initialization (where numba is loaded in the process by then: the
       hosts instantiate every FMU, the plant's import loads it, before they initialize any),
@@ -282,9 +322,6 @@ class LawSlave(DcsSlave):
     #: The vendored ``controller`` package of the adapter: its compiled entry points get their
     #: addresses from its native image when there is one (``native.provide``).
     LAW_PACKAGE: ClassVar[ModuleType | None] = None
-    _STATE_KEY = "__dcs_controller_state__"
-    _INIT_KEY = "__dcs_initialized__"
-    _INIT_ERROR_KEY = "__dcs_init_error__"
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
@@ -324,8 +361,8 @@ class LawSlave(DcsSlave):
         except ValueError as exc:
             self._init_error = f"invalid parameter: {exc}"
             self._initialized = False
-            self._error(f"fmi2ExitInitializationMode: {self._init_error}; every doStep "
-                        f"will be rejected (reset or re-instantiate with valid parameters)")
+            self._error(f"fmi2ExitInitializationMode: {self._init_error}; correct the "
+                        f"parameters and call it again (or reset)")
             return
         self._init_error = None
         self._law = self._make_law(params)
@@ -388,27 +425,32 @@ class LawSlave(DcsSlave):
         return self.do_step(t, h)
 
     # ------------------------------------------------------------- FMU state
-    def _get_fmu_state(self) -> dict[str, Any]:
-        state = super()._get_fmu_state()
-        state[self._STATE_KEY] = self._law.get_state().tolist()
-        state[self._INIT_KEY] = self._initialized
-        state[self._INIT_ERROR_KEY] = self._init_error
-        return state
+    def _fixed_parameters_locked(self) -> bool:
+        return self._initialized
 
-    def _set_fmu_state(self, state: dict[str, Any]) -> None:
-        try:
-            state = dict(state)  # the importer may set the same state again: do not mutate it
-            law_state = np.array(state.pop(self._STATE_KEY), dtype=float)
-            initialized = state.pop(self._INIT_KEY)
-            init_error = state.pop(self._INIT_ERROR_KEY)
-            super()._set_fmu_state(state)
-            self._law.set_state(law_state)
-        except Exception as exc:  # noqa: BLE001 - a foreign state is the importer's error
-            return self._error(f"fmi2SetFMUstate: not a state of this FMU ({exc!r})")
-        self._init_error = init_error
-        self._initialized = bool(initialized)
-        # the parameters came back with the registered variables: take the fixed ones
-        # as the reference and make the next doStep re-validate and apply all of them
-        self._fixed_values = self._snapshot(self.FIXED)
-        self._tunable_values = None
+    def _internal_state(self) -> dict[str, Any]:
+        return {"law": self._law.get_state().tolist()}
+
+    def _restore_internal(self, internal: dict[str, Any]) -> str | None:
+        law = internal.get("law")
+        if set(internal) != {"law"} or not isinstance(law, list):
+            return f"not a state of this FMU (internal part {sorted(internal)})"
+        problem = fmu_state.numbers_problem("its law state", law)
+        shape = self._law.get_state().shape
+        if problem is None and len(law) != shape[0]:
+            problem = f"its law state has {len(law)} values; this law has {shape[0]}"
+        if problem is not None:
+            return problem
+        fixed, tunable = self._snapshot(self.FIXED), self._snapshot(self.TUNABLE)
+        changed = (fixed, tunable) != (self._fixed_values, self._tunable_values)
+        if self._initialized and changed:  # checked as fmi2ExitInitializationMode checks them
+            try:
+                self._params_from_variables()
+            except ValueError as exc:
+                return f"invalid parameter: {exc}"
+        # every check passed: apply. Parameters other than the law's reach it at the next
+        # doStep, in Python (as a tunable one set through FMI does)
+        if self._initialized and changed:
+            self._fixed_values, self._tunable_values = fixed, None
+        self._law.set_state(np.array(law, dtype=float))
         return None

@@ -88,8 +88,14 @@ Other behaviour
   states: fmi2Error (handles are looked up in registries of the live ones, ``dcs_registry.c``,
   never probed through a pointer that may be freed).
 * ``fmi2Reset``: ``slave.reset()`` if it exists, else a new slave object replaces the old one.
-* FMU state: the object of ``slave._get_fmu_state()`` is held by the C state (freed by
-  ``fmi2FreeFMUstate``); serialization through ``_fmu_state_to_bytes``/``_fmu_state_from_bytes``.
+* FMU state: the object of ``slave._get_fmu_state()`` is held by the C state with the phase
+  (FMI state) it was taken in (freed by ``fmi2FreeFMUstate``); ``fmi2SetFMUstate`` refuses a
+  state of another phase, else calls ``slave._set_fmu_state(obj)``. Serialized: the payload of
+  ``_fmu_state_to_bytes(obj)`` sealed with the FMU's identity (the slave class = model
+  identifier, ``build`` of ``resources/dcs_build.json``) and a SHA-256 (``dcs_state_format.h``;
+  docs/reliability.md, "FMU state and call order"); ``fmi2DeSerializeFMUstate`` checks all of it
+  in C, then ``_fmu_state_from_bytes(payload)`` makes the object (a status raised through
+  ``_fmi2_status`` refuses it).
 * Strings of ``fmi2GetString`` stay valid until the next ``fmi2GetString`` on the instance.
 * Unsupported FMI 2.0 features (directional derivatives, input/output derivatives,
   ``fmi2CancelStep``) return fmi2Error; ``fmi2Get*Status`` returns fmi2Discard except
@@ -117,11 +123,11 @@ HERE = Path(__file__).resolve().parent
 #: the sources stays), and a stray ``.c`` would be linked in.
 SOURCES: tuple[Path, ...] = tuple(HERE / n for n in (
     "dcs_discover.c", "dcs_instance.c", "dcs_python.c", "dcs_registry.c", "dcs_slave.c",
-    "dcs_state.c", "fmi2_functions.c"))
+    "dcs_state.c", "dcs_state_format.c", "fmi2_functions.c"))
 #: The official FMI 2.0.5 headers and our internal ones.
 HEADERS: tuple[Path, ...] = tuple(HERE / n for n in (
-    "dcs_discover.h", "dcs_python.h", "dcs_registry.h", "dcs_wrapper.h", "fmi2/fmi2FunctionTypes.h",
-    "fmi2/fmi2Functions.h", "fmi2/fmi2TypesPlatform.h"))
+    "dcs_discover.h", "dcs_python.h", "dcs_registry.h", "dcs_state_format.h", "dcs_wrapper.h",
+    "fmi2/fmi2FunctionTypes.h", "fmi2/fmi2Functions.h", "fmi2/fmi2TypesPlatform.h"))
 
 
 def python_range() -> tuple[int, int]:

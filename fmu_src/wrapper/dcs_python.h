@@ -145,6 +145,8 @@ int dcs_isinstance(PyObject *o, PyObject *type);
 
 /* The slave object and its protocol, for dcs_state.c (dcs_slave.c; GIL held). */
 PyObject *dcs_slave_object(DcsInstance *in);
+const char *dcs_slave_model_id(DcsInstance *in); /* identity of its states (dcs_state.c) */
+const char *dcs_slave_build_id(DcsInstance *in);
 fmi2Status dcs_slave_exception(DcsInstance *in, const char *fn);
 fmi2Status dcs_slave_status(DcsInstance *in, PyObject *result, const char *fn);
 void dcs_slave_drain(DcsInstance *in);

@@ -58,6 +58,8 @@ struct DcsSlave {
     int has_compiled;     /* the slave defines _fmi2_compiled_step */
     DcsCompiledStep step; /* its current compiled step, NULL: do_step in Python */
     void *step_context;
+    char *model_id;       /* identity of its FMU states: the class (= modelIdentifier) */
+    char *build_id;       /* and the build (resources/dcs_build.json; "" if none) */
 };
 
 /* --------------------------------------------------------------- messages (GIL held) */
@@ -495,6 +497,11 @@ fmi2Status dcs_slave_create(DcsInstance *in)
         } else if ((rc = construct(in, s)) != 0) {
             status = rc == -2 ? fmi2Error
                               : log_exception(in, "fmi2Instantiate (creating the slave)");
+        } else if ((s->model_id = dcs_strdup(cls_name)) == NULL ||
+                   (s->build_id = dcs_state_read_build(in->resources)) == NULL) {
+            dcs_log(in, fmi2Error, "logStatusError", "%s: fmi2Instantiate: out of memory",
+                    in->name);
+            status = fmi2Error;
         } else {
             /* a problem the constructor reported (logged, e.g. a bad resource file) */
             status = take_status(s, status);
@@ -506,6 +513,8 @@ fmi2Status dcs_slave_create(DcsInstance *in)
             dcs_decref(s->cls);
             dcs_decref(s->obj);
             dcs_decref(s->log_queue);
+            free(s->model_id);
+            free(s->build_id);
             free(s);
             in->slave = NULL;
         }
@@ -528,6 +537,8 @@ void dcs_slave_free(DcsInstance *in)
         dcs_decref(s->obj);
         dcs_decref(s->cls);
         p_PyGILState_Release(gil);
+        free(s->model_id);
+        free(s->build_id);
         free(s);
         in->slave = NULL;
     }
@@ -847,6 +858,16 @@ fmi2Status dcs_slave_set(DcsInstance *in, const fmi2ValueReference vr[], size_t 
 PyObject *dcs_slave_object(DcsInstance *in)
 {
     return in->slave->obj;
+}
+
+const char *dcs_slave_model_id(DcsInstance *in)
+{
+    return in->slave->model_id;
+}
+
+const char *dcs_slave_build_id(DcsInstance *in)
+{
+    return in->slave->build_id;
 }
 
 fmi2Status dcs_slave_exception(DcsInstance *in, const char *fn)

@@ -2,18 +2,41 @@
  * FMU state objects (fmi2Get/Set/FreeFMUstate) and their serialization.
  *
  * A state holds the object returned by slave._get_fmu_state() (restored with
- * slave._set_fmu_state(obj)) and, once asked for, its bytes from
- * slave._fmu_state_to_bytes(obj) (cached); bytes become a state again through
- * slave._fmu_state_from_bytes(bytes). FMI 2.0: fmi2GetFMUstate overwrites a state it is given.
+ * slave._set_fmu_state(obj)), the phase the instance was in (its FMI 2.0 state) and, once asked
+ * for, its serialized bytes (cached): the slave's payload (slave._fmu_state_to_bytes(obj)) sealed
+ * in the format of dcs_state_format.h with the FMU's identity (model identifier, build of
+ * resources/dcs_build.json) and a SHA-256. Deserializing checks all of that in C first (a
+ * damaged, foreign or other-build state is fmi2Error naming why, before Python sees a byte), then
+ * the payload becomes a state object through slave._fmu_state_from_bytes(payload), which may
+ * refuse it (the status protocol). FMI 2.0: fmi2GetFMUstate overwrites a state it is given.
+ *
+ * The rules of fmi2SetFMUstate (docs/reliability.md, "FMU state and call order"):
+ *   - a state is restored only in the phase it was taken in: fmi2SetFMUstate does not change
+ *     the instance's FMI state (FMI 2.0), so a state of another phase is refused, not half
+ *     restored;
+ *   - the slave checks the content as it checks parameters and applies all or nothing
+ *     (fmu_src/slave_support/state.py).
  */
 #include "dcs_python.h"
+#include "dcs_state_format.h"
 
+#include <ctype.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+/* The phases of the format are the wrapper's DcsState bits (a state records in->state). */
+typedef char dcs_phases_are_states[
+    (DCS_PHASE_INSTANTIATED == (unsigned)DCS_INSTANTIATED &&
+     DCS_PHASE_INITIALIZATION_MODE == (unsigned)DCS_INITIALIZATION_MODE &&
+     DCS_PHASE_STEP_COMPLETE == (unsigned)DCS_STEP_COMPLETE &&
+     DCS_PHASE_TERMINATED == (unsigned)DCS_TERMINATED) ? 1 : -1];
+
 typedef struct {
     PyObject *obj;
-    PyObject *bytes; /* cached serialization */
+    unsigned phase;      /* DCS_PHASE_* (= the DcsState the instance was in) */
+    unsigned char *blob; /* cached serialization (sealed), NULL until asked */
+    size_t size;
 } DcsFmuState;
 
 /* The live states of this library (any instance's): a handle is valid only if listed. */
@@ -27,12 +50,16 @@ static DcsFmuState *as_state(fmi2FMUstate s)
 static void drop(DcsFmuState *st)
 {
     dcs_decref(st->obj);
-    dcs_decref(st->bytes);
-    st->obj = st->bytes = NULL;
+    st->obj = NULL;
+    free(st->blob);
+    st->blob = NULL;
+    st->size = 0;
 }
 
-/* Put obj (a new reference, consumed) into *state, reusing a state given; GIL held. */
-static fmi2Status store(DcsInstance *in, fmi2FMUstate *state, PyObject *obj, const char *fn)
+/* Put obj (a new reference, consumed) and phase into *state, reusing a state given; blob
+ * (malloc'd, consumed; may be NULL) becomes its cached serialization. GIL held. */
+static fmi2Status store(DcsInstance *in, fmi2FMUstate *state, PyObject *obj, unsigned phase,
+                        unsigned char *blob, size_t size, const char *fn)
 {
     DcsFmuState *st = as_state(*state);
     fmi2Status status = fmi2OK;
@@ -47,10 +74,14 @@ static fmi2Status store(DcsInstance *in, fmi2FMUstate *state, PyObject *obj, con
     }
     if (st == NULL) {
         dcs_decref(obj);
+        free(blob);
         dcs_log(in, fmi2Error, "logStatusError", "%s: %s: out of memory", in->name, fn);
         status = fmi2Error;
     } else {
         st->obj = obj;
+        st->phase = phase;
+        st->blob = blob;
+        st->size = size;
         *state = st;
     }
     return status;
@@ -65,7 +96,7 @@ fmi2Status dcs_state_get(DcsInstance *in, fmi2FMUstate *state)
     if (obj == NULL) {
         status = dcs_slave_exception(in, "fmi2GetFMUstate");
     } else {
-        status = store(in, state, obj, "fmi2GetFMUstate");
+        status = store(in, state, obj, (unsigned)in->state, NULL, 0, "fmi2GetFMUstate");
         if (status == fmi2OK) {
             dcs_incref(dcs_py.none);
             status = dcs_slave_status(in, dcs_py.none, "fmi2GetFMUstate");
@@ -83,6 +114,11 @@ fmi2Status dcs_state_set(DcsInstance *in, fmi2FMUstate state)
     if (st == NULL || st->obj == NULL) {
         dcs_log(in, fmi2Error, "logStatusError", "%s: fmi2SetFMUstate: not a state of this FMU",
                 in->name);
+    } else if (st->phase != (unsigned)in->state) {
+        dcs_log(in, fmi2Error, "logStatusError", "%s: fmi2SetFMUstate: a state taken in %s "
+                "cannot be restored in %s (a state is restored only in the phase it was taken "
+                "in); the instance is unchanged", in->name, dcs_phase_name(st->phase),
+                dcs_phase_name((unsigned)in->state));
     } else {
         PyGILState_STATE gil = p_PyGILState_Ensure();
         status = dcs_slave_status(
@@ -113,25 +149,47 @@ fmi2Status dcs_state_free(DcsInstance *in, fmi2FMUstate *state)
     return status;
 }
 
-/* The serialized bytes of a state, cached in it; NULL (logged, *status set) on failure. */
-static PyObject *state_bytes(DcsInstance *in, DcsFmuState *st, const char *fn,
-                             fmi2Status *status)
+/* Seal the payload b (the slave's answer; NULL: it raised) into st's cached serialization. */
+static fmi2Status seal_payload(DcsInstance *in, DcsFmuState *st, PyObject *b, const char *fn)
 {
-    if (st->bytes == NULL) {
-        PyObject *b = p_PyObject_CallMethodObjArgs(dcs_slave_object(in), dcs_py.to_bytes,
-                                                   st->obj, NULL);
-        if (b == NULL) {
-            *status = dcs_slave_exception(in, fn);
-        } else if (!dcs_isinstance(b, dcs_py.bytes_type)) {
-            dcs_decref(b);
-            dcs_log(in, fmi2Error, "logStatusError", "%s: %s: _fmu_state_to_bytes did not "
-                    "return bytes", in->name, fn);
-            *status = fmi2Error;
+    fmi2Status status = fmi2OK;
+    if (b == NULL) {
+        status = dcs_slave_exception(in, fn);
+    } else if (!dcs_isinstance(b, dcs_py.bytes_type)) {
+        dcs_log(in, fmi2Error, "logStatusError", "%s: %s: _fmu_state_to_bytes did not return "
+                "bytes", in->name, fn);
+        status = fmi2Error;
+    } else {
+        const char *model = dcs_slave_model_id(in), *build = dcs_slave_build_id(in);
+        size_t n = (size_t)p_PyBytes_Size(b);
+        size_t size = dcs_state_size_for(strlen(model), strlen(build), n);
+        unsigned char *blob = size > 0 ? (unsigned char *)malloc(size) : NULL;
+        if (blob == NULL) {
+            dcs_log(in, fmi2Error, "logStatusError", "%s: %s: out of memory (or an identifier "
+                    "longer than %u characters)", in->name, fn, DCS_STATE_MAX_ID);
+            status = fmi2Error;
         } else {
-            st->bytes = b;
+            dcs_state_seal(blob, st->phase, model, build,
+                           (const unsigned char *)p_PyBytes_AsString(b), n);
+            st->blob = blob;
+            st->size = size;
         }
     }
-    return st->bytes;
+    return status;
+}
+
+/* The sealed bytes of a state, made and cached on first use (GIL held); fmi2Error (logged) if
+ * the slave cannot encode it. */
+static fmi2Status seal(DcsInstance *in, DcsFmuState *st, const char *fn)
+{
+    fmi2Status status = fmi2OK;
+    if (st->blob == NULL) {
+        PyObject *b = p_PyObject_CallMethodObjArgs(dcs_slave_object(in), dcs_py.to_bytes,
+                                                   st->obj, NULL);
+        status = seal_payload(in, st, b, fn);
+        dcs_decref(b);
+    }
+    return status;
 }
 
 fmi2Status dcs_state_size(DcsInstance *in, fmi2FMUstate state, size_t *size)
@@ -144,9 +202,9 @@ fmi2Status dcs_state_size(DcsInstance *in, fmi2FMUstate state, size_t *size)
         status = fmi2Error;
     } else {
         PyGILState_STATE gil = p_PyGILState_Ensure();
-        PyObject *b = state_bytes(in, st, "fmi2SerializedFMUstateSize", &status);
-        if (b != NULL)
-            *size = (size_t)p_PyBytes_Size(b);
+        status = seal(in, st, "fmi2SerializedFMUstateSize");
+        if (status == fmi2OK)
+            *size = st->size;
         dcs_slave_drain(in);
         p_PyGILState_Release(gil);
     }
@@ -164,14 +222,13 @@ fmi2Status dcs_state_serialize(DcsInstance *in, fmi2FMUstate state, fmi2Byte out
         status = fmi2Error;
     } else {
         PyGILState_STATE gil = p_PyGILState_Ensure();
-        PyObject *b = state_bytes(in, st, "fmi2SerializeFMUstate", &status);
-        size_t n = b != NULL ? (size_t)p_PyBytes_Size(b) : 0;
-        if (b != NULL && size < n) {
+        status = seal(in, st, "fmi2SerializeFMUstate");
+        if (status == fmi2OK && size < st->size) {
             dcs_log(in, fmi2Error, "logStatusError", "%s: fmi2SerializeFMUstate: buffer of "
-                    "%zu bytes, %zu needed", in->name, size, n);
+                    "%zu bytes, %zu needed", in->name, size, st->size);
             status = fmi2Error;
-        } else if (b != NULL) {
-            memcpy(out, p_PyBytes_AsString(b), n);
+        } else if (status == fmi2OK) {
+            memcpy(out, st->blob, st->size);
         }
         dcs_slave_drain(in);
         p_PyGILState_Release(gil);
@@ -182,25 +239,91 @@ fmi2Status dcs_state_serialize(DcsInstance *in, fmi2FMUstate state, fmi2Byte out
 fmi2Status dcs_state_deserialize(DcsInstance *in, const fmi2Byte bytes[], size_t size,
                                  fmi2FMUstate *state)
 {
-    fmi2Status status = fmi2OK;
-    if (state == NULL || (bytes == NULL && size > 0)) {
-        dcs_log(in, fmi2Error, "logStatusError", "%s: fmi2DeSerializeFMUstate: invalid "
-                "arguments", in->name);
-        status = fmi2Error;
+    const char *fn = "fmi2DeSerializeFMUstate";
+    fmi2Status status = fmi2Error;
+    DcsStateView view;
+    char why[400];
+    if (state == NULL) {
+        dcs_log(in, fmi2Error, "logStatusError", "%s: %s: NULL state pointer", in->name, fn);
+    } else if (dcs_state_open((const unsigned char *)bytes, size, dcs_slave_model_id(in),
+                              dcs_slave_build_id(in), &view, why, sizeof why) != 0) {
+        dcs_log(in, fmi2Error, "logStatusError", "%s: %s: refused: %s", in->name, fn, why);
     } else {
         PyGILState_STATE gil = p_PyGILState_Ensure();
-        PyObject *obj = NULL, *b = p_PyBytes_FromStringAndSize(bytes, (Py_ssize_t)size);
-        if (b != NULL) {
-            obj = p_PyObject_CallMethodObjArgs(dcs_slave_object(in), dcs_py.from_bytes, b,
+        unsigned char *copy = (unsigned char *)malloc(size);
+        PyObject *obj = NULL, *payload = NULL;
+        if (copy != NULL)
+            payload = p_PyBytes_FromStringAndSize((const char *)view.payload,
+                                                  (Py_ssize_t)view.payload_len);
+        if (payload != NULL) {
+            obj = p_PyObject_CallMethodObjArgs(dcs_slave_object(in), dcs_py.from_bytes, payload,
                                                NULL);
-            dcs_decref(b);
+            dcs_decref(payload);
         }
-        if (obj == NULL)
-            status = dcs_slave_exception(in, "fmi2DeSerializeFMUstate");
-        else
-            status = store(in, state, obj, "fmi2DeSerializeFMUstate");
+        if (obj == NULL) {
+            free(copy);
+            status = copy == NULL ? fmi2Error : dcs_slave_exception(in, fn);
+            if (copy == NULL)
+                dcs_log(in, fmi2Error, "logStatusError", "%s: %s: out of memory", in->name, fn);
+        } else {
+            dcs_incref(dcs_py.none);
+            status = dcs_slave_status(in, dcs_py.none, fn); /* the slave may refuse it */
+            if (status > fmi2Warning) {
+                dcs_decref(obj);
+                free(copy);
+            } else {
+                memcpy(copy, bytes, size);
+                status = store(in, state, obj, view.phase, copy, size, fn);
+            }
+        }
         dcs_slave_drain(in);
         p_PyGILState_Release(gil);
     }
     return status;
+}
+
+/* Where the value of "build" starts in text (*at) and its length (0: none). The file is ours
+ * (fmu_src/build.py, json.dumps): "build": "<hex digits>". */
+static size_t find_build(const char *text, const char **at)
+{
+    const char quote = 34; /* the double quote */
+    const char *p = strstr(text, "\"build\"");
+    size_t len = 0;
+    if (p != NULL) {
+        p += strlen("\"build\"");
+        p += strspn(p, " \t\r\n");
+        p += *p == ':';
+        p += strspn(p, " \t\r\n");
+        if (*p == quote) {
+            p++;
+            while (len < DCS_STATE_MAX_ID && isalnum((unsigned char)p[len]))
+                len++;
+            len = p[len] == quote ? len : 0;
+        }
+    }
+    *at = p;
+    return len;
+}
+
+char *dcs_state_read_build(const char *resources)
+{
+    char path[4096], text[8192], *out;
+    const char *at = NULL;
+    size_t n = 0, len;
+    FILE *f;
+    snprintf(path, sizeof path, "%s/dcs_build.json", resources);
+    f = fopen(path, "rb");
+    if (f != NULL) {
+        n = fread(text, 1, sizeof text - 1, f);
+        fclose(f);
+    }
+    text[n] = '\0';
+    len = find_build(text, &at);
+    out = (char *)malloc(len + 1);
+    if (out != NULL) {
+        if (len > 0)
+            memcpy(out, at, len);
+        out[len] = '\0';
+    }
+    return out;
 }

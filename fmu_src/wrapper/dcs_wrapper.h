@@ -7,7 +7,9 @@
  *   dcs_python.c      the Python C-API through dlsym; attaching to / starting an interpreter
  *   dcs_discover.c    finding a Python for a host without one (checked in child processes)
  *   dcs_slave.c       the pythonfmu slave object: calls, the status protocol, values, buffers
- *   dcs_state.c       FMU state objects and their serialization
+ *   dcs_state.c       FMU state objects and their serialization; the rules of restoring one
+ *   dcs_state_format.c the serialized state format (identity, SHA-256; dcs_state_format.h,
+ *                     which the C controller FMU shares)
  *   dcs_registry.c    the sets of live instances and states (handles are looked up, never
  *                     probed through a pointer that may be freed; dcs_registry.h, which the
  *                     C controller FMU shares)
@@ -109,5 +111,7 @@ fmi2Status dcs_state_serialize(DcsInstance *in, fmi2FMUstate state, fmi2Byte out
                                size_t size);
 fmi2Status dcs_state_deserialize(DcsInstance *in, const fmi2Byte bytes[], size_t size,
                                  fmi2FMUstate *state);
+/* The "build" of <resources>/dcs_build.json ("" if none), malloc'd (NULL: out of memory). */
+char *dcs_state_read_build(const char *resources);
 
 #endif

@@ -6,7 +6,13 @@ physics of :func:`plant.kernels.rhs3d`: a test asserts both agree to ~1e-12 rela
 states, a strong check of each. It is written from the model description (joint spring-dampers in
 body ``i+1``'s frame, rotational potential ``1/2 tr(G (I - R_rel))``, Newton in the inertial frame,
 Euler with the gyroscopic term in the body frame), with arrays over bodies and joints instead of
-loops; it shares only the flat parameter arrays ``p``, ``ip``, ``fp`` with the kernel.
+loops. It derives its own masses, inertias, joint springs and dampers and the boundary springs
+from the parameters (:func:`body_constants`: the formulas of the paper's section 3 and of the
+damping model, written again, not the model's packed array ``p``); it shares with the kernel
+only the layout arrays ``ip``, ``fp`` (which bodies carry stabilizers, contact, actuators and
+loads), the first lateral frequency of the pinned multi-span beam (the model's finite-element
+value, :func:`plant.uniform_pipe.lateral_reference_frequency`) and the bit's static rock position
+(``p[ZBIT0]``, set by the static equilibrium of :meth:`DrillstringModel.initial_state`).
 
 State layout (length 12 n, blocks of 3 n): positions of the mass centres [m], Cardan angles
 (psi, theta, phi) [rad], inertial velocities [m/s], body-frame angular velocities [rad/s].
@@ -14,12 +20,92 @@ State layout (length 12 n, blocks of 3 n): positions of the mass centres [m], Ca
 
 from __future__ import annotations
 
+import math
+from typing import Any
+
 import numpy as np
 
 from drillcosim.plant import layout as lay
 from drillcosim.plant.kernels import IP_FIELD, IP_HDR, IP_N, IP_NA, IP_NC, IP_NL, IP_NS, IP_UNB
 
-__all__ = ["NumpyRhs", "cardan_matrices", "rhs3d_numpy"]
+__all__ = ["NumpyRhs", "body_constants", "cardan_matrices", "rhs3d_numpy"]
+
+
+def _series(k_boundary: float, k_half: float) -> float:
+    """A boundary spring in series with half a segment (2 k of the segment); inf: rigid, 0: free."""
+    if k_boundary <= 0.0:
+        return 0.0
+    return k_half if math.isinf(k_boundary) else k_boundary * k_half / (k_boundary + k_half)
+
+
+def body_constants(params: Any, w_lateral: float) -> dict[str, float]:
+    """The uniform string's body and joint constants, from the parameters (SI).
+
+    n rigid hollow cylinders of length dx = L / n (OD, ID, E, G, rho): mass rho A dx, polar
+    inertia m (ro^2 + ri^2) / 2, transverse inertia m (3 (ro^2 + ri^2) + dx^2) / 12; joint springs
+    EA / dx, kappa G A / dx (Cowper's kappa of a hollow circle unless given), EI / dx, G J / dx
+    (J = 2 I); the rotational potential ``1/2 tr(G (I - R_rel))`` with G = diag(g1, g1, g3) has
+    the small-angle stiffnesses g1 (torsion) and (g1 + g3) / 2 (bending), so g1 = G J / dx and
+    g3 = 2 EI / dx - g1. Dampers stiffness-proportional, ``beta = 2 zeta / w`` at the first
+    fixed-free rod frequency w = pi c / (2 L) (axial, also for shear; torsional with c_t); the
+    lateral drag ``2 zeta_l w_l`` (or bending dampers ``2 zeta_l / w_l`` in the joint model).
+    The top drive's and the bit's springs act in series with half a segment.
+
+    Parameters
+    ----------
+    params : plant.params.PlantParams
+        A uniform pipe without a damping-rate cap (``damping.max_joint_rate = inf``).
+    w_lateral : float
+        First bending frequency [rad/s] of the pinned spans (used when the damping parameters
+        give none).
+    """
+    pipe, dmp = params.pipe, params.damping
+    if not params.uniform:
+        raise ValueError("the numpy reference is the uniform pipe's right-hand side; it has no "
+                         "string sections")
+    if not math.isinf(dmp.max_joint_rate):
+        raise ValueError("the numpy reference has no joint-damper rate cap "
+                         "(damping.max_joint_rate = inf)")
+    E, Gm, rho = pipe.youngs_modulus, pipe.shear_modulus, pipe.density
+    ro, ri = pipe.outer_diameter / 2.0, pipe.inner_diameter / 2.0
+    L, n = pipe.length, pipe.n_segments
+    dx = L / n
+    area = math.pi * (ro**2 - ri**2)
+    inertia = math.pi / 4.0 * (ro**4 - ri**4)
+    kappa = pipe.shear_coefficient
+    if kappa <= 0.0:  # Cowper (1966), hollow circle
+        nu, m2 = E / (2.0 * Gm) - 1.0, (ri / ro) ** 2
+        kappa = 6.0 * (1 + nu) * (1 + m2) ** 2 / ((7 + 6 * nu) * (1 + m2) ** 2 + (20 + 12 * nu) * m2)
+    mass = rho * area * dx
+    k_ax, k_sh = E * area / dx, kappa * Gm * area / dx
+    k_be, k_to = E * inertia / dx, Gm * 2.0 * inertia / dx
+    beta_ax = 2.0 * dmp.axial_ratio / (math.pi * math.sqrt(E / rho) / (2.0 * L))
+    beta_to = 2.0 * dmp.torsional_ratio / (math.pi * math.sqrt(Gm / rho) / (2.0 * L))
+    w_l = dmp.lateral_reference_frequency if dmp.lateral_reference_frequency > 0.0 else w_lateral
+    joint = dmp.lateral_model == "joint"
+    td, bit, st, ct = params.top_drive, params.bit, params.stabilizers, params.contact
+    out = {"HALF": dx / 2.0, "MASS": mass, "JP": 0.5 * mass * (ro**2 + ri**2),
+           "JT": mass * (3.0 * (ro**2 + ri**2) + dx**2) / 12.0, "GRAV": params.gravity,
+           "K_AX": k_ax, "K_SH": k_sh, "G1": k_to, "G3": 2.0 * k_be - k_to,
+           "C_AX": beta_ax * k_ax, "C_SH": beta_ax * k_sh, "C_TO": beta_to * k_to,
+           "C_BE": (2.0 * dmp.lateral_ratio / w_l if joint else beta_ax) * k_be,
+           "ALPHA_LAT": 0.0 if joint else 2.0 * dmp.lateral_ratio * w_l,
+           "KT_AX": _series(td.axial_stiffness, 2.0 * k_ax),
+           "KT_LAT": _series(td.lateral_stiffness, 2.0 * k_sh),
+           "KT_TO": _series(td.torsional_stiffness, 2.0 * k_to),
+           "KB_AX": _series(bit.axial_stiffness, 2.0 * k_ax),
+           "OMEGA0": td.rotary_speed, "T_RAMP": td.ramp_time,
+           "BIT_AMP": bit.displacement_amplitude if bit.axial_stiffness > 0.0 else 0.0,
+           "BIT_LOBES": bit.lobes, "BIT_TORQUE": bit.torque, "BIT_EPS": bit.slip_speed,
+           "K_STAB": st.stiffness, "C_STAB": beta_ax * st.stiffness if st.damping < 0.0
+           else st.damping,
+           "K_CONT": ct.stiffness if ct.enabled else 0.0,
+           "C_CONT": ct.damping if ct.enabled else 0.0, "CLEAR": ct.clearance,
+           "UNB": params.unbalance.moment if params.unbalance.enabled else 0.0,
+           "ACT_ARM": 2.0 * (params.actuators.radius or ro)}
+    out.update(CT_AX=beta_ax * out["KT_AX"], CT_LAT=beta_ax * out["KT_LAT"],
+               CT_TO=beta_to * out["KT_TO"], CB_AX=beta_ax * out["KB_AX"])
+    return out
 
 
 def cardan_matrices(ang: np.ndarray) -> np.ndarray:
@@ -95,9 +181,9 @@ def _skew_torque(G: np.ndarray, Rrel: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return tb, ta
 
 
-def rhs3d_numpy(t: float, y: np.ndarray, p: np.ndarray, ip: np.ndarray, fp: np.ndarray,
-                u: np.ndarray) -> np.ndarray:
-    """Full 3D right-hand side, vectorised (allocates); same arguments as the kernel's arrays.
+def rhs3d_numpy(t: float, y: np.ndarray, constants: dict[str, float], ip: np.ndarray,
+                fp: np.ndarray, u: np.ndarray, zbit0: float) -> np.ndarray:
+    """Full 3D right-hand side, vectorised (allocates).
 
     Parameters
     ----------
@@ -105,10 +191,14 @@ def rhs3d_numpy(t: float, y: np.ndarray, p: np.ndarray, ip: np.ndarray, fp: np.n
         Time [s].
     y : numpy.ndarray, shape (12 n,)
         State (see the module docstring).
-    p, ip, fp : numpy.ndarray
-        Flat parameter arrays of :class:`plant.model.DrillstringModel` (``model.p`` etc.).
+    constants : dict
+        :func:`body_constants` of the parameters.
+    ip, fp : numpy.ndarray
+        The layout arrays of :class:`plant.model.DrillstringModel` (``model.ip``, ``model.fp``).
     u : numpy.ndarray, shape (2 n_sites,)
         Actuator forces [N].
+    zbit0 : float
+        The rock's position under the bit at rest [m] (``model.p[layout.ZBIT0]``).
 
     Returns
     -------
@@ -118,11 +208,12 @@ def rhs3d_numpy(t: float, y: np.ndarray, p: np.ndarray, ip: np.ndarray, fp: np.n
     if ip[IP_FIELD]:
         raise ValueError("rhs3d_numpy is the reference of the uniform pipe's right-hand side; "
                          "it has no string sections, trajectory or fluid")
+    q = constants
     n = int(ip[IP_N])
     ns, nc, na, unb, nl = (int(ip[k]) for k in (IP_NS, IP_NC, IP_NA, IP_UNB, IP_NL))
-    h = p[lay.HALF]
-    m = p[lay.MASS]
-    jt, jp = p[lay.JT], p[lay.JP]
+    h = q["HALF"]
+    m = q["MASS"]
+    jt, jp = q["JT"], q["JP"]
     X = y[:3 * n].reshape(n, 3)
     ang = y[3 * n:6 * n].reshape(n, 3)
     V = y[6 * n:9 * n].reshape(n, 3)
@@ -137,9 +228,9 @@ def rhs3d_numpy(t: float, y: np.ndarray, p: np.ndarray, ip: np.ndarray, fp: np.n
 
     F = np.zeros((n, 3))
     M = np.zeros((n, 3))  # body frame
-    F[:, 0] = -p[lay.ALPHA_LAT] * m * V[:, 0]
-    F[:, 1] = -p[lay.ALPHA_LAT] * m * V[:, 1]
-    F[:, 2] = m * p[lay.GRAV]
+    F[:, 0] = -q["ALPHA_LAT"] * m * V[:, 0]
+    F[:, 1] = -q["ALPHA_LAT"] * m * V[:, 1]
+    F[:, 2] = m * q["GRAV"]
 
     # ---- joints a -> b = a + 1: translational spring-damper in b's frame
     Ra, Rb = R[:-1], R[1:]
@@ -150,8 +241,8 @@ def rhs3d_numpy(t: float, y: np.ndarray, p: np.ndarray, ip: np.ndarray, fp: np.n
     d = _apply_t(Rb, dI)
     # rate of d seen in b's frame: R_b^T d(dI)/dt - w_b x d
     ddot = _apply_t(Rb, dv) - _cross(Wb, d)
-    kvec = np.array([p[lay.K_SH], p[lay.K_SH], p[lay.K_AX]])
-    cvec = np.array([p[lay.C_SH], p[lay.C_SH], p[lay.C_AX]])
+    kvec = np.array([q["K_SH"], q["K_SH"], q["K_AX"]])
+    cvec = np.array([q["C_SH"], q["C_SH"], q["C_AX"]])
     f = -(kvec * d + cvec * ddot)  # force on b at A, b frame
     Fin = _apply(Rb, f)
     F[1:] += Fin
@@ -162,16 +253,16 @@ def rhs3d_numpy(t: float, y: np.ndarray, p: np.ndarray, ip: np.ndarray, fp: np.n
 
     # ---- joints: rotational spring-damper
     Rrel = np.transpose(Ra, (0, 2, 1)) @ Rb
-    G = np.diag([p[lay.G1], p[lay.G1], p[lay.G3]])
+    G = np.diag([q["G1"], q["G1"], q["G3"]])
     tb, ta = _skew_torque(G, Rrel)
-    cw = np.array([p[lay.C_BE], p[lay.C_BE], p[lay.C_TO]])
+    cw = np.array([q["C_BE"], q["C_BE"], q["C_TO"]])
     td = -cw * (Wb - _apply_t(Rrel, Wa))  # on b, b frame
     M[1:] += tb + td
     M[:-1] += ta - _apply(Rrel, td)
 
     # ---- actuator couples at joints below body ip[...] (moment on b, reaction on a)
     o_act = IP_HDR + ns + nc
-    arm = p[lay.ACT_ARM]
+    arm = q["ACT_ARM"]
     for s in range(na):
         ja = int(ip[o_act + s])
         tq = np.array([-arm * u[2 * s + 1], arm * u[2 * s], 0.0])
@@ -179,40 +270,40 @@ def rhs3d_numpy(t: float, y: np.ndarray, p: np.ndarray, ip: np.ndarray, fp: np.n
         M[ja] -= (R[ja].T @ R[ja + 1]) @ tq
 
     # ---- top drive joint on body 0
-    ang_td, om_td = _top_drive(t, p[lay.OMEGA0], p[lay.T_RAMP])
+    ang_td, om_td = _top_drive(t, q["OMEGA0"], q["T_RAMP"])
     R0, w0 = R[0], W[0]
     rA0 = np.array([0.0, 0.0, -h])
     A0 = X[0] + R0 @ rA0
     d0 = R0.T @ A0
     r0 = R0.T @ (V[0] + R0 @ _cross(w0, rA0)) - _cross(w0, d0)
-    kt = np.array([p[lay.KT_LAT], p[lay.KT_LAT], p[lay.KT_AX]])
-    ct = np.array([p[lay.CT_LAT], p[lay.CT_LAT], p[lay.CT_AX]])
+    kt = np.array([q["KT_LAT"], q["KT_LAT"], q["KT_AX"]])
+    ct = np.array([q["CT_LAT"], q["CT_LAT"], q["CT_AX"]])
     f0 = -(kt * d0 + ct * r0)
     F[0] += R0 @ f0
     M[0] += _cross(rA0, f0) - _cross(d0, f0)
-    ktt = p[lay.KT_TO]
+    ktt = q["KT_TO"]
     if ktt > 0.0:
         ca, sa = np.cos(ang_td), np.sin(ang_td)
         Rd = np.array([[ca, -sa, 0.0], [sa, ca, 0.0], [0.0, 0.0, 1.0]])
         Rr = Rd.T @ R0
         # potential 1/2 ktt tr(I - Rr) restricted as in the kernel (pin about the drive axis)
         M[0] += np.array([0.5 * ktt * (Rr[2, 1] + Rr[1, 2]), -0.5 * ktt * (Rr[0, 2] + Rr[2, 0]),
-                          -0.5 * ktt * (Rr[1, 0] - Rr[0, 1]) - p[lay.CT_TO] * (w0[2] - om_td * R0[2, 2])])
+                          -0.5 * ktt * (Rr[1, 0] - Rr[0, 1]) - q["CT_TO"] * (w0[2] - om_td * R0[2, 2])])
 
     # ---- bit: axial spring-damper to the rock, resisting torque
     e = n - 1
-    if p[lay.KB_AX] > 0.0:
-        lob, amp = p[lay.BIT_LOBES], p[lay.BIT_AMP]
-        zr = p[lay.ZBIT0] + amp * np.sin(lob * ang_td)
+    if q["KB_AX"] > 0.0:
+        lob, amp = q["BIT_LOBES"], q["BIT_AMP"]
+        zr = zbit0 + amp * np.sin(lob * ang_td)
         vr = amp * lob * om_td * np.cos(lob * ang_td)
         rB = np.array([0.0, 0.0, h])
         Bz = X[e, 2] + (R[e] @ rB)[2]
         vBz = V[e, 2] + (R[e] @ _cross(W[e], rB))[2]
-        Fz = -p[lay.KB_AX] * (Bz - zr) - p[lay.CB_AX] * (vBz - vr)
+        Fz = -q["KB_AX"] * (Bz - zr) - q["CB_AX"] * (vBz - vr)
         F[e, 2] += Fz
         M[e] += _cross(rB, R[e].T @ np.array([0.0, 0.0, Fz]))
-    if p[lay.BIT_TORQUE] > 0.0:
-        M[e, 2] -= p[lay.BIT_TORQUE] * np.tanh(W[e, 2] / p[lay.BIT_EPS])
+    if q["BIT_TORQUE"] > 0.0:
+        M[e, 2] -= q["BIT_TORQUE"] * np.tanh(W[e, 2] / q["BIT_EPS"])
 
     # ---- stabilizers: lateral springs at material points (local offset z)
     if ns:
@@ -222,28 +313,28 @@ def rhs3d_numpy(t: float, y: np.ndarray, p: np.ndarray, ip: np.ndarray, fp: np.n
         P = X[ks] + _apply(R[ks], rP)
         vP = V[ks] + _apply(R[ks], _cross(W[ks], rP))
         Fs = np.zeros((ns, 3))
-        Fs[:, :2] = -p[lay.K_STAB] * P[:, :2] - p[lay.C_STAB] * vP[:, :2]
+        Fs[:, :2] = -q["K_STAB"] * P[:, :2] - q["C_STAB"] * vP[:, :2]
         np.add.at(F, ks, Fs)
         np.add.at(M, ks, _cross(rP, _apply_t(R[ks], Fs)))
 
     # ---- wellbore contact, frictionless, never pulling
-    kc, cc = p[lay.K_CONT], p[lay.C_CONT]
+    kc, cc = q["K_CONT"], q["C_CONT"]
     if nc and (kc != 0.0 or cc != 0.0):
         kb = ip[IP_HDR + ns:IP_HDR + ns + nc]
         XY = X[kb, :2]
         dl = np.hypot(XY[:, 0], XY[:, 1])
-        on = dl > p[lay.CLEAR]
+        on = dl > q["CLEAR"]
         if on.any():
             nrm = XY[on] / dl[on, None]
             vn = np.sum(nrm * V[kb[on], :2], axis=1)
-            fn = kc * (dl[on] - p[lay.CLEAR]) + cc * vn
+            fn = kc * (dl[on] - q["CLEAR"]) + cc * vn
             push = fn > 0.0
             np.add.at(F, (kb[on][push], 0), -fn[push] * nrm[push, 0])
             np.add.at(F, (kb[on][push], 1), -fn[push] * nrm[push, 1])
 
     # ---- unbalance: centrifugal force along body x
     if unb >= 0:
-        F[unb] += p[lay.UNB] * W[unb, 2] ** 2 * R[unb, :, 0]
+        F[unb] += q["UNB"] * W[unb, 2] ** 2 * R[unb, :, 0]
 
     # ---- external loads (pulses/steps)
     for s in range(nl):
@@ -268,12 +359,15 @@ class NumpyRhs:
     """
 
     def __init__(self, model) -> None:
+        from drillcosim.plant.uniform_pipe import lateral_reference_frequency
+
         if model.kind != "full3d":
             raise ValueError("NumpyRhs implements the full 3D model only")
         self.model = model
+        self.constants = body_constants(model.params, lateral_reference_frequency(model.params))
         self.calls = 0
 
     def __call__(self, t: float, y: np.ndarray) -> np.ndarray:
         self.calls += 1
         m = self.model
-        return rhs3d_numpy(t, y, m.p, m.ip, m.fp, m.u)
+        return rhs3d_numpy(t, y, self.constants, m.ip, m.fp, m.u, m.p[lay.ZBIT0])

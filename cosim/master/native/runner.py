@@ -63,7 +63,7 @@ class _Slave(ctypes.Structure):
                 ("n_in", ctypes.c_int32), ("n_out", ctypes.c_int32), ("u", _VP), ("y", _VP),
                 ("n_plain", ctypes.c_int32), ("n_delayed", ctypes.c_int32),
                 ("n_push", ctypes.c_int32), ("plain", _I32P), ("delayed", _I32P),
-                ("push", _I32P)]
+                ("push", _I32P), ("timing", _F64P)]
 
 
 class _Steps(ctypes.Structure):
@@ -131,6 +131,7 @@ class NativeLoop:
         y_address = ctypes.addressof(alg.y)
         for c, plan in zip(self.c_slaves, plans):
             c.period, c.h = plan.period, plan.h
+            c.timing = ctypes.cast(ctypes.byref(alg.timing, 8 * 4 * plan.index), _F64P)
             c.n_in, c.n_out = len(plan.in_names), len(plan.out_names)
             c.u = ctypes.addressof(plan.u)
             c.y = y_address + 8 * plan.out_offset
@@ -165,7 +166,8 @@ class NativeLoop:
         s.horizons = ctypes.cast(self.c_horizons, _F64P)
         s.y = y_address
         s.newest = ctypes.cast(self.newest, ctypes.POINTER(ctypes.c_int64))
-        s.start, s.num, s.den = execution.start_time, execution._num, execution._den
+        frac = execution.base_fraction
+        s.start, s.num, s.den = execution.start_time, frac.numerator, frac.denominator
         index = alg.y_index
         limit_index = [index[r] for lim in limits for r in lim.refs]
         limit = [lim.bound for lim in limits for _r in lim.refs]

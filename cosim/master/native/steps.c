@@ -23,10 +23,22 @@
  *                    its row not recorded: Python runs that tick's observers itself)
  *   DCS_FULL         the recording buffer is full (tick completed and recorded up to here)
  * Floating point: no contraction (-ffp-contract=off), the Python expressions in their order.
+ *
+ * Telemetry: the wall time of every component call is added to the component's `timing`
+ * record (cosim/master/algorithms.py, _Algorithm.timing): its steps' total, longest and count,
+ * and the total of its exchange calls (set inputs, get outputs), on a monotonic clock.
  */
+#if !defined(_WIN32) && !defined(_POSIX_C_SOURCE)
+#define _POSIX_C_SOURCE 199309L
+#endif
 #include <math.h>
 #include <stddef.h>
 #include <stdint.h>
+#ifdef _WIN32
+#include <windows.h>
+#else
+#include <time.h>
+#endif
 
 typedef int (*dcs_set_real)(void *, const unsigned int *, size_t, const double *);
 typedef int (*dcs_do_step)(void *, double, double, int);
@@ -69,6 +81,7 @@ typedef struct {
     const int32_t *plain;     /* (input position, output index) pairs */
     const int32_t *delayed;   /* (input position, line, first horizon, source period) */
     const int32_t *push;      /* (output index, line) pairs */
+    double *timing;           /* [step total, step max, exchange total, steps] [s, s, s, 1] */
 } DcsSlave;
 
 typedef struct {
@@ -93,6 +106,30 @@ typedef struct {
     int32_t event, event_slave, event_call, event_status;
     int32_t resume;           /* >= 0: the first tick goes on after this slave's step */
 } DcsSteps;
+
+/* Seconds on a monotonic clock. */
+static double now(void)
+{
+#ifdef _WIN32
+    LARGE_INTEGER c, f;
+    QueryPerformanceCounter(&c);
+    QueryPerformanceFrequency(&f);
+    return (double)c.QuadPart / (double)f.QuadPart;
+#else
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+#endif
+}
+
+static void timed_step(DcsSlave *s, double t0)
+{
+    double dt = now() - t0;
+    s->timing[0] += dt;
+    if (dt > s->timing[1])
+        s->timing[1] = dt;
+    s->timing[3] += 1.0;
+}
 
 static double time_of(const DcsSteps *r, int64_t k)
 {
@@ -156,7 +193,11 @@ static int apply_inputs(DcsSteps *r, int32_t i, int64_t tick, int64_t time_tick)
             s->step_in[s->in_slot[j]] = s->u[j];
         return 0;
     }
-    j = s->set_real(s->component, s->in_vr, (size_t)s->n_in, s->u);
+    {
+        double t0 = now();
+        j = s->set_real(s->component, s->in_vr, (size_t)s->n_in, s->u);
+        s->timing[2] += now() - t0;
+    }
     return j > 1 ? fail(r, DCS_FAILED, i, DCS_SET, j, time_tick) : 0;
 }
 
@@ -164,12 +205,15 @@ static int step_slave(DcsSteps *r, int32_t i, int64_t tick)
 {
     DcsSlave *s = &r->slaves[i];
     double t = time_of(r, tick);
+    double t0 = now();
     int st;
     if (s->kind == DCS_COMPILED) {
         st = s->step(s->context, t, s->h);
+        timed_step(s, t0);
         return st != 0 ? fail(r, DCS_STEP_FAILED, i, DCS_DO_STEP, st, tick) : 0;
     }
     st = s->do_step(s->component, t, s->h, 0);
+    timed_step(s, t0);
     return st > 1 ? fail(r, DCS_FAILED, i, DCS_DO_STEP, st, tick) : 0;
 }
 
@@ -183,7 +227,9 @@ static int read_outputs(DcsSteps *r, int32_t i, int64_t newest)
             for (j = 0; j < s->n_out; j++)
                 s->y[j] = s->step_out[s->out_slot[j]];
         } else {
+            double t0 = now();
             int st = s->get_real(s->component, s->out_vr, (size_t)s->n_out, s->y);
+            s->timing[2] += now() - t0;
             if (st > 1)
                 return fail(r, DCS_FAILED, i, DCS_GET, st, newest);
         }
