@@ -150,7 +150,7 @@ def linearize(params: PlantParams, kind: str = "full3d", spin: float | None = No
     model = DrillstringModel(prm, kind)
     if model.framed:
         raise ValueError("linearize: the spinning straight string needs a vertical hole; this "
-                         "trajectory curves it (use plant.modal.modes about a state instead)")
+                         "trajectory curves it (use analysis.modal.modes about a state instead)")
     rest = DrillstringModel(replace(prm, top_drive=replace(prm.top_drive, rotary_speed=0.0)), kind)
     x0 = static_equilibrium(rest)
     n = model.n

@@ -276,10 +276,11 @@ class Stepping:
     def method_for_step(self, h: float | None) -> str:
         """The fastest accurate fixed-step method for communication steps of ``h`` [s].
 
-        Exponential Euler (exact for the linear chain, one step a communication step) unless
-        :attr:`exponential_exclusions` names a reason: the axial-torsional chain whose inputs
-        are held over a step, step loads, or the top drive's prescribed hoisting and rotation
-        (ramps: integrated exactly through ``phi`` functions). Else, among the methods of
+        Exponential Euler, one exact step a communication step, when
+        :attr:`exponential_exclusions` is empty: the linear axial-torsional chain, whose
+        inputs held over a step, step loads (steps split at their switch times) and the top
+        drive's prescribed hoisting and rotation ramps (``phi`` functions) it integrates
+        exactly. Otherwise (:attr:`exponential_exclusions` says why), among the methods of
         :data:`plant.integrators.METHODS` marked ``automatic`` for this model kind (they met
         the accuracy bar of ``BENCHMARKS.md`` at their automatic step; explicit Runge-Kutta
         methods that evaluate the prescribed motions at their stage times, so a hoisting or

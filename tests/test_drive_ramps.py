@@ -1,5 +1,5 @@
 """The top drive's prescribed motion (hoisting, a rotation ramp) is integrated to each method's
-order by every method the automatic choice can pick (issue 34).
+order by every method the automatic choice can pick.
 
 Before the fix the automatic method of a linear axial-torsional scene, exponential Euler, held
 the hoisting travel over each step: a hoisting vertical string's steady hook load was off the

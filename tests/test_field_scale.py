@@ -464,7 +464,7 @@ def test_field_scenes_through_the_api_equal_the_plant_alone():
          ["trajectory.hole"]),
         ({"sections": [{"length": 10.0, "segment_length": 1.0, "stabilizers": [2.0],
                         "stabilizer_diameter": 0.2}]}, ["stabilizers", "[trajectory]"]),
-        # issue 34: a bit or a stabilizer blade larger than the hole at its depth
+        # a bit or a stabilizer blade larger than the hole at its depth
         ({"sections": [{"length": 10.0, "segment_length": 1.0}],
           "trajectory": {"hole": [[100, HOLE]]}, "bit": {"radius": 0.108}},
          ["bit.radius = 0.108 m", "gauge diameter 0.216 m", "hole diameter 0.2159 m"]),

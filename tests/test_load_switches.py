@@ -99,7 +99,7 @@ def test_auto_method_is_exponential_euler_only_where_it_is_exact():
         m = DrillstringModel(sc.plant, sc.model)
         assert m.kind == "axial_torsional" and m.default_method == "expeuler"
         assert PlantSimulator(m).method == "expeuler"
-    # a prescribed rotation ramp is integrated exactly (issue 34, tests/test_drive_ramps.py);
+    # a prescribed rotation ramp is integrated exactly (tests/test_drive_ramps.py);
     # a bit torque (tanh) or the bit's sinusoidal displacement are not
     sc = load_scene("table1_torsional_pulse", overrides={"top_drive": {"rotary_speed": 10.0}})
     assert DrillstringModel(sc.plant, "axial_torsional").default_method == "expeuler"

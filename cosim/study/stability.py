@@ -361,7 +361,7 @@ def coupled_plant(scene: Any, cache: bool = True
     """The scene's plant linearized (full 3D, top-drive frame) and reduced to the loop's modes.
 
     One linearization per plant and operating point: the result is a function of the plant's
-    parameters (the operating point is theirs: :func:`plant.linearize.operating_params`) and
+    parameters (the operating point is theirs: :func:`analysis.linearize.operating_params`) and
     of the code, kept on disk by content (:func:`cosim.scenario.cache.cached_arrays`, key: the
     parameters, the sources of ``plant/`` and of this module, numpy's and scipy's versions).
 
