@@ -102,9 +102,19 @@ def _entry(kind: str, key: str) -> Any:
     arrays = ", ".join(f"_f{d}(c, {k})" for k, d in enumerate(dims))
     namespace = {"__name__": __name__, "carray": carray, "np": np, "_WIDTH": _WIDTH,
                  "_f1": _f1, "_f2": _f2, "core": core, "INTERNAL": INTERNAL}
-    exec(compile(_TEMPLATE.format(name=name, count=len(dims), arrays=arrays), __file__,
-                 "exec"), namespace)
+    # blank lines ahead put the function's lines where the template's text is in this file, so
+    # inspect.getsource reads the template (numba does, for the type annotations it writes with
+    # its cache; elsewhere in this file Python 3.12's tokenizer stops with a TokenError)
+    source = "\n" * _template_offset() + _TEMPLATE.format(name=name, count=len(dims),
+                                                         arrays=arrays)
+    exec(compile(source, __file__, "exec"), namespace)
     return namespace[name]
+
+
+def _template_offset() -> int:
+    """The lines of this file before the template's first line (its ``_TEMPLATE`` line)."""
+    lines = Path(__file__).read_text(encoding="utf-8").splitlines()
+    return lines.index('_TEMPLATE = """')
 
 
 _SIGNATURE = types.int32(types.voidptr, types.float64, types.float64)

@@ -121,23 +121,46 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
 
 def _cmd_build(args: argparse.Namespace) -> int:
     from drillcosim.api import build_fmus, load_scene
+    from drillcosim.cosim.master.errors import UserError
     from drillcosim.cosim.scenario.build import scene_recipes
     from drillcosim.cosim.scenario.scene_fmus import built_for_scene
+    from drillcosim.fmu_src.platforms import select
 
+    try:
+        select(args.platforms)  # a bad --platforms is bad input: one line, exit 2
+    except ValueError as exc:
+        if args.platforms is not None:
+            raise UserError(f"--platforms: {exc}") from None
     if args.scene:
         recipes = scene_recipes(load_scene(args.scene))
-        for instance, path in build_fmus(args.out, scene=args.scene).items():
+        built = build_fmus(args.out, scene=args.scene, platforms=args.platforms,
+                           standalone=args.standalone)
+        for instance, path in built.items():
             kind = ("built for the scene" if built_for_scene(recipes[instance])
                     else "the default build")
-            print(f"built {path} ({instance}: {kind})")
+            print(f"built {path} ({instance}: {kind}{_self_contained(path)})")
         return EXIT_OK
     try:
-        built = build_fmus(args.out)  # prints "built <path>" per Python FMU
+        built = build_fmus(args.out, platforms=args.platforms,
+                           standalone=args.standalone)  # "built <path>" per FMU
     except RuntimeError as exc:  # the C controller needs only a C compiler
-        print(f"drillcosim build: StrainControllerC.fmu not built: {exc}", file=sys.stderr)
+        print(f"drillcosim build: {exc}", file=sys.stderr)
         return EXIT_FAILED
-    print(f"built {built['StrainControllerC']}")
+    for path in built.values() if args.standalone else [built["StrainControllerC"]]:
+        print(f"built {path}{_self_contained(path)}")
     return EXIT_OK
+
+
+def _self_contained(path: Path) -> str:
+    """", self-contained: <platform> Python X (N MB)" for an FMU that carries runtimes."""
+    from drillcosim.fmu_src.standalone import runtimes
+
+    found = runtimes(path)
+    if not found:
+        return ""
+    parts = [f"{p} Python {info['python']}" for p, info in found.items()]
+    return (f", self-contained: {', '.join(parts)}; {path.stat().st_size / 1e6:.0f} MB, "
+            f"{sum(int(i['bytes']) for i in found.values()) / 1e6:.0f} MB unpacked")
 
 
 def _is_ssp(target: str) -> bool:
@@ -195,7 +218,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
             baseline = _baseline(config, cached_only=True) if want_baseline else None
             feed = workers.feed(plot_settings(config, baseline), config.cosim.stop_time)
             result = simulate(built, progress=_progress(args), csv_path=out / "results.csv",
-                              observers=[feed] if feed is not None else ())
+                              observers=[feed] if feed is not None else (),
+                              save_state=args.save_state, from_state=args.from_state)
         except CosimError as exc:  # failed before the first step: earlier files are kept
             if exc.call == "fmi2ExitInitializationMode" and exc.status == FMI2_ERROR:
                 # the FMU rejected its parameters (its message names them): bad input
@@ -208,6 +232,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
         files = result.save(out, plots=not args.no_plots, workers=workers, baseline=baseline)
     message = result.message(out, files)
     print(message, file=sys.stdout if result.completed else sys.stderr)
+    if args.save_state is not None:
+        print(f"checkpoint at {result.end_time:g} s: {args.save_state}" if result.completed
+              else "no checkpoint written: the run did not reach its stop time",
+              file=sys.stdout if result.completed else sys.stderr)
     if args.profile:
         print(result.profile_table())
     return EXIT_OK if result.completed else EXIT_FAILED
@@ -280,7 +308,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         print(f"drillcosim sweep: note: {note}", file=sys.stderr)
     out = args.out or f"out/sweep_{Path(args.scene).stem}"
     frame = sweep(spec, out=out, workers=args.workers, scheduler=args.scheduler,
-                  progress=_progress(args), retry_errors=args.retry_errors)
+                  progress=_progress(args), retry_errors=args.retry_errors,
+                  branch=not args.no_branch)
     res = frame.attrs["outcome"]
     print(f"ran {res.n_run} of {res.n_points} points ({res.n_skipped} already done) in "
           f"{res.wall_time:.1f} s")
@@ -437,6 +466,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--scene", metavar="SCENE", help="build the FMUs that run this scene (name "
                    "or path): plant and controllers for its layout (DrillstringPlant_<scene>, "
                    "StrainController_<scene>), or the default ones where they fit")
+    p.add_argument("--platforms", metavar="LIST", default=None,
+                   help="binary platforms of the FMUs, comma-separated: linux64,win64 (win64 "
+                   "cross-compiled with mingw-w64); default: every one whose C compiler is "
+                   "found, a skipped one named in one line")
+    p.add_argument("--standalone", action="store_true", help="also write self-contained "
+                   "copies into <out>/standalone/: each carries its own Python runtime for "
+                   "each of its platforms (no Python needed on the target; the plant ~115 MB "
+                   "for linux64, ~80 MB for win64), see docs/interop.md")
     p.set_defaults(func=_cmd_build)
     p = sub.add_parser("bench", help="plant work-precision benchmarks -> BENCHMARKS.md")
     p.add_argument("--quick", action="store_true", help="short horizons (< 3 min)")
@@ -464,6 +501,13 @@ def _parser() -> argparse.ArgumentParser:
                    help="print where the stepping loop's time went: per component its mean "
                         "and longest step and share, the master's own share, the real-time "
                         "factor (also in summary.json's telemetry)")
+    p.add_argument("--save-state", metavar="FILE",
+                   help="write a checkpoint of the whole system at the stop time (every FMU's "
+                        "state and the master's: ticks, delay lines, held values)")
+    p.add_argument("--from-state", metavar="FILE",
+                   help="continue from a checkpoint (--save-state of the same scene, settings, "
+                        "engine and build) to --stop-time; the same outputs, bit for bit, as "
+                        "the run that was never interrupted")
     p.add_argument("--no-baseline", action="store_true",
                    help="figures without the open-loop baseline (a closed-loop run's figures "
                         "draw the scene with the controller off behind it; run once, cached)")
@@ -516,6 +560,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", help="results folder (default out/sweep_<scene>); "
                    "re-running into it skips finished points")
     p.add_argument("--retry-errors", action="store_true", help="re-run points recorded as errors")
+    p.add_argument("--no-branch", action="store_true",
+                   help="run every closed-loop point from 0 s instead of continuing the points "
+                        "identical up to the controller's switch-on from one checkpoint of "
+                        "that prefix (the same table)")
     p.add_argument("--maps", action="store_true", help="also write the stability/benefit maps")
     p.add_argument("--no-prediction", action="store_true",
                    help="maps without the linear prediction overlay")
@@ -568,7 +616,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--strain-noise", type=float, default=1e-7, metavar="E",
                    help="lqg: std of the strain noise [1] (default 1e-7)")
     p.add_argument("--force-limit", type=float, default=math.inf, metavar="N",
-                   help="saturation |force| <= N [N] (default: none)")
+                   help="saturation: force magnitude <= N [N] (default: none)")
     p.add_argument("--max-frequency", type=float, default=1000.0, metavar="W",
                    help="design model: the plant's modes up to W [rad/s] (default 1000: the "
                    "lateral bending modes; inf: all); judged with all of them")

@@ -100,7 +100,8 @@ def simulate(scene: str | Path = "paper_closed_loop", *, stop_time: float | None
              outputs: Sequence[str] | None = None, progress: bool | None = False,
              fmu_dir: str | Path | None = None, plant_fmu: str | Path | None = None,
              controller_fmu: str | Path | None = None,
-             csv_path: str | Path | None = None) -> Result:
+             csv_path: str | Path | None = None, save_state: str | Path | None = None,
+             from_state: str | Path | None = None) -> Result:
     """Co-simulate a scene: plant and controllers through the master.
 
     Parameters
@@ -132,6 +133,13 @@ def simulate(scene: str | Path = "paper_closed_loop", *, stop_time: float | None
         FMU files (any maker) instead of the project's; checked against the others by name.
     csv_path : path-like, optional
         Also stream the recorded rows to this CSV while running (``drillcosim run`` does).
+    save_state : path-like, optional
+        Write a checkpoint of the whole system (every component's state and the master's) at
+        the stop time to this file.
+    from_state : path-like, optional
+        Continue from this checkpoint to ``stop_time`` instead of starting at 0 s: the same
+        outputs, bit for bit, as the run that was never interrupted. A checkpoint of another
+        scene, settings, build, FMU or version, or a damaged one, is refused (one line).
 
     Returns
     -------
@@ -150,7 +158,8 @@ def simulate(scene: str | Path = "paper_closed_loop", *, stop_time: float | None
     config = load_scene(scene, stop_time=stop_time, step=step, delay=delay, gain=gain,
                         overrides=overrides, plant_fmu=plant_fmu, controller_fmu=controller_fmu)
     built = build_system(config, engine, fmu_dir=fmu_dir)
-    return simulate_built(built, outputs=outputs, progress=progress, csv_path=csv_path)
+    return simulate_built(built, outputs=outputs, progress=progress, csv_path=csv_path,
+                          save_state=save_state, from_state=from_state)
 
 
 def sweep(scene: str | Path | SweepSpec = "paper_closed_loop", *,
@@ -160,7 +169,8 @@ def sweep(scene: str | Path | SweepSpec = "paper_closed_loop", *,
           overrides: Mapping[str, Any] | None = None, engine: str = "fmu",
           plant_fmu: str | Path | None = None, controller_fmu: str | Path | None = None,
           out: str | Path | None = None, workers: int | None = 0, scheduler: Any = None,
-          progress: bool | None = False, retry_errors: bool = False, **options: float):
+          progress: bool | None = False, retry_errors: bool = False, branch: bool = True,
+          **options: float):
     """Stability and benefit sweep, one co-simulation per point: gain x delay x step x any
     other scene keys (``vary``), full factorial, plus open-loop references.
 
@@ -201,6 +211,10 @@ def sweep(scene: str | Path | SweepSpec = "paper_closed_loop", *,
     progress : bool or None
     retry_errors : bool
         Re-run points recorded as errors.
+    branch : bool
+        Closed-loop points identical up to the controller's switch-on (e.g.
+        ``paper_switch_on_25s``) continue from one checkpoint of that prefix instead of each
+        running it (the same table; ``branch_time`` says where a point branched).
     **options
         Point metric options (:class:`cosim.study.point.PointOptions`: ``fit_fraction``,
         ``envelope_window`` [s], ``rms_fraction``, ``force_cap`` [N], ``highpass`` [rad/s]).
@@ -234,7 +248,7 @@ def sweep(scene: str | Path | SweepSpec = "paper_closed_loop", *,
     with tempfile.TemporaryDirectory(prefix="drillcosim_sweep_") as tmp:
         folder = Path(out) if out is not None else Path(tmp)
         outcome = execute_sweep(spec, folder, workers=workers, scheduler=scheduler,
-                                progress=progress, retry_errors=retry_errors)
+                                progress=progress, retry_errors=retry_errors, branch=branch)
         keys = {p.key for p in spec.points()}
         rows = [r for r in read_table(folder) if r["key"] in keys]
     frame = pd.DataFrame(rows)
@@ -285,8 +299,9 @@ def modes(scene: str | Path = "table1_lateral_step", *, model: str | None = None
             "spin_rad_s": sc.plant.top_drive.rotary_speed, "modes": table}
 
 
-def build_fmus(out: str | Path | None = None, *, scene: str | Path | None = None
-               ) -> dict[str, Path]:
+def build_fmus(out: str | Path | None = None, *, scene: str | Path | None = None,
+               platforms: str | Sequence[str] | None = None,
+               standalone: bool = False) -> dict[str, Path]:
     """Build the FMUs (``drillcosim build``).
 
     Parameters
@@ -296,6 +311,13 @@ def build_fmus(out: str | Path | None = None, *, scene: str | Path | None = None
     scene : str or path, optional
         Build the FMUs that run this scene (plant and controllers for its layout, or the
         default ones where they fit) instead of the default set.
+    platforms : str or sequence of str, optional
+        Binary platforms, e.g. ``"linux64,win64"``; default: this machine's and every other
+        one whose C compiler is found (a skipped one is named in one printed line).
+    standalone : bool
+        Also write self-contained copies that carry their own Python runtime for each of their
+        platforms (:mod:`drillcosim.fmu_src.standalone`) into ``<out>/standalone/``; those
+        are returned.
 
     Returns
     -------
@@ -305,12 +327,32 @@ def build_fmus(out: str | Path | None = None, *, scene: str | Path | None = None
     Raises
     ------
     RuntimeError
-        No C compiler for ``StrainControllerC.fmu`` (the others are built).
+        No C compiler for ``StrainControllerC.fmu`` (the others are built), or no runtime can
+        be made (``standalone``: the building Python has no shared libpython, a download
+        failed).
+    ValueError
+        An unknown platform, or one named whose compiler is missing.
     """
+    from drillcosim.fmu_src.platforms import select
+
     folder = Path(out) if out is not None else default_out()
+    try:
+        selection = select(platforms)
+    except ValueError as exc:
+        if platforms is not None:
+            raise
+        raise RuntimeError(f"building the FMUs needs a C compiler: {exc}") from None
     if scene is not None:
-        return {instance: build_one(recipe, folder)
-                for instance, recipe in scene_recipes(load_config(scene)).items()}
-    built = {Path(p).stem: Path(p) for p in build_all(folder)}
-    built["StrainControllerC"] = build_c_controller(folder)
+        if selection.note():
+            print(selection.note())
+        built = {instance: build_one(recipe, folder, selection)
+                 for instance, recipe in scene_recipes(load_config(scene)).items()}
+    else:
+        built = {Path(p).stem: Path(p) for p in build_all(folder, platforms=selection)}
+        built["StrainControllerC"] = build_c_controller(folder, platforms=selection)
+    if standalone:
+        from drillcosim.fmu_src.standalone import make_standalone
+
+        built = {key: make_standalone(path, folder / "standalone" / path.name)
+                 for key, path in built.items()}
     return built

@@ -45,13 +45,15 @@ listed gets no ``dependencies`` attribute, meaning "depends on all"), and
 
 FMI wrapper
 -----------
-pythonfmu's prebuilt C++ binary ``binaries/linux64/<name>.so`` is replaced by our C wrapper
-(:mod:`fmu_src.wrapper`, compiled here against the stable ABI of CPython 3.10: one binary for
-CPython 3.10 to 3.13, stated at the end of the modelDescription's ``description``; needs a C
-compiler, ``$CC`` or ``gcc``), which returns fmi2Error for exceptions and for statuses the adapter reports,
-survives exceptions, finds a Python in hosts without one and moves Real inputs/outputs without
-Python calls; pythonfmu's other binaries (win64) are dropped: they could report no error.
-Without a C compiler the build stops with a one-line message.
+pythonfmu's prebuilt C++ binaries are replaced by our C wrapper (:mod:`fmu_src.wrapper`,
+compiled here against the stable ABI of CPython 3.10: one binary per platform for CPython 3.10
+to 3.13, stated at the end of the modelDescription's ``description``), which returns fmi2Error
+for exceptions and for statuses the adapter reports, survives exceptions, finds a Python in
+hosts without one and moves Real inputs/outputs without Python calls. The platforms are those
+of :func:`fmu_src.platforms.select`: ``binaries/linux64/<name>.so`` (``$CC`` or ``gcc``) and
+``binaries/win64/<name>.dll`` (cross-compiled with mingw-w64), by default every one whose
+compiler is found (:func:`build_all` prints one line naming a skipped one and why). Without any
+C compiler the build stops with a one-line message.
 
 The registry
 ------------
@@ -107,6 +109,7 @@ from xml.etree import ElementTree as ET
 
 from drillcosim._toolchain import user_cache
 from drillcosim.controller.registry import LAWS
+from drillcosim.fmu_src.platforms import Selection, select
 
 __all__ = [
     "DEFAULT_OUT",
@@ -711,12 +714,13 @@ def shipped_modules(fmu: Path | str) -> dict[str, str]:
         return dict(json.loads(zf.read(BUILD_INFO))["modules"])
 
 
-def _build_in_this_process(recipe: FmuRecipe, workdir: Path) -> Path:
-    """Build one FMU into ``workdir/out`` (run in a dedicated subprocess)."""
+def _build_in_this_process(recipe: FmuRecipe, workdir: Path, platforms: Sequence[str]) -> Path:
+    """Build one FMU into ``workdir/out`` with binaries for ``platforms`` (run in a dedicated
+    subprocess)."""
     import pythonfmu
     from pythonfmu import FmuBuilder
 
-    from drillcosim.fmu_src.wrapper import compile_wrapper, install_native_wrapper, python_range
+    from drillcosim.fmu_src.wrapper import install_native_wrapper, python_range, wrapper_library
 
     staging = workdir / "vendor"
     staging.mkdir(parents=True)
@@ -725,7 +729,7 @@ def _build_in_this_process(recipe: FmuRecipe, workdir: Path) -> Path:
         raise RuntimeError(f"pythonfmu {pythonfmu.__version__} is installed; the adapters import "
                            f"{PYTHONFMU_VENDORED} (install the pinned version)")
     # the wrapper first: without a compiler nothing else is worth doing
-    library = compile_wrapper(workdir / "dcs_fmi2_native.so")
+    libraries = {name: wrapper_library(name) for name in platforms}
     source = recipe.script_path.read_text()
     if re.search(r"^\s*(from|import)\s+pythonfmu\b", source, re.M):
         raise RuntimeError(f"{recipe.script_path}: import pythonfmu as {PYTHONFMU_VENDORED} "
@@ -797,20 +801,26 @@ def _build_in_this_process(recipe: FmuRecipe, workdir: Path) -> Path:
     for package, _ in recipe.vendored:
         if any(n.startswith(f"resources/{Path(package).name}/") for n in members):
             raise RuntimeError(f"{fmu.name}: unversioned resources/{package}/ would shadow")
-    install_native_wrapper(fmu, recipe.name, library, recipe.requires)
+    install_native_wrapper(fmu, recipe.name, libraries, recipe.requires)
     return fmu
 
 
 # ------------------------------------------------------------------------- public
-def _check_compiler() -> None:
-    """Raise RuntimeError (one line) if there is no C compiler for the wrapper."""
-    cc = os.environ.get("CC") or "gcc"
-    if shutil.which(cc) is None:
-        raise RuntimeError(f"building the FMUs needs a C compiler and {cc!r} (from $CC or the "
-                           f"default gcc) was not found: install one (Debian: apt install gcc)")
+def _selection(platforms: Selection | str | Sequence[str] | None) -> Selection:
+    """The platforms to build (:func:`fmu_src.platforms.select`); RuntimeError (one line)
+    when no platform has a compiler, ValueError for a bad explicit choice."""
+    if isinstance(platforms, Selection):
+        return platforms
+    if platforms is None:
+        try:
+            return select()
+        except ValueError as exc:
+            raise RuntimeError(f"building the FMUs needs a C compiler: {exc}") from None
+    return select(platforms)
 
 
-def build_one(recipe: FmuRecipe, out_dir: Path | str = DEFAULT_OUT) -> Path:
+def build_one(recipe: FmuRecipe, out_dir: Path | str = DEFAULT_OUT,
+              platforms: Selection | str | Sequence[str] | None = None) -> Path:
     """Build one FMU atomically into ``out_dir``.
 
     Parameters
@@ -819,6 +829,9 @@ def build_one(recipe: FmuRecipe, out_dir: Path | str = DEFAULT_OUT) -> Path:
         What to build.
     out_dir : path-like
         Target folder (created if missing).
+    platforms : Selection, str or sequence of str, optional
+        The binary platforms (``"linux64,win64"``); default every one whose compiler is found
+        (:func:`fmu_src.platforms.select`).
 
     Returns
     -------
@@ -830,8 +843,10 @@ def build_one(recipe: FmuRecipe, out_dir: Path | str = DEFAULT_OUT) -> Path:
     RuntimeError
         Without a C compiler (one line), or if the build subprocess fails (its output is
         included).
+    ValueError
+        An unknown platform, or one named whose compiler is missing.
     """
-    _check_compiler()
+    selection = _selection(platforms)
     out_dir = Path(out_dir).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
     target = out_dir / f"{recipe.name}.fmu"
@@ -840,7 +855,8 @@ def build_one(recipe: FmuRecipe, out_dir: Path | str = DEFAULT_OUT) -> Path:
         env = dict(os.environ)
         env["PYTHONDONTWRITEBYTECODE"] = "1"
         cmd = [sys.executable, "-m", "drillcosim.fmu_src.build", "--worker-recipe",
-               json.dumps(asdict(recipe)), "--workdir", str(workdir)]
+               json.dumps(asdict(recipe)), "--workdir", str(workdir),
+               "--platforms", ",".join(selection.names)]
         # a fresh interpreter in an empty folder: nothing of the calling process (its
         # sys.modules, a shadowing pythonfmu, the working directory) reaches the build
         proc = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True)
@@ -854,7 +870,8 @@ def build_one(recipe: FmuRecipe, out_dir: Path | str = DEFAULT_OUT) -> Path:
 
 
 def build_all(out_dir: Path | str = DEFAULT_OUT,
-              recipes: Sequence[FmuRecipe] = REGISTRY) -> list[Path]:
+              recipes: Sequence[FmuRecipe] = REGISTRY,
+              platforms: Selection | str | Sequence[str] | None = None) -> list[Path]:
     """Build every FMU of ``recipes`` whose adapter script exists.
 
     Parameters
@@ -863,18 +880,23 @@ def build_all(out_dir: Path | str = DEFAULT_OUT,
         Target folder, default ``build/fmus/`` in the repository.
     recipes : sequence of FmuRecipe
         Default :data:`REGISTRY`.
+    platforms : Selection, str or sequence of str, optional
+        As for :func:`build_one`; a platform left out by default is named in one printed line.
 
     Returns
     -------
     list of pathlib.Path
         The FMUs written (skipped entries are not listed).
     """
+    selection = _selection(platforms)
+    if selection.note():
+        print(selection.note())
     built = []
     for recipe in recipes:
         if not recipe.script_path.is_file():
             print(f"note: skipping {recipe.name}: adapter {recipe.script} does not exist yet")
             continue
-        built.append(build_one(recipe, out_dir))
+        built.append(build_one(recipe, out_dir, selection))
         print(f"built {built[-1]}")
     return built
 
@@ -922,11 +944,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help=f"output folder (default {DEFAULT_OUT})")
     parser.add_argument("--only", action="append", default=None, metavar="NAME",
                         help="build only this FMU (repeatable)")
+    parser.add_argument("--platforms", default=None, metavar="LIST",
+                        help="binary platforms, comma-separated (linux64,win64); default: "
+                        "every one whose C compiler is found")
     parser.add_argument("--worker-recipe", help=argparse.SUPPRESS)
     parser.add_argument("--workdir", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker_recipe is not None:
-        _build_in_this_process(_recipe_from_json(args.worker_recipe), args.workdir)
+        _build_in_this_process(_recipe_from_json(args.worker_recipe), args.workdir,
+                               args.platforms.split(","))
         return 0
     recipes = REGISTRY
     if args.only:
@@ -936,7 +962,14 @@ def main(argv: Sequence[str] | None = None) -> int:
                          f"{[r.name for r in REGISTRY]}")
         recipes = tuple(r for r in REGISTRY if r.name in args.only)
     try:
-        build_all(args.out, recipes)
+        selection = _selection(args.platforms)
+    except ValueError as exc:
+        parser.error(str(exc))
+    except RuntimeError as exc:  # no compiler for this machine
+        print(f"python -m drillcosim.fmu_src.build: {exc}", file=sys.stderr)
+        return 1
+    try:
+        build_all(args.out, recipes, selection)
     except RuntimeError as exc:
         print(f"python -m drillcosim.fmu_src.build: {exc}", file=sys.stderr)
         return 1

@@ -1,15 +1,18 @@
-"""The README's FMU variable tables, generated from the port tables.
+"""The FMU variable tables of the docs, generated from the port tables.
 
 ``python -m drillcosim.fmu_src.interface_doc`` prints the markdown: the default plant FMU
 (``plant/signals.py``, ``plant/scene.py``) and the default FMU of every registered controller
 law (``Law.ports``), the tables the FMUs register their variables from (``tests/test_port_tables.py``
-and ``tests/test_law_plugins.py`` check the built FMUs against them); a test checks that the
-README holds exactly this text between its ``fmu-interface`` markers.
+and ``tests/test_law_plugins.py`` check the built FMUs against them);
+``... --write docs/fmu_interface.md`` replaces the text between the page's ``fmu-interface``
+markers with it, and a test checks that the page holds exactly this text.
 """
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Iterable
+from pathlib import Path
 from typing import Any
 
 from drillcosim.controller import LAWS
@@ -65,5 +68,16 @@ def interface_markdown() -> str:
     return "\n".join(lines)
 
 
+def write_into(page: str | Path) -> None:
+    """Replace the generated block of ``page`` (between :data:`START` and :data:`END`)."""
+    text = Path(page).read_text()
+    start, end = text.index(START), text.index(END) + len(END)
+    Path(page).write_text(text[:start] + interface_markdown() + text[end:])
+
+
 if __name__ == "__main__":  # pragma: no cover
-    print(interface_markdown())
+    args = sys.argv[1:]
+    if args[:1] == ["--write"]:
+        write_into(args[1])
+    else:
+        print(interface_markdown())

@@ -21,6 +21,7 @@ a C compiler itself).
 from __future__ import annotations
 
 import ctypes
+import os
 import sys
 import sysconfig
 from pathlib import Path
@@ -179,3 +180,20 @@ def closed_loop_c(project_fmus, c_controller_fmu, tmp_path_factory) -> ClosedLoo
     """The engine-comparison loop with the C controller FMU (SSP + our master's result)."""
     return closed_loop(project_fmus["DrillstringPlant"], c_controller_fmu,
                        tmp_path_factory.mktemp("closed_loop_c"), name="closed_loop_c")
+
+
+@pytest.fixture(scope="session")
+def windows_caches(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+    """The caches of every Windows process of this test run (numba's, the stable package copies
+    and their native images), as environment variables: empty at the start of a run, shared by
+    the wine tests of all pytest-xdist workers (one folder beside the workers' own), so the
+    plant's kernels are compiled under wine once per run, not once per test file."""
+    from support.windows_bench import windows_path
+
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        base = base.parent  # the run's folder, above popen-gw0, popen-gw1, ...
+    folder = base / "windows_caches"
+    folder.mkdir(exist_ok=True)
+    return {"DRILLCOSIM_CACHE": windows_path(folder / "drillcosim"),
+            "NUMBA_CACHE_DIR": windows_path(folder / "numba"), "OPENBLAS_NUM_THREADS": "1"}

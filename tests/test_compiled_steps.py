@@ -321,3 +321,20 @@ def test_ztorque_controller(project_fmus, monkeypatch) -> None:
     # the refused one and the first after the restore
     fast = assert_same(fmu, script, monkeypatch, max_python=6)
     assert "non-finite input: top_rotary_speed" in fast["messages"][0][1]
+
+
+def test_every_entry_points_source_is_its_template() -> None:
+    """numba writes each compiled law's type annotations (read with ``inspect.getsource``) into
+    its cache: the source Python finds for an entry point must be the template it was compiled
+    from, a ``def`` of its own name, on every Python (3.12's tokenizer raises a TokenError on a
+    block that starts inside a docstring, where 3.11's did not)."""
+    import inspect
+
+    from drillcosim.controller import compiled
+
+    key = compiled._sources_key()
+    for kind in compiled.ENTRIES:
+        entry = compiled._entry(kind, key)
+        lines, first = inspect.getsourcelines(entry)
+        assert lines[0].startswith("def {name}("), (kind, first, lines[:2])
+        assert first == entry.__code__.co_firstlineno

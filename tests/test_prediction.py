@@ -112,8 +112,8 @@ def _fresh_rates(points: list[tuple[float, float]], step: float) -> dict:
 
 def test_point_predictions_equal_a_fresh_linearization() -> None:
     """The 12 points of gains 1e6, 1e8, 1e9 x delays 0-200 us: the sweep's predicted growth
-    rates (cached linearization, the loop model kept per process) equal the uncached computation
-    to 1e-9 1/s."""
+    rates (cached linearization, the loop model kept per process) equal the uncached
+    computation to 1e-9 1/s."""
     from drillcosim.cosim.study.point import point_config
     from drillcosim.cosim.study.prediction import point_prediction
 

@@ -92,6 +92,19 @@ class DelayLine:
             return v0
         return v0 + (v0 - self.delayed(1)) * horizon
 
+    def history(self) -> tuple[float, ...]:
+        """The samples held, oldest first, newest last (:attr:`depth` of them)."""
+        buf, pos = self.buf, self.pos
+        return tuple(buf[pos + 1:] + buf[:pos + 1])
+
+    def restore_history(self, samples) -> None:
+        """Hold the newest :attr:`depth` of ``samples`` (oldest first): a line of any delay
+        continues from the history of a line of the same source with a larger or equal one."""
+        if len(samples) < self.depth:
+            raise ValueError(f"{len(samples)} samples; this line holds {self.depth}")
+        self.buf = [float(v) for v in samples[len(samples) - self.depth:]]
+        self.pos = self.depth - 1
+
     def get_state(self) -> tuple[tuple[float, ...], int]:
         """Snapshot of the buffer (immutable)."""
         return tuple(self.buf), self.pos

@@ -92,6 +92,7 @@ class Execution:
         self.algorithm = algorithm or make_algorithm(system.algorithm)
         self._read_outputs = tuple(read_outputs)
         self._native = None          # the native loop's plan, built at the first use
+        self._resume = None          # a checkpoint initialize() restores
         self.initialized = False
         self.closed = False
         given = dict(slaves or {})
@@ -135,6 +136,13 @@ class Execution:
                              f"start_time, got {stop_time} s")
         return k
 
+    def resume_from(self, checkpoint) -> None:
+        """Start from ``checkpoint`` (a :class:`~.checkpoint.Checkpoint`) instead of the start
+        time: :meth:`initialize` restores it (:func:`.resume.restore`)."""
+        if self.initialized:
+            raise RuntimeError("resume_from: call it before the execution is initialized")
+        self._resume = checkpoint
+
     # -- hooks ----------------------------------------------------------------
     def add_observer(self, observer: Observer) -> None:
         """Register a read-only observer (``on_step(execution)``).
@@ -167,6 +175,10 @@ class Execution:
                 raise ValueError(f"read_outputs: unknown FMU in {ref!r}")
         self.algorithm.setup(system, self.slaves, self.time_of, read)
         self.algorithm.initialize()
+        if self._resume is not None:
+            from .resume import restore
+
+            restore(self, self._resume)
         self.initialized = True
         for obs in self.observers:
             if hasattr(obs, "on_start"):

@@ -57,6 +57,8 @@ class Result:
         Where the stepping loop's wall time went: per component (by name) ``steps``,
         ``step_total_s``, ``step_max_s`` (its step calls) and ``exchange_s`` (its set-inputs
         and get-outputs calls) [s]; :meth:`profile` summarizes it.
+    checkpoint : Checkpoint or None
+        The state at the stop time (:mod:`.checkpoint`), if asked for and the run completed.
     """
 
     data: np.ndarray
@@ -66,6 +68,7 @@ class Result:
     diverged: Divergence | None = None
     csv_path: Path | None = None
     timings: dict[str, dict[str, float]] = field(default_factory=dict)
+    checkpoint: Any = None
 
     def profile(self) -> dict[str, Any]:
         """The run's telemetry: per component the mean and longest step [s], its calls' total
@@ -113,7 +116,8 @@ class Master:
             output_interval: float | None = None, progress: bool | None = False,
             csv_path: str | Path | None = None, flush_every: int = 1000,
             observers: Sequence[Any] = (), manipulators: Sequence[Any] = (),
-            output_ticks: int | None = None) -> Result:
+            output_ticks: int | None = None, from_checkpoint: Any = None,
+            checkpoint_identity: Mapping[str, Any] | None = None) -> Result:
         """Simulate from the start time to ``stop_time``.
 
         Parameters
@@ -139,6 +143,12 @@ class Master:
             before the recorder.
         manipulators : sequence
             Manipulators (``before_step(execution)``): scenario events, fault injection.
+        from_checkpoint : Checkpoint, optional
+            Start from it (:func:`.resume.restore`) instead of the start time: the recorded
+            rows begin at its time.
+        checkpoint_identity : mapping, optional
+            Take a checkpoint at the stop time carrying this identity
+            (:attr:`Result.checkpoint`).
 
         Returns
         -------
@@ -168,9 +178,11 @@ class Master:
         recorder = Recorder(outputs, interval, csv_path, flush_every)
         execution = None
         wall0 = time.perf_counter()
-        diverged = None
+        diverged = checkpoint = None
         try:
             execution = Execution(system, read_outputs=outputs, slaves=self.slaves)
+            if from_checkpoint is not None:
+                execution.resume_from(from_checkpoint)
             for obs in observers:
                 execution.add_observer(obs)
             for man in manipulators:
@@ -186,6 +198,10 @@ class Master:
                 execution.algorithm.reset_timing()
             wall0 = time.perf_counter()
             execution.simulate_until(stop)
+            if checkpoint_identity is not None:
+                from .resume import capture
+
+                checkpoint = capture(execution, checkpoint_identity)
         except DivergenceError as err:
             diverged = Divergence(err.time, err.quantity, err.value)
         except CosimError as err:
@@ -194,14 +210,15 @@ class Master:
         except BaseException:
             self._finish(recorder, execution, wall0, None)
             raise
-        return self._finish(recorder, execution, wall0, diverged)
+        return self._finish(recorder, execution, wall0, diverged, checkpoint)
 
     @staticmethod
     def _finish(recorder: Recorder, execution: Execution | None, wall0: float,
-                diverged: Divergence | None) -> Result:
+                diverged: Divergence | None, checkpoint: Any = None) -> Result:
         wall = time.perf_counter() - wall0
         end = execution.time if execution is not None else float("nan")
-        sim = (execution.time - execution.start_time) if execution is not None else 0.0
+        sim = (execution.time - (execution.start_time if execution._resume is None
+                                 else execution._resume.time)) if execution is not None else 0.0
         stepped = execution is not None and execution.tick > 0
 
         timings = {}
@@ -211,7 +228,7 @@ class Master:
 
         def result() -> Result:
             return Result(recorder.data, wall, sim / wall if wall > 0 else float("inf"), end,
-                          diverged, recorder.csv_path, timings)
+                          diverged, recorder.csv_path, timings, checkpoint)
 
         try:
             if execution is not None:

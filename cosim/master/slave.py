@@ -12,9 +12,10 @@ from __future__ import annotations
 import abc
 import ctypes
 import functools
+import hashlib
 import math
 import shutil
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NoReturn
@@ -161,6 +162,27 @@ class Slave(abc.ABC):
         """Release a state from :meth:`get_state` (errors ignored)."""
         del state   # nothing to release unless a subclass holds native resources
 
+    def state_identity(self) -> dict[str, Any]:
+        """What a serialized state of this component belongs to (JSON-ready): a checkpoint
+        restores it only into a component of the same identity."""
+        return {"class": type(self).__qualname__}
+
+    def serialize_state(self, time: float) -> bytes:
+        """The component's full state as bytes (:meth:`deserialize_state` restores it)."""
+        raise CosimError(self.name, "fmi2SerializeFMUstate", time,
+                         "the component cannot serialize its state")
+
+    def deserialize_state(self, data: bytes, time: float) -> None:
+        """Restore a state written by :meth:`serialize_state` (all of it or, raising, none)."""
+        raise CosimError(self.name, "fmi2DeSerializeFMUstate", time,
+                         "the component cannot restore a serialized state")
+
+    def restore_parameters(self, changed: Mapping[str, ParameterValue], time: float) -> None:
+        """Set the start values ``changed`` (those of this run that differ from the run whose
+        state was restored) again after a restore; nothing here: a component that takes its
+        parameters at construction already has them."""
+        del changed, time
+
 
 @dataclass(frozen=True)
 class FmiCalls:
@@ -257,6 +279,7 @@ class FmuSlave(Slave):
         self.initialized = False
         self._bound: tuple = ()
         self._native: FmiCalls | None = None
+        self._identity: dict[str, Any] | None = None
 
     # -- variables -------------------------------------------------------------
     def variable(self, name: str, causality: Sequence[str] | None = None):
@@ -389,6 +412,44 @@ class FmuSlave(Slave):
         self._call("fmi2SetFMUstate", time,
                    lambda: self.fmu.fmi2SetFMUstate(self.component, state))
         self.errored = False
+
+    def state_identity(self) -> dict[str, Any]:
+        """The model identifier, GUID and SHA-256 of the FMU file (computed once)."""
+        if self._identity is None:
+            md = self.model_description
+            digest = hashlib.sha256(Path(self.spec.path).read_bytes()).hexdigest()
+            self._identity = {"model": md.coSimulation.modelIdentifier, "guid": md.guid,
+                              "fmu_sha256": digest}
+        return self._identity
+
+    def serialize_state(self, time: float) -> bytes:
+        """``fmi2GetFMUstate`` then ``fmi2SerializeFMUstate`` (the FMU's own format)."""
+        state = self.get_state(time)
+        try:
+            out: list[bytes] = []
+            self._call("fmi2SerializeFMUstate", time,
+                       lambda: out.append(bytes(self.fmu.serializeFMUstate(state))))
+            return out[0]
+        finally:
+            self.free_state(state)
+
+    def deserialize_state(self, data: bytes, time: float) -> None:
+        """``fmi2DeSerializeFMUstate`` then ``fmi2SetFMUstate`` (the FMU checks the bytes)."""
+        if not self.can_get_set_state:
+            raise CosimError(self.name, "fmi2DeSerializeFMUstate", time,
+                             "the FMU does not declare canGetAndSetFMUstate")
+        box: list = []
+        self._call("fmi2DeSerializeFMUstate", time,
+                   lambda: box.append(self.fmu.deSerializeFMUstate(bytes(data))))
+        try:
+            self.set_state(box[0], time)
+        finally:
+            self.free_state(box[0])
+
+    def restore_parameters(self, changed: Mapping[str, ParameterValue], time: float) -> None:
+        """``fmi2SetXxx`` of each changed start value (the FMU refuses a fixed one)."""
+        for name, value in changed.items():
+            self.set_value(name, value, time)
 
     def free_state(self, state) -> None:
         """Release a state handle (errors ignored)."""

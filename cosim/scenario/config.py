@@ -355,7 +355,7 @@ class SceneConfig:
         A foreign plant FMU's own parameters (``[plant.parameters]``), by variable name.
     origin : object
         What it was made of (the scene's tables before overrides, its file, the FMU files
-        given as arguments): :func:`derive_config` makes another configuration from it.
+        given as arguments): :func:`cosim.scenario.config.derive_config` makes another configuration from it.
     """
 
     scene: Scene

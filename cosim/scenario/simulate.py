@@ -15,12 +15,14 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from drillcosim.cosim.master.checkpoint import Checkpoint, write_checkpoint
 from drillcosim.cosim.master.errors import CosimError
 from drillcosim.cosim.master.master import Master
 from drillcosim.cosim.master.master import Result as MasterResult
 from drillcosim.cosim.master.system import SystemSpec
 
 from .build import BuiltSystem
+from .checkpoints import load_for, run_identity
 from .config import ConfigError
 from .result import Result
 
@@ -44,10 +46,13 @@ def _failure(err: CosimError | None, result: MasterResult) -> dict[str, Any] | N
 
 def simulate_system(system: SystemSpec, slaves, outputs: Sequence[str], output_ticks: int,
                stop_time: float, *, progress: bool | None = False,
-               csv_path: str | Path | None = None, observers: Sequence[Any] = ()
+               csv_path: str | Path | None = None, observers: Sequence[Any] = (),
+               from_checkpoint: Any = None, checkpoint_identity: Any = None
                ) -> tuple[MasterResult, dict[str, Any] | None]:
     """Run ``system`` to ``stop_time`` [s], recording ``outputs`` every ``output_ticks`` base
-    steps (and streaming them to ``csv_path``, written atomically, if given).
+    steps (and streaming them to ``csv_path``, written atomically, if given); from
+    ``from_checkpoint`` and taking one at the stop time with ``checkpoint_identity`` if given
+    (:meth:`Master.simulate <cosim.master.master.Master.simulate>`).
 
     Returns
     -------
@@ -63,7 +68,8 @@ def simulate_system(system: SystemSpec, slaves, outputs: Sequence[str], output_t
     try:
         result = Master(system, slaves or None).simulate(
             stop_time=stop_time, outputs=outputs, output_ticks=output_ticks, progress=progress,
-            csv_path=csv_path, observers=observers)
+            csv_path=csv_path, observers=observers, from_checkpoint=from_checkpoint,
+            checkpoint_identity=checkpoint_identity)
     except CosimError as exc:
         err, result = exc, exc.result
         if result is None or not (math.isfinite(result.end_time)
@@ -74,7 +80,9 @@ def simulate_system(system: SystemSpec, slaves, outputs: Sequence[str], output_t
 
 def simulate(built: BuiltSystem, stop_time: float | None = None, *,
              outputs: Sequence[str] | None = None, progress: bool | None = False,
-             csv_path: str | Path | None = None, observers: Sequence[Any] = ()) -> Result:
+             csv_path: str | Path | None = None, observers: Sequence[Any] = (),
+             save_state: str | Path | None = None,
+             from_state: str | Path | Checkpoint | None = None) -> Result:
     """Simulate a built system and return its :class:`~.result.Result`.
 
     Parameters
@@ -91,6 +99,14 @@ def simulate(built: BuiltSystem, stop_time: float | None = None, *,
         Also stream the recorded rows to this CSV while running (its folder is created).
     observers : sequence
         Read-only observers for the master (e.g. a study's early stop).
+    save_state : path-like, optional
+        Write the whole system's state at the stop time to this checkpoint file
+        (:mod:`.checkpoints`; only if the run completed).
+    from_state : path-like, optional
+        Continue from this checkpoint file (of the same scene, settings, engine, builds and
+        drillcosim version) instead of the start time: the rows begin at its time. A
+        :class:`~cosim.master.checkpoint.Checkpoint` object (a study's branch) is restored
+        without the run-identity check (the components' builds are checked).
 
     Raises
     ------
@@ -98,6 +114,8 @@ def simulate(built: BuiltSystem, stop_time: float | None = None, *,
         A stop time off the step grid, an output the system does not have.
     CosimError
         The run failed before its first step.
+    CheckpointError
+        ``from_state`` is unreadable, damaged or of another run (one line).
     """
     cosim = built.config.cosim
     stop = cosim.stop_time if stop_time is None else cosim.seconds(
@@ -109,8 +127,14 @@ def simulate(built: BuiltSystem, stop_time: float | None = None, *,
                           f"allowed: {', '.join(built.units)}")
     if csv_path is not None:
         Path(csv_path).parent.mkdir(parents=True, exist_ok=True)
+    start = (from_state if from_state is None or isinstance(from_state, Checkpoint)
+             else load_for(from_state, built.config, built.engine, stop))
+    identity = None if save_state is None else run_identity(built.config, built.engine)
     result, failure = simulate_system(built.system, built.slaves, names, cosim.output_ticks, stop,
-                                 progress=progress, csv_path=csv_path, observers=observers)
+                                 progress=progress, csv_path=csv_path, observers=observers,
+                                 from_checkpoint=start, checkpoint_identity=identity)
+    if save_state is not None and result.checkpoint is not None:
+        write_checkpoint(result.checkpoint, save_state)
     return Result(built.config, built.engine, result.data,
                   {"time": "s", **{n: built.units[n] for n in names}}, stop, result.end_time,
                   result.wall_time, result.real_time_factor, failure, result.csv_path,

@@ -59,6 +59,7 @@ from typing import Any
 
 import numpy as np
 
+from drillcosim.cosim.master.checkpoint import Checkpoint
 from drillcosim.cosim.master.limits import OutputLimit
 from drillcosim.cosim.scenario.build import ENGINES, build_system
 from drillcosim.cosim.scenario.config import ConfigError, SceneConfig, key_paths, load_config
@@ -302,10 +303,11 @@ def simulate_point(config: SceneConfig, opts: PointOptions, engine: str = "fmu",
 
 
 def run_point(config: SceneConfig, opts: PointOptions, engine: str = "fmu",
-              fmu_dir: str | None = None, initial_offset: np.ndarray | None = None
-              ) -> tuple[Result, str]:
+              fmu_dir: str | None = None, initial_offset: np.ndarray | None = None,
+              from_checkpoint: Checkpoint | None = None) -> tuple[Result, str]:
     """:func:`simulate_point`, returning the run's :class:`~cosim.scenario.result.Result`
-    (its timings too) instead of its data."""
+    (its timings too) instead of its data; from ``from_checkpoint`` if given (its rows begin
+    at the checkpoint's time)."""
     if initial_offset is not None and engine != "inprocess":
         raise ConfigError("initial_offset: a perturbed initial state needs engine 'inprocess' "
                           "(the in-process plant)")
@@ -321,7 +323,8 @@ def run_point(config: SceneConfig, opts: PointOptions, engine: str = "fmu",
     forces = [o for o in (ref(CONTROLLER, actuator_force(s, a)) for s, a in channels)
               if o in built.outputs]
     # a force beyond the cap stops the point as a divergence (checked in C by the native loop)
-    res = simulate(built, observers=[OutputLimit(forces, opts.force_cap)] if forces else ())
+    res = simulate(built, observers=[OutputLimit(forces, opts.force_cap)] if forces else (),
+                   from_state=from_checkpoint)
     f = res.failure
     if f is None:
         return res, ""
@@ -345,6 +348,7 @@ def measure_point(scene: str, gain: float, delay: float, step: float, stop_time:
                   engine: str = "fmu", *, open_loop: bool = False,
                   overrides: Mapping[str, Any] | None = None, fmu_dir: str | None = None,
                   gain_key: str = DEFAULT_GAIN_KEY, config: SceneConfig | None = None,
+                  prefix: Any = None,
                   **options: float) -> dict[str, Any]:
     """Run one sweep point and measure it.
 
@@ -374,6 +378,9 @@ def measure_point(scene: str, gain: float, delay: float, step: float, stop_time:
         The point's typed configuration (a sweep derives it once from its base,
         :attr:`cosim.study.grid.SweepSpec.planned`); default: :func:`point_config` of the
         arguments above.
+    prefix : cosim.study.branch.Prefix, optional
+        Continue from this shared prefix (its checkpoint and rows) instead of running from
+        0 s: the same record, bit for bit (:mod:`cosim.study.branch`).
     **options
         :class:`PointOptions` fields.
 
@@ -396,9 +403,12 @@ def measure_point(scene: str, gain: float, delay: float, step: float, stop_time:
     if config is None:
         config = point_config(scene, gain, delay, step, stop_time, open_loop, overrides,
                               gain_key)
-    res, reason = run_point(config, opts, engine, fmu_dir)
+    start = None if prefix is None else Checkpoint.from_bytes(prefix.checkpoint)
+    res, reason = run_point(config, opts, engine, fmu_dir, from_checkpoint=start)
     run_time = time.perf_counter() - wall0
     data = res.data
+    if prefix is not None:   # the shared rows before the branch time, then the point's own
+        data = np.concatenate([prefix.rows.astype(data.dtype, copy=False), data])
     t = data["time"]
     end = float(t[-1]) if len(t) else 0.0
     diverged = bool(reason)
@@ -413,6 +423,7 @@ def measure_point(scene: str, gain: float, delay: float, step: float, stop_time:
     row["predicted_growth_rate"], row["prediction_note"] = math.nan, ""
     if strain_loop and not open_loop:
         row["predicted_growth_rate"], row["prediction_note"] = point_prediction(config)
+    row["branch_time"] = math.nan if prefix is None else prefix.time
     row["stepping_time"] = res.wall_time
     row["startup_time"] = run_time - res.wall_time
     row["wall_time"] = time.perf_counter() - wall0

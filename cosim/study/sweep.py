@@ -45,6 +45,7 @@ from drillcosim.cosim.scenario.config import (
 from drillcosim.cosim.scenario.scene_fmus import default_fmu_dir, ensure_recipes
 from drillcosim.plant.signals import CONTROLLER, TOP_DRIVE
 
+from .branch import branch_points
 from .grid import DEFAULT_GAIN_KEY, Point, SweepSpec, check_gain_key
 from .point import PointOptions, error_row, measure_point, point_config
 from .table import ResultTable, notes, verdict_counts
@@ -216,7 +217,8 @@ def _inline(points: Sequence[StudyPoint], measure: Measure) -> Iterator[dict[str
 def execute_points(points: Sequence[StudyPoint], table: ResultTable, measure: Measure, *,
                    workers: int | None = None, scheduler: Any = None,
                    progress: bool | None = None, retry_errors: bool = False, desc: str = "sweep",
-                   meta: Mapping[str, Any] | None = None) -> int:
+                   meta: Mapping[str, Any] | None = None,
+                   prepare: Callable[[list], list] | None = None) -> int:
     """Run the points not yet in ``table`` and append each row as it finishes.
 
     Holds the table folder's lock (:meth:`ResultTable.lock`) while running; the table is
@@ -236,6 +238,9 @@ def execute_points(points: Sequence[StudyPoint], table: ResultTable, measure: Me
     meta : mapping, optional
         ``{file name: JSON-ready content}`` written into the table's folder once the lock
         is held (the study's description, e.g. ``sweep.json``).
+    prepare : callable, optional
+        Applied to the points still to run before they are dispatched (e.g.
+        :func:`cosim.study.branch.branch_points`).
 
     Returns
     -------
@@ -249,6 +254,8 @@ def execute_points(points: Sequence[StudyPoint], table: ResultTable, measure: Me
         table.rows = table.load(repair=True)     # re-read and repaired under the lock
         done = table.keys(include_errors=not retry_errors)
         todo = [p for p in points if p.key not in done]
+        if prepare is not None and todo:
+            todo = prepare(todo)
         n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
         if scheduler is not None:
             rows = _dask(todo, measure, scheduler)
@@ -311,7 +318,8 @@ def check_points(points: Sequence[Point], engine: str) -> None:
 
 def execute_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int | None = None,
                   scheduler: Any = None, progress: bool | None = None,
-                  measure: Measure = measure_point, retry_errors: bool = False) -> SweepOutcome:
+                  measure: Measure = measure_point, retry_errors: bool = False,
+                  branch: bool = True) -> SweepOutcome:
     """Run (or resume) a sweep and record every point in ``out_dir``.
 
     Parameters
@@ -330,6 +338,9 @@ def execute_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int |
         Point measurement (module-level, picklable), default :func:`measure_point`.
     retry_errors : bool
         Re-run points recorded as ``error``.
+    branch : bool
+        Closed-loop points identical up to the controller's switch-on continue from one
+        checkpoint of that prefix per group, run here first (:mod:`.branch`; same numbers).
 
     Returns
     -------
@@ -350,7 +361,9 @@ def execute_sweep(spec: SweepSpec, out_dir: str | os.PathLike, *, workers: int |
             meta["components"] = describe_components(spec.base, spec.engine)
     n_run = execute_points(points, table, measure, workers=workers, scheduler=scheduler,
                            progress=progress, retry_errors=retry_errors,
-                           meta={"sweep.json": meta})
+                           meta={"sweep.json": meta},
+                           prepare=branch_points if branch and measure is measure_point
+                           else None)
     keys = {p.key for p in points}
     mine = [r for r in table.rows if r["key"] in keys]
     return SweepOutcome(Path(out_dir), len(points), len(points) - n_run, n_run,

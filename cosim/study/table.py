@@ -26,7 +26,9 @@ judged, "" if it can): :mod:`cosim.study.verdict`. Measured besides the metrics
 (:func:`cosim.study.point.measure_point`): ``predicted_growth_rate`` [1/s], ``contact_time`` [s],
 ``rms_rise_<span>`` [1], and the point's ``wall_time`` split into ``startup_time`` (configuration,
 build, FMU instantiation and initialization) and ``stepping_time`` [s], plus ``worker_startup``
-[s] (the worker process's start, imports included, before its first point; NaN for the others).
+[s] (the worker process's start, imports included, before its first point; NaN for the others)
+and ``branch_time`` [s] (the point continued from a shared prefix's checkpoint at that time,
+:mod:`cosim.study.branch`; NaN: run from the start).
 """
 
 from __future__ import annotations
@@ -57,7 +59,7 @@ COLUMNS: tuple[str, ...] = (
     "benefit_short", "rms_rise_long", "rms_rise_short", "benefit_note",
     "peak_deflection_long", "peak_deflection_short", "peak_force", "peak_power",
     "stick_slip_severity", "stick_fraction", "wall_time", "startup_time", "stepping_time",
-    "worker_startup", "reason",
+    "worker_startup", "branch_time", "reason",
 )
 #: Columns computed from the rows by :func:`derive` (``reason`` too, for completed runs;
 #: ``prediction_note`` where the point has a prediction).

@@ -128,7 +128,9 @@ static SerialState *state_of(fmi2FMUstate s)
 }
 
 /* ------------------------------------------------------------------------ logging */
-#if defined(__GNUC__)
+#if defined(__MINGW_PRINTF_FORMAT) /* mingw-w64: its C99 printf (ms_printf knows no %zu) */
+#define PRINTF_LIKE(f, a) __attribute__((format(__MINGW_PRINTF_FORMAT, f, a)))
+#elif defined(__GNUC__)
 #define PRINTF_LIKE(f, a) __attribute__((format(printf, f, a)))
 #else
 #define PRINTF_LIKE(f, a)

@@ -85,7 +85,10 @@ def stable_copy(src: Path) -> Path:
     final.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}-", dir=final.parent))
     try:
-        shutil.copytree(src, tmp / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        # copyfile, not copy2: CPython 3.12+ copies with CopyFile2 on Windows, which wine 8
+        # lacks (the process aborts there); the copy needs the bytes, not the file times
+        shutil.copytree(src, tmp / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"),
+                        copy_function=shutil.copyfile)
         (tmp / _COMPLETE).write_text(str(src) + "\n")
         try:
             os.replace(tmp, final)

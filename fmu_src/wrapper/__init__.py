@@ -4,9 +4,11 @@ The C sources beside this file (one job per file, see ``dcs_wrapper.h``) replace
 0.7.0's prebuilt C++ binary, which can return only fmi2OK, fmi2Discard and fmi2Fatal, needs
 libpython preloaded in a C host, and releases an instance's Python objects twice after an
 exception. The build (``python -m drillcosim.fmu_src.build``) compiles them against the running
-Python's headers with ``Py_LIMITED_API`` = 3.10 into ``binaries/linux64/<modelIdentifier>.so``:
-one binary for CPython 3.10 to 3.13 (:func:`python_range`), every C-API function resolved with
-``dlsym`` at run time, no structure whose layout differs per version; the rest of the FMU (slave
+Python's headers with ``Py_LIMITED_API`` = 3.10 into ``binaries/linux64/<modelIdentifier>.so``
+and, cross-compiled with mingw-w64, ``binaries/win64/<modelIdentifier>.dll``
+(:mod:`drillcosim.fmu_src.platforms`): per platform one binary for CPython 3.10 to 3.13
+(:func:`python_range`), every C-API function looked up at run time (``dlsym`` /
+``GetProcAddress``), no structure whose layout differs per version; the rest of the FMU (slave
 module, ``resources/``, modelDescription.xml) is pythonfmu's. The FMI 2.0 declarations come
 from the official headers in ``fmi2/`` (BSD 2-Clause, see ``fmi2/LICENSE.txt``).
 
@@ -26,7 +28,11 @@ Which Python runs the slave
   and started through the stable ABI with the environment ignored (``Py_IgnoreEnvironmentFlag``),
   so a host's ``PYTHONHOME``/``PYTHONPATH`` change nothing, no signal handlers, and the host's
   ``LC_CTYPE`` restored after the start (``dcs_python.c``, ``dcs_discover.c``;
-  ``docs/interop.md``). ``drillcosim doctor`` runs the same search without starting anything
+  ``docs/interop.md``). On Windows the same order with Windows' names
+  (``%APPDATA%\\drillcosim\\drillcosim.conf``; ``python.exe``, ``python3.exe``, ``python3.X.exe`` on
+  ``PATH``), then the Pythons CPython's installer registered (PEP 514), and no building
+  interpreter (the win64 binary is cross-built). What the operating system is asked is one file
+  per platform behind ``dcs_platform.h``. ``drillcosim doctor`` runs the same search without starting anything
   (the exported ``drillcosim_doctor``; :mod:`.doctor`).
 
 The status protocol (what a slave method's outcome becomes)
@@ -107,26 +113,29 @@ from __future__ import annotations
 import os
 import sys
 import sysconfig
+import tempfile
 import zipfile
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 # the one place the project runs a C compiler (shared with the master's native loop)
 from drillcosim._toolchain import CFLAGS, compile_shared
 
 __all__ = ["CFLAGS", "HEADERS", "SOURCES", "compile_shared", "compile_wrapper",
-           "install_native_wrapper", "python_range", "sources"]
+           "install_native_wrapper", "python_range", "sources", "wrapper_library"]
 
 HERE = Path(__file__).resolve().parent
 #: The C sources of the wrapper, compiled together. Named, not globbed: an installed copy can
 #: carry stray files (setuptools reuses a checkout's ``build/lib``, where a file deleted from
 #: the sources stays), and a stray ``.c`` would be linked in.
 SOURCES: tuple[Path, ...] = tuple(HERE / n for n in (
-    "dcs_discover.c", "dcs_instance.c", "dcs_python.c", "dcs_registry.c", "dcs_slave.c",
+    "dcs_discover.c", "dcs_instance.c", "dcs_platform_posix.c", "dcs_platform_win32.c",
+    "dcs_python.c", "dcs_registry.c", "dcs_runtime.c", "dcs_sha256.c", "dcs_slave.c",
     "dcs_state.c", "dcs_state_format.c", "fmi2_functions.c"))
 #: The official FMI 2.0.5 headers and our internal ones.
 HEADERS: tuple[Path, ...] = tuple(HERE / n for n in (
-    "dcs_discover.h", "dcs_python.h", "dcs_registry.h", "dcs_state_format.h", "dcs_wrapper.h",
+    "dcs_discover.h", "dcs_lock.h", "dcs_platform.h", "dcs_python.h", "dcs_registry.h",
+    "dcs_runtime.h", "dcs_sha256.h", "dcs_state_format.h", "dcs_wrapper.h",
     "fmi2/fmi2FunctionTypes.h", "fmi2/fmi2Functions.h", "fmi2/fmi2TypesPlatform.h"))
 
 
@@ -152,24 +161,29 @@ def _c_string(text: str) -> str:
 
 
 def compile_wrapper(out: Path | str, cc: str | None = None, flags: Sequence[str] = (),
-                    include: Path | str | None = None) -> Path:
+                    include: Path | str | None = None, platform: str = "linux64") -> Path:
     """Compile the wrapper into the shared library ``out``: one binary for CPython 3.10-3.13.
 
     The running Python's headers are used with ``Py_LIMITED_API`` = 3.10 (the compiler refuses
     anything outside the stable ABI); the running interpreter is recorded as the last Python
     candidate and its minor version as the preferred one among a PATH folder's names (see the
-    module docstring); nothing else of this machine is compiled in.
+    module docstring); nothing else of this machine is compiled in. A binary for another
+    system (``platform="win64"``, cross-compiled) records no interpreter: the building one's
+    path means nothing there.
 
     Parameters
     ----------
     out : path-like
-        Target ``.so`` (its name is irrelevant; FMUs copy it to ``<id>.so``).
+        Target library (its name is irrelevant; FMUs copy it to ``<id>.so`` / ``<id>.dll``).
     cc : str, optional
-        C compiler (default ``$CC`` or ``gcc``).
+        C compiler (default: the platform's, :mod:`drillcosim.fmu_src.platforms`).
     flags : sequence of str
-        Extra compiler flags (e.g. sanitizers), after :data:`CFLAGS`.
+        Extra compiler flags (e.g. sanitizers), after :data:`CFLAGS` and the platform's.
     include : path-like, optional
-        Python headers to compile against (default: the running Python's).
+        Python headers to compile against (default: the running Python's, for ``win64`` with
+        the Windows ``pyconfig.h``).
+    platform : str
+        ``linux64`` (default) or ``win64``.
 
     Returns
     -------
@@ -181,22 +195,41 @@ def compile_wrapper(out: Path | str, cc: str | None = None, flags: Sequence[str]
     RuntimeError
         If there is no compiler, or it fails or prints a warning (its output is included).
     """
-    include = include or sysconfig.get_paths()["include"]
-    return compile_shared(
-        "the native wrapper", SOURCES, out,
-        flags=(f"-I{include}", f"-I{HERE}",
-               f"-DDCS_BUILD_PYTHON=\"{_c_string(sys.executable)}\"",
-               f"-DDCS_BUILD_MINOR={sys.version_info.minor}", *flags),
-        libs=("-ldl", "-lpthread"), cc=cc)
+    from drillcosim.fmu_src.platforms import PLATFORMS, python_include
+
+    target = PLATFORMS[platform]
+    with tempfile.TemporaryDirectory(prefix="dcs-wrapper-") as tmp:
+        include = include or python_include(target, Path(tmp))
+        build_python = "" if target.cross else sys.executable
+        return compile_shared(
+            f"the native wrapper ({platform})", SOURCES, out,
+            flags=(*target.flags, f"-I{include}", f"-I{HERE}",
+                   f"-DDCS_BUILD_PYTHON=\"{_c_string(build_python)}\"",
+                   f"-DDCS_BUILD_MINOR={sys.version_info.minor}", *flags),
+            libs=target.libs, cc=cc or target.cc)
 
 
-def install_native_wrapper(fmu: Path | str, class_name: str, library: Path | str,
+def wrapper_library(platform: str = "linux64") -> Path:
+    """The wrapper compiled for ``platform`` by :func:`compile_wrapper`, from the per-user
+    cache (:func:`drillcosim.fmu_src.platforms.cached_library`: compiled once per content of
+    its sources, compiler, flags and this interpreter)."""
+    from drillcosim.fmu_src.platforms import PLATFORMS, cached_library
+
+    target = PLATFORMS[platform]
+    key = (f"{sys.executable}|{sys.version}|{sysconfig.get_paths()['include']}|"
+           f"{(HERE / 'win64' / 'pyconfig.h').read_bytes().hex() if target.cross else ''}")
+    return cached_library("wrapper", target, sources(), key,
+                          lambda path: compile_wrapper(path, platform=platform))
+
+
+def install_native_wrapper(fmu: Path | str, class_name: str,
+                           library: Path | str | Mapping[str, Path | str],
                            requires: tuple[str, ...] = ()) -> None:
-    """Make a pythonfmu-built FMU run on our wrapper, linux64 only.
+    """Make a pythonfmu-built FMU run on our wrapper.
 
-    Replaces ``binaries/linux64/<modelIdentifier>.so`` by ``library``, removes every other
-    ``binaries/`` member (pythonfmu's prebuilt win64 binary cannot report errors), and writes
-    ``resources/slaveclass.txt`` (the class the wrapper instantiates) and
+    Writes each platform's library as ``binaries/<platform>/<modelIdentifier><suffix>``, removes
+    every other ``binaries/`` member (pythonfmu's prebuilt binaries cannot report errors), and
+    writes ``resources/slaveclass.txt`` (the class the wrapper instantiates) and
     ``resources/python_requires.txt`` (the modules a Python must import to run the FMU).
 
     Parameters
@@ -205,11 +238,15 @@ def install_native_wrapper(fmu: Path | str, class_name: str, library: Path | str
         The ``.fmu`` (rewritten in place).
     class_name : str
         The ``Fmi2Slave`` subclass in the slave module.
-    library : path-like
-        Output of :func:`compile_wrapper`.
+    library : path-like or mapping of str to path-like
+        Output of :func:`compile_wrapper`: one path (the ``linux64`` library) or ``{platform:
+        path}``.
     requires : tuple of str
         Import names checked in each Python candidate of a host without Python.
     """
+    from drillcosim.fmu_src.platforms import PLATFORMS
+
+    libraries = (dict(library) if isinstance(library, Mapping) else {"linux64": library})
     fmu = Path(fmu)
     tmp = fmu.with_suffix(".native.tmp")
     ours = {"resources/slaveclass.txt", "resources/python_requires.txt"}
@@ -221,7 +258,8 @@ def install_native_wrapper(fmu: Path | str, class_name: str, library: Path | str
                 if info.filename.startswith("binaries/") or info.filename in ours:
                     continue
                 dst.writestr(info, src.read(info.filename), compress_type=zipfile.ZIP_DEFLATED)
-            dst.write(library, f"binaries/linux64/{ident}.so")
+            for name, path in libraries.items():
+                dst.write(path, PLATFORMS[name].library_name(ident))
             dst.writestr("resources/slaveclass.txt", class_name + "\n")
             dst.writestr("resources/python_requires.txt", " ".join(requires) + "\n")
     os.replace(tmp, fmu)

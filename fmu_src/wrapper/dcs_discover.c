@@ -4,49 +4,41 @@
  * Candidates, in this order (docs/interop.md):
  *   1. $DRILLCOSIM_PYTHON, an interpreter path;
  *   2. a config file with a line "python = /path/to/python3": first
- *      <FMU unzip folder>/drillcosim.conf (can be shipped inside the .fmu), then
- *      $XDG_CONFIG_HOME/drillcosim/drillcosim.conf (default ~/.config/drillcosim/...);
- *   3. on $PATH, folder by folder in PATH order: "python3", then "python3.B" (B: the minor
- *      version that built the FMU), then "python3.M" for the other supported M, newest first;
- *   4. the interpreter that built the FMU (the only absolute path of the building machine).
+ *      <FMU unzip folder>/drillcosim.conf (can be shipped inside the .fmu), then the user's
+ *      (POSIX: $XDG_CONFIG_HOME/drillcosim/drillcosim.conf, default ~/.config/drillcosim/...;
+ *      Windows: %APPDATA%\drillcosim\drillcosim.conf);
+ *   3. the installed ones:
+ *      on $PATH, folder by folder in PATH order: "python3" (Windows: "python.exe", then
+ *      "python3.exe"), then "python3.B" (B: the minor version that built the FMU), then
+ *      "python3.M" for the other supported M, newest first (Windows: with ".exe");
+ *      then, on Windows, those CPython's installer registered (PEP 514: HKEY_CURRENT_USER,
+ *      then HKEY_LOCAL_MACHINE, Software\Python\PythonCore\3.M), 3.B first, then newest;
+ *   4. the interpreter that built the FMU (the only absolute path of the building machine;
+ *      not recorded in a binary cross-built for another system).
  * An explicit choice (1 or 2) that does not fit ends the search: the FMU never runs in
  * another Python than the one named.
  *
  * The first candidate that fits is used: CPython 3.10 to 3.13 (any of them: the wrapper uses
  * the stable ABI only; the building version is preferred only among the names of one PATH
  * folder), a shared libpython, every module the FMU requires importable.
- * Each candidate is checked in a child process started with posix_spawn (no fork of a possibly
- * threaded host), stdin /dev/null, stdout and stderr into a pipe, default signal dispositions,
- * killed after CHECK_TIMEOUT_MS:
+ * Each candidate is checked in a child process (dcs_run_process of the platform layer: stdin
+ * the null device, stdout and stderr into a pipe, killed after CHECK_TIMEOUT_MS):
  *     <candidate> -E -X utf8 -c CHECK_SCRIPT <min minor> <max minor> <module> ...
  * -E ignores PYTHONHOME, PYTHONPATH and every other PYTHON* variable and -X utf8 is the UTF-8
  * mode, the two settings of the embedded interpreter (dcs_python.c): what the child sees is
  * what the FMU will see. The child reports its version, sys.executable, its shared libpython
  * and the required modules it cannot import.
  */
-#define _GNU_SOURCE
-#include <errno.h>
-#include <fcntl.h>
-#include <limits.h>
-#include <poll.h>
-#include <signal.h>
-#include <spawn.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
-#include <sys/types.h>
-#include <sys/wait.h>
-#include <time.h>
-#include <unistd.h>
 
 #include "dcs_discover.h"
 
-extern char **environ;
-
 #define CHECK_TIMEOUT_MS 120000
 #define MAX_PATH_CANDIDATES 16
+#define MAX_INSTALLED 16
 #define MAX_MODULES 16
 #define CONFIG_NAME "drillcosim.conf"
 
@@ -58,13 +50,17 @@ static const char CHECK_SCRIPT[] =
     "print('dcs:executable=' + (sys.executable or ''))\n"
     "if v[0] == 3 and int(sys.argv[1]) <= v[1] <= int(sys.argv[2]):\n"
     "    import os, sysconfig\n"
-    "    d = sysconfig.get_config_var('LIBDIR') or ''\n"
     "    lib = ''\n"
-    "    for k in ('INSTSONAME', 'LDLIBRARY'):\n"
-    "        n = sysconfig.get_config_var(k) or ''\n"
-    "        if '.so' in n and os.path.isfile(os.path.join(d, n)):\n"
-    "            lib = os.path.join(d, n)\n"
-    "            break\n"
+    "    if sys.platform == 'win32':\n"
+    "        import _winapi\n"
+    "        lib = _winapi.GetModuleFileName(sys.dllhandle)\n"
+    "    else:\n"
+    "        d = sysconfig.get_config_var('LIBDIR') or ''\n"
+    "        for k in ('INSTSONAME', 'LDLIBRARY'):\n"
+    "            n = sysconfig.get_config_var(k) or ''\n"
+    "            if '.so' in n and os.path.isfile(os.path.join(d, n)):\n"
+    "                lib = os.path.join(d, n)\n"
+    "                break\n"
     "    print('dcs:libpython=' + lib)\n"
     "    for m in sys.argv[3:]:\n"
     "        try:\n"
@@ -80,7 +76,7 @@ typedef struct {
     size_t len, cap;
 } Text;
 
-static void text_add(Text *t, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void text_add(Text *t, const char *fmt, ...) DCS_PRINTF(2, 3);
 
 static void text_add(Text *t, const char *fmt, ...)
 {
@@ -105,131 +101,43 @@ static void text_add(Text *t, const char *fmt, ...)
     }
 }
 
-/* ------------------------------------------------------------ one child check */
-static long now_ms(void)
+/* The next token of *cursor delimited by any of seps (NUL-terminated in place), NULL at the
+ * end; *cursor moves past it (strtok_r, which Windows' C runtime lacks). */
+static char *next_token(char **cursor, const char *seps)
 {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (long)ts.tv_sec * 1000L + ts.tv_nsec / 1000000L;
+    char *start = *cursor + strspn(*cursor, seps), *end = start + strcspn(start, seps);
+    *cursor = *end ? end + 1 : end;
+    *end = '\0';
+    return *start != '\0' ? start : NULL;
 }
 
-static int read_child(pid_t pid, int fd, char *out, size_t nout, char *why, size_t nwhy);
-
+/* ------------------------------------------------------------ one child check */
 /* Run the check script in `exe`; its merged stdout/stderr lands in out (NUL-terminated).
- * Returns the child's wait status, -1 if it could not be started (why set). */
+ * Returns 0 with *exit_code when it ran to its end, -1 if it could not be started or did
+ * not answer in time (why set). */
 static int run_child(const char *exe, const DcsWant *want, const char *requires, char *out,
-                     size_t nout, char *why, size_t nwhy)
+                     size_t nout, int *exit_code, char *why, size_t nwhy)
 {
     char mods[1024], lo[16], hi[16];
-    char *argv[8 + MAX_MODULES + 1];
-    char *save = NULL, *tok;
-    int argc = 0, fds[2], rc, wstatus = -1;
-    pid_t pid = -1;
-    posix_spawn_file_actions_t actions;
-    posix_spawnattr_t attr;
-    sigset_t none, reset;
-
+    const char *argv[8 + MAX_MODULES + 1];
+    char *tok, *cursor = mods;
+    int argc = 0;
     snprintf(mods, sizeof mods, "%s", requires);
     snprintf(lo, sizeof lo, "%d", want->min_minor);
     snprintf(hi, sizeof hi, "%d", want->max_minor);
-    argv[argc++] = (char *)exe;
-    argv[argc++] = (char *)"-E";
-    argv[argc++] = (char *)"-X";
-    argv[argc++] = (char *)"utf8";
-    argv[argc++] = (char *)"-c";
-    argv[argc++] = (char *)CHECK_SCRIPT;
+    argv[argc++] = exe;
+    argv[argc++] = "-E";
+    argv[argc++] = "-X";
+    argv[argc++] = "utf8";
+    argv[argc++] = "-c";
+    argv[argc++] = CHECK_SCRIPT;
     argv[argc++] = lo;
     argv[argc++] = hi;
-    for (tok = strtok_r(mods, " \t\r\n", &save); tok != NULL && argc < 8 + MAX_MODULES;
-         tok = strtok_r(NULL, " \t\r\n", &save))
+    for (tok = next_token(&cursor, " \t\r\n"); tok != NULL && argc < 8 + MAX_MODULES;
+         tok = next_token(&cursor, " \t\r\n"))
         argv[argc++] = tok;
     argv[argc] = NULL;
-    out[0] = '\0';
-    if (pipe2(fds, O_CLOEXEC) != 0) {
-        snprintf(why, nwhy, "cannot create a pipe: %s", strerror(errno));
-        pid = -1;
-    } else {
-        posix_spawn_file_actions_init(&actions);
-        posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
-        posix_spawn_file_actions_adddup2(&actions, fds[1], 1);
-        posix_spawn_file_actions_adddup2(&actions, fds[1], 2);
-        posix_spawnattr_init(&attr);
-        sigemptyset(&none);
-        sigemptyset(&reset);
-        sigaddset(&reset, SIGPIPE);
-        sigaddset(&reset, SIGINT);
-        sigaddset(&reset, SIGTERM);
-        sigaddset(&reset, SIGHUP);
-        sigaddset(&reset, SIGQUIT);
-        sigaddset(&reset, SIGCHLD);
-        posix_spawnattr_setsigmask(&attr, &none);
-        posix_spawnattr_setsigdefault(&attr, &reset);
-        posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
-        rc = posix_spawn(&pid, exe, &actions, &attr, argv, environ);
-        posix_spawn_file_actions_destroy(&actions);
-        posix_spawnattr_destroy(&attr);
-        close(fds[1]);
-        if (rc != 0) {
-            close(fds[0]);
-            snprintf(why, nwhy, "cannot be started: %s", strerror(rc));
-            pid = -1;
-        }
-    }
-    if (pid != -1)
-        wstatus = read_child(pid, fds[0], out, nout, why, nwhy);
-    return wstatus;
-}
-
-/* Collect the child's output until it closes the pipe or CHECK_TIMEOUT_MS passed (then it
- * is killed); reap it. Returns its wait status, -1 on a timeout (why set). */
-static int read_child(pid_t pid, int fd, char *out, size_t nout, char *why, size_t nwhy)
-{
-    int wstatus = -1, timed_out = 0;
-    size_t len = 0;
-    long deadline = now_ms() + CHECK_TIMEOUT_MS;
-    pid_t reaped;
-    for (;;) {
-        struct pollfd p;
-        char trash[4096];
-        ssize_t k;
-        long left = deadline - now_ms();
-        int r;
-        if (left <= 0) {
-            timed_out = 1;
-            kill(pid, SIGKILL);
-            break;
-        }
-        p.fd = fd;
-        p.events = POLLIN;
-        p.revents = 0;
-        r = poll(&p, 1, (int)(left > 1000 ? 1000 : left));
-        if (r < 0 && errno != EINTR)
-            break;
-        if (r <= 0)
-            continue;
-        if (len + 1 < nout)
-            k = read(fd, out + len, nout - 1 - len);
-        else
-            k = read(fd, trash, sizeof trash); /* drain: the child must not block */
-        if (k < 0 && errno == EINTR)
-            continue;
-        if (k <= 0)
-            break;
-        if (len + 1 < nout)
-            len += (size_t)k;
-    }
-    out[len] = '\0';
-    close(fd);
-    do {
-        reaped = waitpid(pid, &wstatus, 0);
-    } while (reaped < 0 && errno == EINTR);
-    if (reaped < 0)
-        wstatus = 0; /* a host that ignores SIGCHLD: reaped already, the output decides */
-    if (timed_out) {
-        snprintf(why, nwhy, "did not answer within %d s (killed)", CHECK_TIMEOUT_MS / 1000);
-        wstatus = -1;
-    }
-    return wstatus;
+    return dcs_run_process(argv, out, nout, CHECK_TIMEOUT_MS, exit_code, why, nwhy);
 }
 
 /* Value of "dcs:<key>=" in the child's output (the first line), copied into dst. */
@@ -273,19 +181,18 @@ static int check_candidate(const char *exe, const DcsWant *want, const char *req
 {
     static char out[65536];
     char line[512];
-    struct stat st;
-    int wstatus, fits = -1;
+    int exit_code = -1, kind = dcs_is_regular_file(exe), fits = -1;
     why[0] = '\0';
-    if (stat(exe, &st) != 0) {
+    if (kind == 0) {
         snprintf(why, nwhy, "not found");
-    } else if (!S_ISREG(st.st_mode) || access(exe, X_OK) != 0) {
+    } else if (kind < 0 || !dcs_is_executable(exe)) {
         snprintf(why, nwhy, "not an executable file");
-    } else if ((wstatus = run_child(exe, want, requires, out, sizeof out, why, nwhy)) == -1) {
-        /* why set by run_child */
+    } else if (run_child(exe, want, requires, out, sizeof out, &exit_code, why, nwhy) != 0) {
+        /* why set by the platform layer */
     } else if (strstr(out, "dcs:done") == NULL) {
         foreign_line(out, line, sizeof line);
         snprintf(why, nwhy, "does not run as a Python 3 interpreter (exit status %d%s%s)",
-                 WIFEXITED(wstatus) ? WEXITSTATUS(wstatus) : -1, line[0] ? ": " : "", line);
+                 exit_code, line[0] ? ": " : "", line);
     } else {
         const char *m;
         int major = 0, minor = -1;
@@ -329,7 +236,7 @@ typedef struct {
     void *ctx;
     Text report;
     int found, stop, n_tried;
-    char tried[MAX_PATH_CANDIDATES + 4][2 * PATH_MAX + 2]; /* see seen_before */
+    char tried[MAX_PATH_CANDIDATES + MAX_INSTALLED + 4][2 * DCS_PATH_MAX + 2]; /* seen_before */
 } Search;
 
 static char *dcs_path_dup(const char *s)
@@ -347,14 +254,17 @@ static char *dcs_path_dup(const char *s)
  * base interpreter; the venv is found beside the link) stays distinct from that base. */
 static int seen_before(Search *s, const char *exe)
 {
-    char dir[DCS_PATH_MAX], real_dir[PATH_MAX], real_exe[PATH_MAX];
+    char dir[DCS_PATH_MAX], real_dir[DCS_PATH_MAX], real_exe[DCS_PATH_MAX];
     char key[sizeof s->tried[0]];
-    const char *slash = strrchr(exe, '/');
+    const char *p, *slash = NULL;
     int i, seen = 0;
+    for (p = exe; *p; p++)
+        if (dcs_is_dir_sep(*p))
+            slash = p;
     snprintf(dir, sizeof dir, "%.*s", slash != NULL ? (int)(slash - exe) : 0, exe);
-    if (slash == NULL || slash == exe || realpath(dir, real_dir) == NULL)
+    if (slash == NULL || slash == exe || dcs_canonical_path(dir, real_dir, sizeof real_dir) != 0)
         snprintf(real_dir, sizeof real_dir, "%s", dir);
-    if (realpath(exe, real_exe) == NULL)
+    if (dcs_canonical_path(exe, real_exe, sizeof real_exe) != 0)
         snprintf(real_exe, sizeof real_exe, "%s", exe);
     snprintf(key, sizeof key, "%s|%s", real_dir, real_exe);
     for (i = 0; i < s->n_tried && !seen; i++)
@@ -364,24 +274,32 @@ static int seen_before(Search *s, const char *exe)
     return seen;
 }
 
-/* Check and load one candidate; report a line for it. explicit: stop whatever happens. */
+/* Load a candidate that fits (py; checked, or known to fit) and report a line for it; if
+ * it does not load, the line gives why. explicit: stop whatever happens. */
+static void offer(Search *s, const char *label, const char *exe, const DcsPython *py,
+                  char *why, size_t nwhy, int explicit_choice)
+{
+    if (py != NULL && s->load(py, s->ctx, why, nwhy, &s->stop) == 0) {
+        s->found = 1;
+        text_add(&s->report, "  %s %s: Python %s (%s), %s\n", label, exe, py->version,
+                 py->executable, s->used);
+    } else {
+        text_add(&s->report, "  %s %s: %s%s\n", label, exe, why,
+                 explicit_choice ? " (an explicit choice: no other candidate is tried)" : "");
+    }
+    if (explicit_choice)
+        s->stop = 1;
+}
+
+/* Check one candidate in a child process, then offer it. */
 static void try_candidate(Search *s, const char *label, const char *exe, int explicit_choice)
 {
     DcsPython py;
     char why[2048];
     memset(&py, 0, sizeof py);
-    if (check_candidate(exe, s->want, s->requires, &py, why, sizeof why) == 0) {
-        if (s->load(&py, s->ctx, why, sizeof why, &s->stop) == 0) {
-            s->found = 1;
-            text_add(&s->report, "  %s %s: Python %s (%s), %s\n", label, exe, py.version,
-                     py.executable, s->used);
-        }
-    }
-    if (!s->found)
-        text_add(&s->report, "  %s %s: %s%s\n", label, exe, why,
-                 explicit_choice ? " (an explicit choice: no other candidate is tried)" : "");
-    if (explicit_choice)
-        s->stop = 1;
+    offer(s, label, exe,
+          check_candidate(exe, s->want, s->requires, &py, why, sizeof why) == 0 ? &py : NULL,
+          why, sizeof why, explicit_choice);
 }
 
 /* "python = /path" of a config file into dst; 1 if found. */
@@ -389,7 +307,7 @@ static int config_python(const char *file, char *dst, size_t n)
 {
     char line[DCS_PATH_MAX + 64];
     int found = 0;
-    FILE *f = fopen(file, "r");
+    FILE *f = dcs_fopen(file, "r");
     while (f != NULL && !found && fgets(line, sizeof line, f) != NULL) {
         char *p = line, *e;
         while (*p == ' ' || *p == '\t')
@@ -408,10 +326,7 @@ static int config_python(const char *file, char *dst, size_t n)
         while (e > p && (e[-1] == '\n' || e[-1] == '\r' || e[-1] == ' ' || e[-1] == '\t' ||
                          e[-1] == '"' || e[-1] == '\''))
             *--e = '\0';
-        if (p[0] == '~' && p[1] == '/' && getenv("HOME") != NULL)
-            snprintf(dst, n, "%s%s", getenv("HOME"), p + 1);
-        else
-            snprintf(dst, n, "%s", p);
+        dcs_expand_home(p, dst, n);
         found = dst[0] != '\0';
     }
     if (f != NULL)
@@ -422,15 +337,12 @@ static int config_python(const char *file, char *dst, size_t n)
 static void try_config_files(Search *s, const char *unzip_dir)
 {
     char files[2][DCS_PATH_MAX], exe[DCS_PATH_MAX], label[2 * DCS_PATH_MAX + 64];
-    const char *xdg = getenv("XDG_CONFIG_HOME"), *home = getenv("HOME");
-    int i, n = 0;
-    snprintf(files[n++], DCS_PATH_MAX, "%s/%s", unzip_dir, CONFIG_NAME);
-    if (xdg != NULL && xdg[0] == '/')
-        snprintf(files[n++], DCS_PATH_MAX, "%s/drillcosim/%s", xdg, CONFIG_NAME);
-    else if (home != NULL && home[0] != '\0')
-        snprintf(files[n++], DCS_PATH_MAX, "%s/.config/drillcosim/%s", home, CONFIG_NAME);
+    int i, n = 1;
+    snprintf(files[0], DCS_PATH_MAX, "%s/%s", unzip_dir, CONFIG_NAME);
+    if (dcs_user_config_file(files[1], DCS_PATH_MAX) == 0)
+        n = 2;
     for (i = 0; i < n && !s->stop; i++) {
-        if (access(files[i], F_OK) != 0)
+        if (!dcs_exists(files[i]))
             continue;
         snprintf(label, sizeof label, "2. config file %s: python =", files[i]);
         if (config_python(files[i], exe, sizeof exe)) {
@@ -450,31 +362,36 @@ static void try_config_files(Search *s, const char *unzip_dir)
 /* The names tried in one PATH folder, in order (see the top of this file); their count. */
 static int path_names(const DcsWant *want, char names[][32], int max)
 {
-    int n = 0, minor;
-    snprintf(names[n++], 32, "python3");
-    if (want->prefer_minor >= want->min_minor && want->prefer_minor <= want->max_minor)
-        snprintf(names[n++], 32, "python3.%d", want->prefer_minor);
+    int n = 0, minor, k;
+    for (k = 0; dcs_python_plain_names[k] != NULL && n < max; k++)
+        snprintf(names[n++], 32, "%s", dcs_python_plain_names[k]);
+    if (want->prefer_minor >= want->min_minor && want->prefer_minor <= want->max_minor &&
+        n < max)
+        snprintf(names[n++], 32, "python3.%d%s", want->prefer_minor, dcs_executable_suffix);
     for (minor = want->max_minor; minor >= want->min_minor && n < max; minor--)
         if (minor != want->prefer_minor)
-            snprintf(names[n++], 32, "python3.%d", minor);
+            snprintf(names[n++], 32, "python3.%d%s", minor, dcs_executable_suffix);
     return n;
 }
 
 static void try_path(Search *s)
 {
-    const char *path = getenv("PATH");
-    char names[16][32], exe[DCS_PATH_MAX];
-    char *copy, *save = NULL, *dir;
+    char *path = dcs_getenv("PATH");
+    char names[16][32], exe[DCS_PATH_MAX], seps[2] = {dcs_path_list_sep, '\0'};
+    char *copy, *cursor, *dir;
     int n_found = 0, k, n_names = path_names(s->want, names, 16);
-    copy = dcs_path_dup(path != NULL ? path : "");
-    for (dir = copy != NULL ? strtok_r(copy, ":", &save) : NULL;
+    copy = cursor = dcs_path_dup(path != NULL ? path : "");
+    for (dir = copy != NULL ? next_token(&cursor, seps) : NULL;
          dir != NULL && !s->stop && n_found < MAX_PATH_CANDIDATES;
-         dir = strtok_r(NULL, ":", &save)) {
-        if (dir[0] != '/') /* a relative PATH entry would depend on the host's cwd */
+         dir = next_token(&cursor, seps)) {
+        size_t len = strlen(dir);
+        if (!dcs_is_absolute(dir)) /* a relative PATH entry would depend on the host's cwd */
             continue;
+        while (len > 1 && dcs_is_dir_sep(dir[len - 1]))
+            dir[--len] = '\0';
         for (k = 0; k < n_names && !s->stop && n_found < MAX_PATH_CANDIDATES; k++) {
             snprintf(exe, sizeof exe, "%s/%s", dir, names[k]);
-            if (access(exe, X_OK) != 0 || seen_before(s, exe))
+            if (!dcs_is_executable(exe) || seen_before(s, exe))
                 continue;
             n_found++;
             try_candidate(s, "3. on PATH:", exe, 0);
@@ -483,9 +400,39 @@ static void try_path(Search *s)
     }
     free(copy);
     if (n_found == 0)
-        text_add(&s->report, "  3. on PATH: no python3 or python3.%d to python3.%d in %s\n",
-                 s->want->min_minor, s->want->max_minor,
+        text_add(&s->report, "  3. on PATH: no %s or python3.%d%s to python3.%d%s in %s\n",
+                 dcs_python_plain_names[0], s->want->min_minor, dcs_executable_suffix,
+                 s->want->max_minor, dcs_executable_suffix,
                  path != NULL && path[0] ? path : "(PATH is empty)");
+    free(path);
+}
+
+/* 3. (Windows) the Pythons the installer registered: the building minor first, then as
+ * listed (newest first). Nothing on a system that keeps no list. */
+static void try_installed(Search *s)
+{
+    static DcsInstalled found[MAX_INSTALLED];
+    char label[512];
+    int n = dcs_installed_pythons(found, MAX_INSTALLED), pass, i, fitting = 0;
+    for (pass = 0; pass < 2 && !s->stop; pass++) {
+        for (i = 0; i < n && !s->stop; i++) {
+            int preferred = found[i].minor == s->want->prefer_minor;
+            if ((pass == 0) != preferred || found[i].minor < s->want->min_minor ||
+                found[i].minor > s->want->max_minor)
+                continue;
+            fitting++;
+            if (seen_before(s, found[i].executable))
+                continue;
+            snprintf(label, sizeof label, "3. registered (%s):", found[i].where);
+            try_candidate(s, label, found[i].executable, 0);
+            s->stop = s->stop || s->found;
+        }
+    }
+    if (n >= 0 && fitting == 0)
+        text_add(&s->report, "  3. registered: no CPython 3.%d to 3.%d (64-bit) under "
+                 "Software\\Python\\PythonCore of HKEY_CURRENT_USER or HKEY_LOCAL_MACHINE%s\n",
+                 s->want->min_minor, s->want->max_minor,
+                 n > 0 ? " (only other versions)" : "");
 }
 
 int dcs_discover_python(const char *unzip_dir, const DcsWant *want, const char *requires,
@@ -493,7 +440,7 @@ int dcs_discover_python(const char *unzip_dir, const DcsWant *want, const char *
                         char **report)
 {
     Search *s = (Search *)calloc(1, sizeof *s);
-    const char *env = getenv("DRILLCOSIM_PYTHON");
+    char *env = dcs_getenv("DRILLCOSIM_PYTHON");
     int rc = -1;
     if (s != NULL) {
         s->want = want;
@@ -511,9 +458,12 @@ int dcs_discover_python(const char *unzip_dir, const DcsWant *want, const char *
             try_config_files(s, unzip_dir);
         if (!s->stop)
             try_path(s);
+        if (!s->stop)
+            try_installed(s);
         if (!s->stop) {
             if (build_python == NULL || build_python[0] == '\0')
-                text_add(&s->report, "  4. the building interpreter: not recorded\n");
+                text_add(&s->report, "  4. the building interpreter: not recorded (a binary "
+                         "cross-built on another system)\n");
             else if (seen_before(s, build_python))
                 text_add(&s->report, "  4. the building interpreter %s: tried above\n",
                          build_python);
@@ -524,5 +474,6 @@ int dcs_discover_python(const char *unzip_dir, const DcsWant *want, const char *
         *report = s->report.buf;
         free(s);
     }
+    free(env);
     return rc;
 }

@@ -6,7 +6,7 @@
 
 #include <stddef.h>
 
-#define DCS_PATH_MAX 4096
+#include "dcs_platform.h" /* DCS_PATH_MAX, and what the search asks of the system */
 
 /* Which Pythons fit: 3.min_minor to 3.max_minor; prefer_minor (the building one, 0 if
  * unknown) is tried first among the versioned names of a PATH folder. */
@@ -21,9 +21,9 @@ typedef struct {
     char version[32];              /* "3.11.7" */
 } DcsPython;
 
-/* Load and start a candidate that passed the child check. Returns 0 when it runs; else -1
- * with the reason in why and *stop = 1 if no other candidate may be tried any more (a
- * libpython is loaded in the process by now). */
+/* Load and start a candidate that passed the child check (or that is known to fit without
+ * one). Returns 0 when it runs; else -1 with the reason in why and *stop = 1 if no other
+ * candidate may be tried any more (a libpython is loaded in the process by now). */
 typedef int (*DcsLoad)(const DcsPython *py, void *ctx, char *why, size_t nwhy, int *stop);
 
 /* Try the candidates in the documented order (see dcs_discover.c) until one passes the child

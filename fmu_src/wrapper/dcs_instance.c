@@ -7,13 +7,12 @@
  * delivered only with debug logging on and their category enabled (fmi2SetDebugLogging; no
  * categories = all); every other status is always delivered.
  */
-#define _GNU_SOURCE
-#include <dlfcn.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "dcs_platform.h"
 #include "dcs_wrapper.h"
 
 static DcsRegistry g_instances = DCS_REGISTRY_INIT;
@@ -217,7 +216,7 @@ char *dcs_read_resource_line(const char *resources, const char *file)
     char *out = NULL;
     FILE *f;
     snprintf(path, sizeof path, "%s/%s", resources, file);
-    f = fopen(path, "r");
+    f = dcs_fopen(path, "r");
     if (f != NULL) {
         if (fgets(line, sizeof line, f) != NULL) {
             size_t n = strlen(line);
@@ -233,37 +232,32 @@ char *dcs_read_resource_line(const char *resources, const char *file)
 /* modelIdentifier = file name of this library without its extension. */
 char *dcs_own_model_identifier(void)
 {
-    Dl_info info;
-    char *out = NULL;
-    if (dladdr((void *)&dcs_own_model_identifier, &info) != 0 && info.dli_fname != NULL) {
-        const char *base = strrchr(info.dli_fname, '/');
-        const char *dot;
-        base = base != NULL ? base + 1 : info.dli_fname;
+    char *path = dcs_own_library_path(), *out = NULL;
+    if (path != NULL) {
+        const char *base = path, *p, *dot;
+        for (p = path; *p; p++)
+            if (dcs_is_dir_sep(*p))
+                base = p + 1;
         dot = strrchr(base, '.');
         out = dcs_strdup(base);
         if (out != NULL && dot != NULL)
             out[dot - base] = '\0';
+        free(path);
     }
     return out;
 }
 
-/* "file:///a%20b/resources/" -> "/a b/resources" (malloc'd). */
+/* "file:///a%20b/resources/" -> "/a b/resources" ("file:///C:/x" -> "C:/x" on Windows), the
+ * percent escapes decoded here and the authority read by the platform layer (malloc'd). */
 char *dcs_uri_to_path(const char *uri)
 {
     const char *p = uri;
-    char *out, *o;
-    if (strncmp(p, "file://", 7) == 0) {
-        p += 7;
-        if (*p != '/') { /* file://host/path */
-            const char *slash = strchr(p, '/');
-            p = slash != NULL ? slash : p + strlen(p);
-        }
-    } else if (strncmp(p, "file:", 5) == 0) {
+    char *decoded, *o, *out = NULL;
+    if (strncmp(p, "file:", 5) == 0)
         p += 5;
-    }
-    out = (char *)malloc(strlen(p) + 1);
-    if (out != NULL) {
-        for (o = out; *p; p++) {
+    decoded = (char *)malloc(strlen(p) + 1);
+    if (decoded != NULL) {
+        for (o = decoded; *p; p++) {
             char hex[3] = {0, 0, 0};
             char *end = NULL;
             long v = 0;
@@ -280,7 +274,12 @@ char *dcs_uri_to_path(const char *uri)
             }
         }
         *o = '\0';
-        while (o > out + 1 && o[-1] == '/')
+        out = dcs_file_uri_path(decoded);
+        free(decoded);
+    }
+    if (out != NULL) {
+        o = out + strlen(out);
+        while (o > out + 1 && dcs_is_dir_sep(o[-1]))
             *--o = '\0';
     }
     return out;

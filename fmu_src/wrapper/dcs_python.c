@@ -1,12 +1,14 @@
 /*
  * Attaching to, or starting, the Python interpreter the slaves run in.
  *
- * - Python host (fmpy, libcosimpy): the C-API symbols are found in the process (RTLD_DEFAULT)
- *   and its running interpreter is used; it must be CPython 3.DCS_PY_MINOR_MIN to
+ * - Python host (fmpy, libcosimpy): the C-API symbols are found in the process's libpython
+ *   (dcs_process_python: POSIX RTLD_DEFAULT; Windows the loaded python3XX.dll) and its running
+ *   interpreter is used; it must be CPython 3.DCS_PY_MINOR_MIN to
  *   3.DCS_PY_MINOR_MAX (one clear message otherwise).
  * - Host without Python (a C/C++ tool): a Python is found by dcs_discover.c (candidates checked
- *   in child processes started as `python -E -X utf8`), its shared libpython is dlopen()ed
- *   with RTLD_GLOBAL (extension modules such as numpy need its symbols globally) and started
+ *   in child processes started as `python -E -X utf8`), its shared libpython is loaded
+ *   (dcs_library_open: POSIX RTLD_GLOBAL, extension modules such as numpy need its symbols
+ *   globally; Windows with its own folder searched for its dependencies) and started
  *   through the stable ABI only (no PyConfig: its layout differs per version):
  *       Py_IgnoreEnvironmentFlag = 1  PYTHONHOME, PYTHONPATH, ... of the host are ignored
  *                                     (the child check ran with -E, the same rule);
@@ -30,15 +32,18 @@
  */
 #include "dcs_python.h"
 
-#include <dlfcn.h>
 #include <locale.h>
-#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <wchar.h>
 
 #include "dcs_discover.h"
+#include "dcs_lock.h"
+#include "dcs_platform.h"
+#include "dcs_runtime.h"
+#include "dcs_sha256.h"
 
 #ifndef DCS_BUILD_PYTHON
 #define DCS_BUILD_PYTHON ""
@@ -55,15 +60,17 @@ DCS_PYAPI(DCS_DEFINE)
 __typeof__(Py_UTF8Mode) *p_Py_UTF8Mode;
 #pragma GCC diagnostic pop
 int *p_Py_IgnoreEnvironmentFlag;
+int *p_Py_NoSiteFlag;
 int (*p_PyObject_GetBuffer)(PyObject *, DcsBuffer *, int);
 void (*p_PyBuffer_Release)(DcsBuffer *);
 
 DcsNames dcs_py;
 
-static pthread_mutex_t g_lock = PTHREAD_MUTEX_INITIALIZER;
+static DcsLock g_lock = DCS_LOCK_INIT;
 static int g_ready = 0;           /* API resolved, interpreter running, names interned */
 static int g_loaded = 0;          /* a libpython is in the process (ours or the host's) */
 static char *g_final_error = NULL; /* a failure once g_loaded: final for the process */
+
 
 int dcs_python_started(void)
 {
@@ -71,11 +78,12 @@ int dcs_python_started(void)
 }
 
 /* One symbol into *slot (a data pointer; function pointers are copied bytewise, as POSIX
- * allows for dlsym results). 0 if found, else -1 with why set (the first missing one). */
+ * allows for dlsym results and Windows gives both kinds through GetProcAddress). 0 if found,
+ * else -1 with why set (the first missing one). */
 static int resolve_one(void *handle, const char *name, void *slot, size_t size, char *why,
                        size_t nwhy, int rc)
 {
-    void *sym = dlsym(handle, name);
+    void *sym = dcs_library_symbol(handle, name);
     memcpy(slot, &sym, size);
     if (sym == NULL && rc == 0)
         snprintf(why, nwhy, "Python C-API symbol %s not found", name);
@@ -90,6 +98,7 @@ static int resolve_api(void *handle, char *why, size_t nwhy)
     DCS_PYAPI(DCS_RESOLVE)
     DCS_RESOLVE(Py_UTF8Mode)
     DCS_RESOLVE(Py_IgnoreEnvironmentFlag)
+    DCS_RESOLVE(Py_NoSiteFlag)
     DCS_RESOLVE(PyObject_GetBuffer)
     DCS_RESOLVE(PyBuffer_Release)
 #undef DCS_RESOLVE
@@ -116,68 +125,34 @@ static int version_fits(const char *version)
 static const char *version_of(void *handle)
 {
     const char *(*get)(void) = NULL;
-    void *sym = dlsym(handle, "Py_GetVersion");
+    void *sym = dcs_library_symbol(handle, "Py_GetVersion");
     memcpy(&get, &sym, sizeof get);
     return get != NULL ? get() : "?";
 }
 
-/* UTF-8 bytes -> wchar_t (UTF-32 on Linux), invalid bytes as U+DC80..U+DCFF (surrogateescape,
- * as Python decodes file names). 0 on success. Runs before Python exists: Py_DecodeLocale
- * would need PyMem_RawFree, not in the limited API of 3.10. */
-static int utf8_to_wide(const char *s, wchar_t *out, size_t n)
-{
-    const unsigned char *p = (const unsigned char *)s;
-    size_t k = 0;
-    while (*p && k + 1 < n) {
-        unsigned c = p[0], cp = 0, len = 0, i;
-        if (c < 0x80) {
-            cp = c;
-            len = 1;
-        } else if ((c & 0xE0) == 0xC0 && c >= 0xC2) {
-            cp = c & 0x1F;
-            len = 2;
-        } else if ((c & 0xF0) == 0xE0) {
-            cp = c & 0x0F;
-            len = 3;
-        } else if ((c & 0xF8) == 0xF0 && c <= 0xF4) {
-            cp = c & 0x07;
-            len = 4;
-        }
-        for (i = 1; i < len && len > 1; i++) {
-            if ((p[i] & 0xC0) != 0x80) {
-                len = 0;
-                break;
-            }
-            cp = (cp << 6) | (p[i] & 0x3F);
-        }
-        if (len > 2 && (cp < (len == 3 ? 0x800u : 0x10000u) || cp > 0x10FFFF ||
-                        (cp >= 0xD800 && cp <= 0xDFFF)))
-            len = 0; /* overlong, out of range or a surrogate */
-        if (len == 0) {
-            out[k++] = (wchar_t)(0xDC00 + p[0]);
-            p++;
-        } else {
-            out[k++] = (wchar_t)cp;
-            p += len;
-        }
-    }
-    out[k] = L'\0';
-    return *p == '\0' ? 0 : -1;
-}
-
-static int start_interpreter(const char *executable, char *why, size_t nwhy)
+/* Start the interpreter whose program name is executable. own_runtime: a self-contained FMU's
+ * runtime, started without the site module (sys.path is the runtime's: its home, or on win64
+ * its ._pth, and the MANIFEST's path lines); home: its Py_SetPythonHome (NULL: none). */
+static int start_interpreter(const char *executable, int own_runtime, const char *home,
+                             char *why, size_t nwhy)
 {
     static wchar_t program[DCS_PATH_MAX]; /* Py_SetProgramName keeps the pointer */
+    static wchar_t home_w[DCS_PATH_MAX];  /* so does Py_SetPythonHome */
     char *saved = NULL;
     const char *current = setlocale(LC_CTYPE, NULL);
     int rc = 0;
-    if (utf8_to_wide(executable, program, sizeof program / sizeof program[0]) != 0) {
+    if (dcs_utf8_to_wide(executable, program, sizeof program / sizeof program[0]) != 0 ||
+        (home != NULL && dcs_utf8_to_wide(home, home_w, sizeof home_w / sizeof home_w[0]) != 0)) {
         snprintf(why, nwhy, "its path is too long: %.200s...", executable);
         rc = -1;
     } else {
         saved = current != NULL ? dcs_strdup(current) : NULL;
         *p_Py_IgnoreEnvironmentFlag = 1;
         *p_Py_UTF8Mode = 1;
+        if (own_runtime)
+            *p_Py_NoSiteFlag = 1;
+        if (home != NULL)
+            p_Py_SetPythonHome(home_w);
         p_Py_SetProgramName(program);
         p_Py_InitializeEx(0);
         if (saved != NULL) /* Python set LC_CTYPE from the environment: the host's again */
@@ -197,23 +172,23 @@ static int start_interpreter(const char *executable, char *why, size_t nwhy)
 static int load_candidate(const DcsPython *py, void *ctx, char *why, size_t nwhy, int *stop)
 {
     void *lib;
+    char error[512];
     int rc = -1;
     (void)ctx;
-    lib = dlopen(py->libpython, RTLD_NOW | RTLD_GLOBAL);
+    lib = dcs_library_open(py->libpython, error, sizeof error);
     if (lib == NULL) {
-        const char *e = dlerror();
         snprintf(why, nwhy, "Python %s, but its libpython %s cannot be loaded: %s", py->version,
-                 py->libpython, e != NULL ? e : "unknown error");
+                 py->libpython, error);
     } else if (!version_fits(version_of(lib))) {
         snprintf(why, nwhy, "its libpython %s is Python %.20s, not 3.%d to 3.%d",
                  py->libpython, version_of(lib), DCS_PY_MINOR_MIN, DCS_PY_MINOR_MAX);
-        dlclose(lib);
+        dcs_library_close(lib);
     } else if (resolve_api(lib, why, nwhy) != 0) {
-        dlclose(lib);
+        dcs_library_close(lib);
     } else {
         *stop = 1; /* from here on this libpython stays in the process */
         g_loaded = 1;
-        rc = start_interpreter(py->executable, why, nwhy);
+        rc = start_interpreter(py->executable, 0, NULL, why, nwhy);
     }
     return rc;
 }
@@ -311,25 +286,26 @@ static void requirements(const char *resources, char *out, size_t n)
  * fix it. */
 static int discover(const char *unzip_dir, DcsLoad load, const char *used, char **text)
 {
-    char requires[512], resources[DCS_PATH_MAX], *report = NULL, *fix = NULL;
-    const char *xdg = getenv("XDG_CONFIG_HOME");
-    const char *cfg = xdg != NULL && xdg[0] == '/' ? xdg : "~/.config";
+    char requires[512], resources[DCS_PATH_MAX], cfg[DCS_PATH_MAX], *report = NULL;
+    char *fix = NULL;
     const char *req;
     DcsWant want = {DCS_PY_MINOR_MIN, DCS_PY_MINOR_MAX, DCS_BUILD_MINOR};
     int rc;
     snprintf(resources, sizeof resources, "%s/resources", unzip_dir);
     requirements(resources, requires, sizeof requires);
     req = requires[0] ? requires : "nothing";
+    if (dcs_user_config_file(cfg, sizeof cfg) != 0)
+        snprintf(cfg, sizeof cfg, "the user's drillcosim/drillcosim.conf");
     rc = dcs_discover_python(unzip_dir, &want, requires, DCS_BUILD_PYTHON, load, NULL, used,
                              &report);
     if (rc != 0)
         fix = dcs_format("How to fix: install %s into a CPython 3.%d to 3.%d on PATH "
-                         "(python3.X -m pip install %s), or name such a Python: "
-                         "$DRILLCOSIM_PYTHON=/path/to/python3, or a line 'python = "
-                         "/path/to/python3' in %s/drillcosim/drillcosim.conf. PYTHONHOME and "
-                         "PYTHONPATH are ignored. `drillcosim doctor FMU` prints this report; "
-                         "see docs/interop.md of drillcosim.", req, DCS_PY_MINOR_MIN,
-                         DCS_PY_MINOR_MAX, req, cfg);
+                         "(%s %s), or name such a Python: %s=%s, or a line 'python = %s' in "
+                         "%s. PYTHONHOME and PYTHONPATH are ignored. `drillcosim doctor FMU` "
+                         "prints this report; see docs/interop.md of drillcosim.", req,
+                         DCS_PY_MINOR_MIN, DCS_PY_MINOR_MAX, dcs_wording.pip, req,
+                         dcs_wording.python_variable, dcs_wording.python_path,
+                         dcs_wording.python_path, cfg);
     *text = dcs_format("%sthis FMU runs its model in CPython 3.%d to 3.%d%s%s; in a host "
                        "process without a Python of its own it looks for one, in this "
                        "order:\n%s%s", rc != 0 ? "no usable Python found: " : "",
@@ -341,14 +317,220 @@ static int discover(const char *unzip_dir, DcsLoad load, const char *used, char 
     return rc;
 }
 
+/* The runtimes on sys.path, kept in the interpreter (sys._drillcosim_runtimes: their folders,
+ * the one that started it first): every FMU's wrapper is a library of its own, loaded with its
+ * own copy of this file's variables, and the interpreter is what they share. */
+#define RUNTIMES_ATTR "_drillcosim_runtimes"
+
+/* The folders on the list (a malloc'd array of malloc'd strings, *n of them); NULL with *n 0
+ * if the interpreter was not started from a runtime (a Python host, a discovered Python).
+ * GIL held. */
+static char **runtime_list(size_t *n)
+{
+    PyObject *list = p_PySys_GetObject(RUNTIMES_ATTR); /* borrowed */
+    Py_ssize_t i, size = list != NULL ? p_PyList_Size(list) : -1;
+    char **out = size > 0 ? (char **)calloc((size_t)size, sizeof *out) : NULL;
+    *n = 0;
+    for (i = 0; out != NULL && i < size; i++) {
+        Py_ssize_t len = 0;
+        const char *s = p_PyUnicode_AsUTF8AndSize(p_PyList_GetItem(list, i), &len);
+        if (s != NULL)
+            out[(*n)++] = dcs_strdup(s);
+    }
+    p_PyErr_Clear();
+    return out;
+}
+
+static void free_list(char **list, size_t n)
+{
+    size_t i;
+    for (i = 0; i < n; i++)
+        free(list[i]);
+    free(list);
+}
+
+/* Append the runtime's "path" entries that sys.path lacks and its folder to the list of
+ * runtimes (GIL held). */
+static int add_runtime(const DcsRuntime *rt, char *why, size_t nwhy)
+{
+    PyObject *path = p_PySys_GetObject("path"); /* borrowed */
+    PyObject *list = p_PySys_GetObject(RUNTIMES_ATTR), *root;
+    size_t k, n = dcs_runtime_count(rt, "path");
+    int rc = path != NULL ? 0 : -1;
+    for (k = 0; k < n && rc == 0; k++) {
+        const char *entry = dcs_runtime_item(rt, "path", k);
+        Py_ssize_t i, size = p_PyList_Size(path);
+        int present = 0;
+        PyObject *item;
+        for (i = 0; i < size && !present; i++) {
+            Py_ssize_t len = 0;
+            const char *s = p_PyUnicode_AsUTF8AndSize(p_PyList_GetItem(path, i), &len);
+            present = s != NULL && strcmp(s, entry) == 0;
+        }
+        p_PyErr_Clear();
+        if (present)
+            continue;
+        item = p_PyUnicode_DecodeFSDefault(entry);
+        rc = item != NULL && p_PyList_Insert(path, size, item) == 0 ? 0 : -1;
+        dcs_decref(item);
+    }
+    if (rc == 0 && list == NULL) {
+        PyObject *fresh = p_PyList_New(0);
+        rc = fresh != NULL && p_PySys_SetObject(RUNTIMES_ATTR, fresh) == 0 ? 0 : -1;
+        dcs_decref(fresh);
+        list = p_PySys_GetObject(RUNTIMES_ATTR);
+    }
+    root = rc == 0 && list != NULL ? p_PyUnicode_FromString(dcs_runtime_root(rt)) : NULL;
+    if (root == NULL || p_PyList_Insert(list, p_PyList_Size(list), root) != 0)
+        rc = -1;
+    dcs_decref(root);
+    if (rc != 0) {
+        snprintf(why, nwhy, "cannot put the FMU's own runtime on sys.path");
+        p_PyErr_Clear();
+    }
+    return rc;
+}
+
+/* The resources folder of a runtime folder (<resources>/dcs_runtime/<platform>). */
+static void resources_of(const char *root, char *out, size_t n)
+{
+    char *slash;
+    int k;
+    snprintf(out, n, "%s", root);
+    for (k = 0; k < 2 && (slash = strrchr(out, '/')) != NULL; k++)
+        *slash = '\0';
+}
+
+/* Load the runtime's libraries (preloads first), then its libpython, and resolve the C-API.
+ * 0, or -1 with why (g_loaded once its libpython stays in the process). */
+static int load_runtime(const DcsRuntime *rt, const char *head, char *why, size_t nwhy)
+{
+    size_t k, n = dcs_runtime_count(rt, "preload");
+    void *lib = NULL;
+    int rc = 0;
+    char error[512];
+    for (k = 0; k <= n && rc == 0; k++) { /* the preloads, then the library itself */
+        const char *file = k < n ? dcs_runtime_item(rt, "preload", k) : dcs_runtime_library(rt);
+        lib = dcs_library_open(file, error, sizeof error);
+        if (lib == NULL) {
+            snprintf(why, nwhy, "%scannot load %s: %s", head, file, error);
+            rc = -1;
+        }
+    }
+    if (rc == 0 && !version_fits(version_of(lib))) {
+        snprintf(why, nwhy, "%sis Python %.20s, not 3.%d to 3.%d", head, version_of(lib),
+                 DCS_PY_MINOR_MIN, DCS_PY_MINOR_MAX);
+        rc = -1;
+    }
+    if (rc == 0)
+        rc = resolve_api(lib, why, nwhy);
+    if (rc == 0)
+        g_loaded = 1; /* from here on this libpython stays in the process */
+    else if (lib != NULL)
+        dcs_library_close(lib);
+    return rc;
+}
+
+/* Start a self-contained FMU's own runtime in a host without Python: every file checked
+ * (size and SHA-256) before anything of it is loaded, its libraries loaded, the interpreter
+ * started with its home, sys.path completed. */
+static int start_runtime(DcsInstance *in, DcsRuntime *rt, char *why, size_t nwhy)
+{
+    clock_t t0 = clock(), t1 = t0;
+    char head[160];
+    int rc;
+    PyGILState_STATE g;
+    snprintf(head, sizeof head, "the FMU's own Python runtime (Python %s) ",
+             dcs_runtime_python(rt));
+    rc = dcs_runtime_verify(rt, 1, why, nwhy);
+    if (rc == 0) {
+        t1 = clock();
+        rc = load_runtime(rt, head, why, nwhy);
+    }
+    if (rc == 0)
+        rc = start_interpreter(dcs_runtime_program(rt), 1, dcs_runtime_home(rt), why, nwhy);
+    if (rc == 0) {
+        g = p_PyGILState_Ensure();
+        rc = add_runtime(rt, why, nwhy);
+        p_PyGILState_Release(g);
+    }
+    if (rc == 0)
+        dcs_log(in, fmi2OK, "logAll", "%s: fmi2Instantiate: the host has no Python; %sin %s "
+                "started (CPU time: %.3f s to check its files' sizes and SHA-256%s, %.3f s to "
+                "start the interpreter)", in->name, head, dcs_runtime_root(rt),
+                (double)(t1 - t0) / CLOCKS_PER_SEC,
+                dcs_sha256_accelerated() ? " with the CPU's SHA extensions" : "",
+                (double)(clock() - t1) / CLOCKS_PER_SEC);
+    return rc;
+}
+
+/* An FMU instantiated once an interpreter runs in the process (started by this wrapper or
+ * another FMU's, or the host's own). If the FMU carries a runtime and the interpreter was
+ * started from one, the FMU's must be compatible with it (dcs_runtime_compatible): then its
+ * path entries are added. Its files are checked in full the first time, their sizes at every
+ * later instantiation. In a Python host, or one whose Python was found by the discovery, the
+ * FMU's runtime is not used. */
+static int join_runtime(DcsInstance *in, char *why, size_t nwhy)
+{
+    DcsRuntime *rt = NULL, *running = NULL;
+    char reason[512], resources[DCS_PATH_MAX];
+    char **roots = NULL;
+    size_t n_roots = 0, i;
+    int rc = dcs_runtime_open(in->resources, &rt, why, nwhy), known = 0;
+    PyGILState_STATE g;
+    if (rc == 0) /* no runtime: nothing to join */
+        rt = NULL;
+    g = p_PyGILState_Ensure();
+    roots = rc != 0 ? runtime_list(&n_roots) : NULL;
+    for (i = 0; i < n_roots && rc > 0; i++)
+        known = known || strcmp(roots[i], dcs_runtime_root(rt)) == 0;
+    if (rc == 0) {
+        /* a regular FMU */
+    } else if (n_roots == 0) { /* the host's Python or a discovered one: runtime not used */
+        dcs_log(in, fmi2OK, "logAll", "%s: fmi2Instantiate: this process runs a Python "
+                "already: the FMU's own runtime is not used", in->name);
+        rc = 0;
+    } else if (rc < 0) {
+        /* why set */
+    } else if (known) {
+        rc = dcs_runtime_verify(rt, 0, why, nwhy);
+    } else if ((rc = dcs_runtime_verify(rt, 1, why, nwhy)) != 0) {
+        /* why set */
+    } else if (resources_of(roots[0], resources, sizeof resources),
+               dcs_runtime_open(resources, &running, reason, sizeof reason) <= 0) {
+        snprintf(why, nwhy, "this process runs the Python runtime of another self-contained "
+                 "FMU (%.1000s), whose MANIFEST cannot be read any more (%s)", roots[0],
+                 reason);
+        rc = -1;
+    } else if (!dcs_runtime_compatible(running, rt, reason, sizeof reason)) {
+        snprintf(why, nwhy, "this process runs the Python runtime of another self-contained "
+                 "FMU (%.1000s) and this FMU's own runtime (%.1000s) cannot join it: %s. One "
+                 "process runs one Python: load this FMU in a process of its own, or build "
+                 "the FMUs with one drillcosim (drillcosim build --standalone gives every FMU "
+                 "the same packages)", roots[0], dcs_runtime_root(rt), reason);
+        rc = -1;
+    } else if ((rc = add_runtime(rt, why, nwhy)) == 0) {
+        dcs_log(in, fmi2OK, "logAll", "%s: fmi2Instantiate: the FMU's own runtime %s joins "
+                "the one running (%s): same interpreter, same packages", in->name,
+                dcs_runtime_root(rt), roots[0]);
+    }
+    p_PyGILState_Release(g);
+    free_list(roots, n_roots);
+    dcs_runtime_free(running);
+    dcs_runtime_free(rt);
+    return rc < 0 ? -1 : 0;
+}
+
 /* Find and start a Python for a host without one. On failure *message (malloc'd) is the ONE
  * message listing every candidate tried, what it lacked and how to fix it. */
 static int start_in_plain_host(DcsInstance *in, char **message)
 {
-    char unzip[DCS_PATH_MAX], *slash, *text = NULL;
+    char unzip[DCS_PATH_MAX], *slash = NULL, *p, *text = NULL;
     int rc;
     snprintf(unzip, sizeof unzip, "%s", in->resources);
-    slash = strrchr(unzip, '/');
+    for (p = unzip; *p; p++)
+        if (dcs_is_dir_sep(*p))
+            slash = p;
     if (slash != NULL && slash != unzip)
         *slash = '\0'; /* <unzip>/resources -> <unzip> */
     rc = discover(unzip, load_candidate, "used", &text);
@@ -369,34 +551,46 @@ static int start_in_plain_host(DcsInstance *in, char **message)
 int dcs_python_ready(DcsInstance *in)
 {
     int rc = 0;
-    char why[1024] = "";
+    char why[4096] = "";
     char *message = NULL;
-    pthread_mutex_lock(&g_lock);
+    void *process_python = NULL;
+    DcsRuntime *rt = NULL;
+    int started_own = 0;
+    dcs_lock(&g_lock);
     if (g_ready) {
         rc = 0;
     } else if (g_final_error != NULL) {
         rc = -1;
-    } else if (dlsym(RTLD_DEFAULT, "Py_IsInitialized") != NULL) {
+    } else if (dcs_process_python(&process_python)) {
         g_loaded = 1; /* the process's own libpython: nothing else can be tried */
-        if (!version_fits(version_of(RTLD_DEFAULT))) {
+        if (!version_fits(version_of(process_python))) {
             snprintf(why, sizeof why, "this process runs Python %.20s, but the FMU's wrapper "
                      "runs on CPython 3.%d to 3.%d: load the FMU from a process of one of "
-                     "these versions", version_of(RTLD_DEFAULT), DCS_PY_MINOR_MIN,
+                     "these versions", version_of(process_python), DCS_PY_MINOR_MIN,
                      DCS_PY_MINOR_MAX);
             rc = -1;
         } else {
-            rc = resolve_api(RTLD_DEFAULT, why, sizeof why);
+            rc = resolve_api(process_python, why, sizeof why);
         }
         if (rc == 0 && !p_Py_IsInitialized()) {
             /* a host that links libpython without starting it: start it as a plain host */
             rc = start_in_plain_host(in, &message);
         }
+    } else if ((rc = dcs_runtime_open(in->resources, &rt, why, sizeof why)) != 0) {
+        rc = rc > 0 ? start_runtime(in, rt, why, sizeof why) : -1;
+        started_own = rc == 0;
+        dcs_runtime_free(rt);
     } else {
         rc = start_in_plain_host(in, &message);
     }
     if (rc == 0 && !g_ready)
         rc = make_names(why, sizeof why);
-    if (rc == 0) {
+    if (rc == 0 && !started_own && join_runtime(in, why, sizeof why) != 0) {
+        /* this FMU only: the interpreter runs on for the others */
+        g_ready = 1;
+        rc = -1;
+        message = dcs_format("%s: fmi2Instantiate: %s", in->name, why);
+    } else if (rc == 0) {
         g_ready = 1;
     } else if (g_final_error == NULL) {
         if (message == NULL) {
@@ -415,7 +609,7 @@ int dcs_python_ready(DcsInstance *in)
                      g_final_error != NULL ? g_final_error
                      : message != NULL ? message : "fmi2Instantiate: Python cannot be started");
     free(message);
-    pthread_mutex_unlock(&g_lock);
+    dcs_unlock(&g_lock);
     return rc;
 }
 
@@ -425,12 +619,29 @@ int dcs_python_ready(DcsInstance *in)
  * arguments. Safe in any process (a Python host included): it only runs child processes. */
 FMI2_Export int drillcosim_doctor(const char *unzip_dir, char *out, size_t size)
 {
-    char *text = NULL;
-    int rc = -1;
+    char *text = NULL, resources[DCS_PATH_MAX], why[4096] = "";
+    DcsRuntime *rt = NULL;
+    int rc = -1, own;
     if (unzip_dir != NULL && out != NULL && size > 0) {
-        pthread_mutex_lock(&g_lock); /* the discovery's buffers are shared */
-        rc = discover(unzip_dir, pretend_load, "would be used", &text) == 0 ? 1 : 0;
-        pthread_mutex_unlock(&g_lock);
+        dcs_lock(&g_lock); /* the discovery's buffers are shared */
+        snprintf(resources, sizeof resources, "%s/resources", unzip_dir);
+        own = dcs_runtime_open(resources, &rt, why, sizeof why);
+        if (own > 0 && dcs_runtime_verify(rt, 1, why, sizeof why) != 0)
+            own = -1;
+        if (own > 0) /* fmi2Instantiate starts it before any other candidate */
+            text = dcs_format("this FMU carries its own Python runtime, used in a host process "
+                              "without a Python of its own:\n  0. its own runtime %s: Python "
+                              "%s, every file checked (size and SHA-256), would be used\n",
+                              dcs_runtime_root(rt), dcs_runtime_python(rt));
+        else if (own < 0) /* fmi2Instantiate fails: no other candidate is tried */
+            text = dcs_format("this FMU carries its own Python runtime, and it cannot be "
+                              "used:\n  0. its own runtime: %s\n", why);
+        else
+            rc = discover(unzip_dir, pretend_load, "would be used", &text) == 0 ? 1 : 0;
+        if (own != 0)
+            rc = own > 0 ? 1 : 0;
+        dcs_runtime_free(rt);
+        dcs_unlock(&g_lock);
         snprintf(out, size, "%s", text != NULL ? text : "(out of memory)\n");
         free(text);
     }

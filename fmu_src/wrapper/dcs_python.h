@@ -18,7 +18,8 @@
  *     3.x libpython exports, read by Py_InitializeEx; deprecated since 3.12, PEP 741's
  *     replacement exists from 3.14 on): the only version-independent way to start an
  *     interpreter that ignores PYTHONHOME/PYTHONPATH (dcs_python.c). Its sibling Py_UTF8Mode
- *     is in the limited API.
+ *     is in the limited API. Py_NoSiteFlag is its kin (a self-contained FMU's runtime is
+ *     started without the site module: dcs_runtime.c).
  * Free-threaded builds (3.13t) are not supported (their object header differs).
  */
 #ifndef DCS_PYTHON_H
@@ -59,6 +60,7 @@ typedef struct {
     X(Py_IsInitialized) \
     X(Py_GetVersion) \
     X(Py_SetProgramName) \
+    X(Py_SetPythonHome) \
     X(Py_InitializeEx) \
     X(PyEval_SaveThread) \
     X(PyGILState_Ensure) \
@@ -68,6 +70,7 @@ typedef struct {
     X(Py_BuildValue) \
     X(PyImport_ImportModule) \
     X(PySys_GetObject) \
+    X(PySys_SetObject) \
     X(PyObject_GetAttr) \
     X(PyObject_GetAttrString) \
     X(PyObject_SetAttr) \
@@ -122,6 +125,7 @@ extern __typeof__(Py_UTF8Mode) *p_Py_UTF8Mode;
 
 /* Declared by hand (see the top of this file). */
 extern int *p_Py_IgnoreEnvironmentFlag;
+extern int *p_Py_NoSiteFlag;
 extern int (*p_PyObject_GetBuffer)(PyObject *, DcsBuffer *, int);
 extern void (*p_PyBuffer_Release)(DcsBuffer *);
 

@@ -7,13 +7,43 @@
  * through it would be a read after free). A handle enters when it is created and leaves before
  * it is freed. A set of pointers: open addressing with linear probing and backward-shift
  * deletion, guarded by one mutex (hosts may run instances in different threads). Used by
- * the wrapper and the C controller FMU alike (dcs_registry.h; only libc and pthreads).
+ * the wrapper and the C controller FMU alike (dcs_registry.h; only libc and dcs_lock.h).
  */
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "dcs_registry.h"
+
+#ifdef _WIN32
+#ifndef WIN32_LEAN_AND_MEAN
+#define WIN32_LEAN_AND_MEAN
+#endif
+#include <windows.h>
+
+/* DcsLock is an SRWLOCK by layout (dcs_lock.h) */
+typedef char dcs_lock_is_an_srwlock[sizeof(DcsLock) == sizeof(SRWLOCK) ? 1 : -1];
+
+void dcs_lock(DcsLock *l)
+{
+    AcquireSRWLockExclusive((PSRWLOCK)(void *)l);
+}
+
+void dcs_unlock(DcsLock *l)
+{
+    ReleaseSRWLockExclusive((PSRWLOCK)(void *)l);
+}
+#else
+void dcs_lock(DcsLock *l)
+{
+    pthread_mutex_lock(l);
+}
+
+void dcs_unlock(DcsLock *l)
+{
+    pthread_mutex_unlock(l);
+}
+#endif
 
 static size_t slot_of(const void *p, size_t cap)
 {
@@ -54,7 +84,7 @@ static int grow(DcsRegistry *r)
 int dcs_registry_add(DcsRegistry *r, const void *p)
 {
     int rc = 0;
-    pthread_mutex_lock(&r->lock);
+    dcs_lock(&r->lock);
     if (2 * (r->n + 1) > r->cap) /* load factor <= 1/2 */
         rc = grow(r);
     if (rc == 0) {
@@ -64,23 +94,23 @@ int dcs_registry_add(DcsRegistry *r, const void *p)
             r->n++;
         }
     }
-    pthread_mutex_unlock(&r->lock);
+    dcs_unlock(&r->lock);
     return rc;
 }
 
 int dcs_registry_contains(DcsRegistry *r, const void *p)
 {
     int found;
-    pthread_mutex_lock(&r->lock);
+    dcs_lock(&r->lock);
     found = p != NULL && r->cap > 0 && r->slots[find(r, p)] == p;
-    pthread_mutex_unlock(&r->lock);
+    dcs_unlock(&r->lock);
     return found;
 }
 
 int dcs_registry_remove(DcsRegistry *r, const void *p)
 {
     int found;
-    pthread_mutex_lock(&r->lock);
+    dcs_lock(&r->lock);
     found = p != NULL && r->cap > 0 && r->slots[find(r, p)] == p;
     if (found) {
         size_t hole = find(r, p), i = hole;
@@ -102,6 +132,6 @@ int dcs_registry_remove(DcsRegistry *r, const void *p)
             }
         }
     }
-    pthread_mutex_unlock(&r->lock);
+    dcs_unlock(&r->lock);
     return found;
 }

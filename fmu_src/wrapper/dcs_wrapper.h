@@ -4,8 +4,11 @@
  * Files by job (all compiled into one shared library by fmu_src/wrapper/__init__.py):
  *   fmi2_functions.c  FMI entry points; the calling-sequence rules as a state-mask table
  *   dcs_instance.c    instance memory, resource files, log queue -> the host's logger
- *   dcs_python.c      the Python C-API through dlsym; attaching to / starting an interpreter
+ *   dcs_python.c      the Python C-API looked up at run time; attaching to / starting an
+ *                     interpreter
  *   dcs_discover.c    finding a Python for a host without one (checked in child processes)
+ *   dcs_platform_*.c  the operating system (libraries, files, environment, child processes,
+ *                     installed Pythons): one file per platform behind dcs_platform.h
  *   dcs_slave.c       the pythonfmu slave object: calls, the status protocol, values, buffers
  *   dcs_state.c       FMU state objects and their serialization; the rules of restoring one
  *   dcs_state_format.c the serialized state format (identity, SHA-256; dcs_state_format.h,
@@ -20,6 +23,7 @@
 
 #include <stddef.h>
 
+#include "dcs_platform.h" /* the operating system: one file per platform */
 #include "dcs_registry.h" /* DcsRegistry: the sets of live handles */
 #include "fmi2/fmi2Functions.h"
 
@@ -72,10 +76,10 @@ char *dcs_read_resource_line(const char *resources, const char *file);
 char *dcs_own_model_identifier(void);
 char *dcs_strdup(const char *s);
 /* printf into a new string (malloc'd; NULL if out of memory). */
-char *dcs_format(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+char *dcs_format(const char *fmt, ...) DCS_PRINTF(1, 2);
 /* Queue a message (any thread, GIL or not); delivered by dcs_flush without the GIL. */
 void dcs_log(DcsInstance *in, fmi2Status status, const char *category, const char *fmt, ...)
-    __attribute__((format(printf, 4, 5)));
+    DCS_PRINTF(4, 5);
 void dcs_log_text(DcsInstance *in, fmi2Status status, const char *category, const char *text);
 void dcs_flush(DcsInstance *in);
 const char *dcs_status_category(fmi2Status status);

@@ -1,5 +1,8 @@
 """``drillcosim doctor [FMU]``: which Python an FMU of ours would run in on this machine, and why.
 
+It lists the platforms the FMU carries a binary for (``binaries/linux64``, ``binaries/win64``);
+on this machine's platform it runs the search below, for the others it says what they need.
+
 The search is not re-implemented here: the FMU's own binary exports ``drillcosim_doctor``
 (``dcs_python.c``), which runs the wrapper's discovery (``dcs_discover.c``: every candidate
 checked in a child process, nothing loaded or started) for the unzipped FMU and returns the
@@ -21,11 +24,13 @@ import json
 import sys
 import tempfile
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-__all__ = ["Diagnosis", "NotAnFmuError", "diagnose", "doctor_command"]
+from drillcosim.fmu_src.platforms import PLATFORMS, host_platform
+
+__all__ = ["Diagnosis", "NotAnFmuError", "PlatformReport", "diagnose", "doctor_command"]
 
 REPORT_BYTES = 1 << 20  #: room for the C report (a few KB in practice)
 
@@ -35,6 +40,46 @@ class NotAnFmuError(ValueError):
     bad input, one line."""
 
 
+#: What a binary of each platform needs on a machine other than this one (the search order of
+#: ``dcs_discover.c`` there; the doctor run on that machine names the Python it finds).
+NEEDS = {
+    "linux64": ("a 64-bit CPython {cpython} with a shared libpython and {needs}: the host's own "
+                "interpreter in a Python host; else the first that fits of $DRILLCOSIM_PYTHON, "
+                "'python = ...' in the FMU's drillcosim.conf or ~/.config/drillcosim/"
+                "drillcosim.conf, python3 / python3.X on PATH"),
+    "win64": ("a 64-bit CPython {cpython} for Windows with {needs}: the host's own interpreter "
+              "in a Python host; else (Simulink, Dymola, OpenModelica, ...) the first that fits "
+              "of %DRILLCOSIM_PYTHON%, 'python = C:\\...\\python.exe' in the FMU's "
+              "drillcosim.conf or %APPDATA%\\drillcosim\\drillcosim.conf, python.exe / "
+              "python3.exe / python3.X.exe on PATH, the Pythons python.org's installer "
+              "registered (HKEY_CURRENT_USER or HKEY_LOCAL_MACHINE\\Software\\Python\\"
+              "PythonCore\\3.X)"),
+}
+
+
+@dataclass(frozen=True)
+class PlatformReport:
+    """One platform an FMU carries a binary for.
+
+    Attributes
+    ----------
+    platform : str
+        ``linux64``, ``win64`` (FMI 2.0 names).
+    binary : str
+        Its member, ``binaries/<platform>/<model identifier><suffix>``.
+    here : bool
+        This machine's platform: the search of :attr:`Diagnosis.c_host_report` is its.
+    uses : str
+        What the binary will use: on this machine the Python found (or that none is), on
+        another what it needs there.
+    """
+
+    platform: str
+    binary: str
+    here: bool
+    uses: str
+
+
 @dataclass(frozen=True)
 class Diagnosis:
     """The doctor's findings for one FMU.
@@ -42,7 +87,7 @@ class Diagnosis:
     Attributes
     ----------
     usable : bool
-        A host without Python would find a Python that runs the FMU.
+        A host without Python on this machine would find a Python that runs the FMU.
     c_host_report : str
         The wrapper's discovery report (each candidate, what it lacked, which would be used,
         and how to fix a failure), exactly as ``fmi2Instantiate`` words it.
@@ -52,6 +97,11 @@ class Diagnosis:
         Modules a Python must import to run the FMU.
     this_python : str
         Whether the Python running the doctor could host the FMU (one line).
+    platforms : tuple of PlatformReport
+        The binaries the FMU carries, this machine's first.
+    runtimes : dict of str -> dict of str -> str
+        The Python runtimes a self-contained FMU carries, by platform (its MANIFEST's items:
+        ``python``, ``files``, ``bytes``, ...); empty for a regular FMU.
     """
 
     usable: bool
@@ -59,6 +109,31 @@ class Diagnosis:
     cpython: str
     requires: tuple[str, ...]
     this_python: str
+    platforms: tuple[PlatformReport, ...] = ()
+    runtimes: dict[str, dict[str, str]] = field(default_factory=dict)
+
+    def platform_lines(self) -> list[str]:
+        """The platforms the FMU carries and, per platform, what it will use."""
+        lines = ["Platforms: " + ", ".join(p.platform for p in self.platforms)
+                 + " (none for 32-bit hosts: a 32-bit FMI tool cannot load this FMU)"]
+        for p in self.platforms:
+            where = " (this machine)" if p.here else ""
+            lines.append(f"  {p.platform}{where}, {p.binary}: {p.uses}")
+        return lines
+
+    def self_contained_lines(self) -> list[str]:
+        """Whether the FMU carries its own Python, and which one per platform."""
+        if not self.runtimes:
+            return ["Self-contained: no (it runs in a Python of the machine: see below; "
+                    "`drillcosim build --standalone` writes self-contained FMUs)."]
+        lines = ["Self-contained: yes: in a host without Python it runs in its own Python, "
+                 "per platform:"]
+        for platform, info in sorted(self.runtimes.items()):
+            lines.append(f"  {platform}: CPython {info.get('python', '?')}, "
+                         f"{info.get('files', '?')} files, "
+                         f"{int(info.get('bytes', 0)) / 1e6:.0f} MB unpacked "
+                         f"(resources/dcs_runtime/{platform})")
+        return lines
 
     def text(self, fmu: Path) -> str:
         """The report printed by ``drillcosim doctor``."""
@@ -67,12 +142,16 @@ class Diagnosis:
         needs = " ".join(self.requires) or "nothing"
         return "\n".join([
             f"FMU {fmu}",
+            *self.platform_lines(),
             f"Verdict: {verdict}.",
+            *self.self_contained_lines(),
             "",
             "In a host without Python of its own (a C/C++ FMI tool, fmusim, ...):",
             self.c_host_report.rstrip(),
             "",
-            "In a Python host (fmpy, libcosimpy, ...): the FMU runs in the host's own interpreter,",
+            "In a Python host (fmpy, libcosimpy, ...): the FMU runs in the host's own interpreter"
+            + (" (its own runtime is not loaded there: one process runs one Python)"
+               if self.runtimes else "") + ",",
             f"which must be CPython {self.cpython} with these modules importable: {needs};",
             "a host of another version gets one message at fmi2Instantiate.",
             self.this_python,
@@ -131,9 +210,14 @@ def diagnose(fmu: Path | str) -> Diagnosis:
         raise NotAnFmuError(f"{fmu}: not an FMU (not a zip file)") from None
     with zf, tempfile.TemporaryDirectory(prefix="dcs_doctor_") as tmp:
         ident = _model_identifier(fmu, zf)
-        binary = f"binaries/linux64/{ident}.so"
-        if binary not in zf.namelist():
-            raise NotAnFmuError(f"{fmu}: no {binary} (no binary for linux64)")
+        here = host_platform()
+        carried = [p for p in PLATFORMS.values() if p.library_name(ident) in zf.namelist()]
+        if here is None or here not in {p.name for p in carried}:
+            machine = here or "a platform the build does not know"
+            has = ", ".join(p.name for p in carried) or "none"
+            raise NotAnFmuError(f"{fmu}: no binary for this machine ({machine}); it carries "
+                                f"{has}")
+        binary = PLATFORMS[here].library_name(ident)
         zf.extractall(tmp)
         try:
             cpython = json.loads(zf.read("resources/dcs_build.json"))["cpython"]
@@ -154,8 +238,35 @@ def diagnose(fmu: Path | str) -> Diagnosis:
         raise RuntimeError(f"drillcosim_doctor refused its arguments (returned {rc})")
     # the FMU's own unzip folder is a temporary one here: name it as a host would have it
     report = buf.value.decode("utf-8", "replace").replace(tmp, "<the FMU's unzip folder>")
+    from drillcosim.fmu_src.standalone import RUNTIME_DIR, runtimes
+
+    carried_runtimes = runtimes(fmu)
+    needs = " ".join(requires) or "nothing else"
+
+    def uses(platform: str) -> str:
+        if platform == here:
+            return _verdict(rc == 1, report)
+        if platform in carried_runtimes:
+            return (f"in a host without Python its own CPython "
+                    f"{carried_runtimes[platform].get('python', '?')} "
+                    f"({RUNTIME_DIR}/{platform}); in a Python host that host's")
+        return NEEDS.get(platform, "a 64-bit CPython {cpython}").format(cpython=cpython,
+                                                                        needs=needs)
+
+    reports = tuple(PlatformReport(p.name, p.library_name(ident), p.name == here, uses(p.name))
+                    for p in sorted(carried, key=lambda p: p.name != here))
     return Diagnosis(usable=rc == 1, c_host_report=report, cpython=cpython, requires=requires,
-                     this_python=_this_python(cpython, requires))
+                     this_python=_this_python(cpython, requires), platforms=reports,
+                     runtimes=carried_runtimes)
+
+
+def _verdict(usable: bool, report: str) -> str:
+    """One line: the Python a host without one would use here (from the search's report)."""
+    used = [ln.strip() for ln in report.splitlines()
+            if ln.strip().endswith(("would be used", ", used"))]
+    if usable and used:
+        return "in a host without Python: " + used[0].split(": ", 1)[-1]
+    return "no usable Python for a host without one (see below)"
 
 
 def doctor_command(fmu: Path | str | None) -> int:
