@@ -9,7 +9,7 @@ Candidates (all on the physics of ``plant.kernels``):
 * ``expeuler`` / ``etd2``: exponential integrators (axial-torsional model only);
 * ``scipy-BDF`` / ``scipy-Radau`` with ``jac_sparsity`` from the kernel's body-neighbour structure,
   ``scipy-LSODA`` (dense finite-difference Jacobian when stiff), all on the numba rhs;
-* ``naive``: scipy ``solve_ivp`` RK45 on the vectorised numpy rhs (``plant.numpy_rhs``), the
+* ``naive``: scipy ``solve_ivp`` RK45 on the vectorised numpy rhs (``tests/support/numpy_rhs.py``), the
   baseline a user would write.
 
 Reference: the compiled DOPRI5 at rtol 1e-11, checked against rtol 1e-10 (difference reported).
@@ -22,17 +22,21 @@ Run: ``.venv/bin/python benchmarks/run_all.py [--quick]`` (or ``drillcosim bench
 from __future__ import annotations
 
 import math
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
 from drillcosim.plant.model import DrillstringModel
-from drillcosim.plant.numpy_rhs import NumpyRhs
 from drillcosim.plant.scene import load_scene
 from drillcosim.plant.simulator import simulate
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from support.numpy_rhs import NumpyRhs  # noqa: E402  (the test oracle: tests/support)
 
 DT_OUT = 1e-3  # s, output interval of every run
 

@@ -438,7 +438,7 @@ class _VersionAction(argparse.Action):
         super().__init__(option_strings, dest, nargs=0, default=default, help=help)
 
     def __call__(self, parser, namespace, values, option_string=None) -> None:
-        from drillcosim import __version__
+        from drillcosim._version import __version__
 
         print(f"drillcosim {__version__}")  # to stdout, as argparse's own "version" action
         parser.exit()

@@ -14,7 +14,9 @@ One import namespace; the repository's top-level folders install as its subpacka
 (``pyproject.toml``, setuptools ``package-dir``):
 
 ================================  ==========================================================
-``drillcosim.plant``              pure physics: parameters, scenes, model, kernels, signal names
+``drillcosim.plant``              the plant's runtime: parameters, scenes, model, kernels, stepping
+``drillcosim.analysis``           about the plant: equilibrium, linearization, modes, the
+                                  continuous-time closed loop with a pure delay
 ``drillcosim.controller``         pure controller laws (strain P-feedback, top-drive PI)
 ``drillcosim.fmu_src``            thin pythonfmu adapters, the C FMI wrapper, the FMU build
 ``drillcosim.cosim.master``       the generic FMI co-simulation master (no drillstring code)
@@ -37,9 +39,9 @@ __all__ = ["__version__", *_API]
 
 def __getattr__(name: str):
     if name == "__version__":
-        from importlib.metadata import version
+        from ._version import __version__ as found
 
-        globals()["__version__"] = found = version("drillcosim")
+        globals()["__version__"] = found
         return found
     if name in _API:
         from . import api  # the API's imports (numpy, fmpy, the master) only when used

@@ -19,6 +19,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from drillcosim.analysis.modal import PAPER_TABLE1, analytic_reference, operating_modes
 from drillcosim.cosim.master.errors import UserError
 from drillcosim.cosim.scenario.build import ENGINES, build_system, scene_recipes
 from drillcosim.cosim.scenario.config import SceneConfig, key_paths, load_config
@@ -28,7 +29,6 @@ from drillcosim.cosim.study.grid import SweepSpec
 from drillcosim.fmu_src.build import build_all, build_one, default_out
 from drillcosim.fmu_src.build_c import build_c_controller
 from drillcosim.plant import scene as _scene
-from drillcosim.plant.modal import PAPER_TABLE1, analytic_reference, operating_modes
 from drillcosim.plant.model import DrillstringModel
 
 __all__ = ["ENGINES", "Result", "SceneConfig", "UserError", "build_fmus", "list_scenes",

@@ -150,7 +150,7 @@ def default_out() -> Path:
     """
     if _checkout():
         return ROOT / "build" / "fmus"
-    from drillcosim import __version__
+    from drillcosim._version import __version__
 
     return user_cache() / "fmus" / __version__
 
@@ -348,7 +348,7 @@ class FmuRecipe:
     @property
     def script_module(self) -> str:
         """str: import name of the adapter script inside the FMU, ``_dcs_<stem>_<version>``."""
-        from drillcosim import __version__
+        from drillcosim._version import __version__
 
         return f"_dcs_{self.script_path.stem}_{__version__.replace('.', '_')}"
 
@@ -358,7 +358,7 @@ class FmuRecipe:
         ``_dcs_<name>_<hash of base and attributes>_<version>`` (unique per layout)."""
         if not self.base:
             return self.script_module
-        from drillcosim import __version__
+        from drillcosim._version import __version__
 
         digest = hashlib.sha256(json.dumps([self.name, self.base, self.class_attributes])
                                 .encode()).hexdigest()[:10]
@@ -414,11 +414,7 @@ PLANT_RECIPE = FmuRecipe(
     vendored=(vendored("plant"), vendored("fmu_src/slave_support")),
     extra_files=("scenes",),
     requires=("numpy", "scipy", "numba"),
-    # the numpy reference rhs (tests, benchmarks), the linear/modal analysis and the
-    # continuous-time closed loop (study layer): the FMU never imports them (tested)
-    exclude=("plant/numpy_rhs.py", "plant/linearize.py", "plant/modal.py",
-             "plant/equilibrium.py", "plant/closed_loop.py",
-             "scenes/*.json"),   # controller matrices (the plant reads only the TOML)
+    exclude=("scenes/*.json",),   # controller matrices (the plant reads only the TOML)
 )
 
 #: The FMUs of the project: the plant, and the default FMU of every registered controller law.

@@ -52,9 +52,9 @@ parameters (all variability fixed: set before ``fmi2ExitInitializationMode``):
     ``model`` (String "auto" | "full3d" | "axial_torsional", default "full3d":
     "auto" keeps the scene's model); ``max_internal_step`` [s] (0 = automatic: per
     communication step the method and stable step of ``DrillstringModel.method_for_step``,
-    or one exponential Euler step a communication step for a linear time-invariant
-    axial-torsional scene; a value > 0 means RK4 at that step bound, and larger values may
-    diverge); and every scalar field of
+    or one exponential Euler step a communication step for a linear axial-torsional scene
+    (``DrillstringModel.exponential_exclusions`` empty); a value > 0 means RK4 at that step
+    bound, and larger values may diverge); and every scalar field of
     ``PlantParams`` flattened as ``section.field`` (``pipe.n_segments``,
     ``contact.stiffness``, ``gravity``, ...), Real/Integer/Boolean with the unit
     and description of the field metadata and start = the ``PlantParams`` default.

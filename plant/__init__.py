@@ -14,15 +14,19 @@ import os
 from pathlib import Path
 
 
-def _drop_stale_numba_cache(package_dir: Path) -> None:
-    """Delete ``__pycache__/*.nbi|*.nbc`` unless they were built from the current sources.
+def drop_stale_numba_cache(package_dir: Path, depends_on: tuple[Path, ...] = ()) -> None:
+    """Delete ``package_dir/__pycache__/*.nbi|*.nbc`` unless they were built from the current
+    sources of ``package_dir`` and of the packages in ``depends_on`` (whose compiled functions
+    the package's cached machine code inlines or links, e.g. the analysis package's numba
+    functions calling this package's kernels).
 
     Best effort: a read-only tree is left alone (numba then caches elsewhere or not at all).
     """
     digest = hashlib.sha256()
-    for src in sorted(package_dir.glob("*.py")):
-        digest.update(src.name.encode())
-        digest.update(src.read_bytes())
+    for folder in (package_dir, *depends_on):
+        for src in sorted(folder.glob("*.py")):
+            digest.update(src.name.encode())
+            digest.update(src.read_bytes())
     stamp_value = digest.hexdigest()
     cache = package_dir / "__pycache__"
     stamp = cache / "numba_sources.sha256"
@@ -42,4 +46,5 @@ def _drop_stale_numba_cache(package_dir: Path) -> None:
         pass
 
 
-_drop_stale_numba_cache(Path(__file__).resolve().parent)
+_drop_stale_numba_cache = drop_stale_numba_cache  # the name the cache guard's tests use
+drop_stale_numba_cache(Path(__file__).resolve().parent)

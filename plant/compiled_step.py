@@ -36,7 +36,7 @@ import ctypes
 import math
 import os
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numba import carray, cfunc, njit, types
@@ -60,9 +60,7 @@ from .integrators import (
 )
 from .kernels import MODEL_FULL3D
 from .observables import outputs3d, outputs_at
-
-if TYPE_CHECKING:
-    from .simulator import PlantSimulator, StepResult
+from .step_result import StepResult
 
 __all__ = ["DIVERGED", "ENTRIES", "FALLBACK", "INTERNAL", "OK", "REFUSED", "CompiledStep",
            "addresses", "cfuncs", "enabled", "plant_outputs", "plant_step", "use_addresses"]
@@ -325,9 +323,10 @@ class CompiledStep:
 
     Parameters
     ----------
-    sim : PlantSimulator
+    sim : plant.simulator.PlantSimulator
         The simulator stepped (its method must be a fixed-step one: ``sim.compiled_step()``
-        decides).
+        decides). Typed ``Any`` here: this module does not import the simulator, which
+        imports it (one direction, no cycle).
     inputs : numpy.ndarray, shape (k,)
         Input buffer: ``sim.u[in_index[j]] = inputs[j]`` at every step.
     in_index : numpy.ndarray of int, shape (k,)
@@ -344,7 +343,7 @@ class CompiledStep:
         rebuilt it).
     """
 
-    def __init__(self, sim: PlantSimulator, inputs: np.ndarray, in_index: np.ndarray,
+    def __init__(self, sim: Any, inputs: np.ndarray, in_index: np.ndarray,
                  outputs: np.ndarray, out_index: np.ndarray) -> None:
         self.sim = sim
         self._io = (inputs, np.ascontiguousarray(in_index, dtype=np.int64), outputs,

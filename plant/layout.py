@@ -1,6 +1,6 @@
 """Index constants of the flat float parameter vector ``p`` shared by the compiled kernels.
 
-The kernels take plain arrays (numba compiles them once); ``plant/model.py`` fills ``p`` from a
+The kernels take plain arrays (numba compiles them once); ``plant/assembly.py`` fills ``p`` from a
 :class:`~plant.params.PlantParams`: the scalar header (length ``NP``), then one record of ``NB``
 values per body. Units are SI throughout.
 """

@@ -12,7 +12,6 @@ Python reference of the compiled step (:meth:`PlantSimulator.compiled_step`,
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -22,6 +21,7 @@ from .batch import RECORD_EXPEULER, RECORD_RK4, run_record
 from .guards import check_state
 from .integrators import METHODS, Method, next_breakpoint, stable_step
 from .model import DrillstringModel
+from .step_result import StepResult
 
 if TYPE_CHECKING:
     from .compiled_step import CompiledStep
@@ -36,17 +36,6 @@ MAX_STRAIN = 5e-3  # bending strain at the outer wall: 2.5x the yield strain of 
 # A step may take at most this many internal steps (~10 s of wall time): a huge step size must not
 # hang the caller (an FMU importer).
 MAX_SUBSTEPS = 2_000_000
-
-
-@dataclass(frozen=True)
-class StepResult:
-    """Outcome of a step: ``ok`` and, on failure, a message naming time and quantity."""
-
-    ok: bool
-    message: str = ""
-    time: float = math.nan
-    quantity: str = ""
-    value: float = math.nan
 
 
 _NO_OPERATOR = (np.zeros((0, 0), dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 0, 0)),

@@ -18,6 +18,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from threadpoolctl import threadpool_limits
 
+from drillcosim.analysis.closed_loop import ClosedLoopSimulator, StrainLaw
 from drillcosim.controller import ControllerParams, StrainController
 from drillcosim.cosim.scenario.config import load_config
 from drillcosim.cosim.study.continuous import (
@@ -28,7 +29,6 @@ from drillcosim.cosim.study.continuous import (
     pade_delay,
 )
 from drillcosim.cosim.study.stability import LoopModel
-from drillcosim.plant.closed_loop import ClosedLoopSimulator, StrainLaw
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.scene import load_scene
 from drillcosim.plant.simulator import PlantSimulator

@@ -19,8 +19,8 @@ import math
 import numpy as np
 import pytest
 
+from drillcosim.analysis.modal import first_modes
 from drillcosim.plant.integrators import METHODS
-from drillcosim.plant.modal import first_modes
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.scene import load_scene, read_scene_tables, scene_from_dict
 from drillcosim.plant.simulator import PlantSimulator, simulate

@@ -10,7 +10,7 @@ inputs at its communication step (the automatic method for that step: RK4 at 1 m
 method at 0.25 ms), then run alone through the recording loop; outputs and states must be equal
 bit for bit. A deliberate change of main's plant moves :data:`BASE`.
 
-The numpy reference right-hand side (``plant/numpy_rhs.py``) is a second implementation too, but
+The numpy reference right-hand side (``tests/support/numpy_rhs.py``) is a second implementation too, but
 it sums in another order (equal to 1e-12, ``tests/test_integrators.py``): it cannot tell a bit
 apart. The extracted plant is cached per commit under the user cache (numba's cache beside it).
 """

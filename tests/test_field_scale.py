@@ -12,8 +12,8 @@ import pytest
 from scipy.optimize import brentq
 from threadpoolctl import threadpool_limits
 
+from drillcosim.analysis.modal import modes
 from drillcosim.plant import layout as lay
-from drillcosim.plant.modal import modes
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.params import (
     BitParams,

@@ -8,10 +8,11 @@ from scipy.integrate import solve_ivp
 
 from drillcosim.plant import layout as lay
 from drillcosim.plant.integrators import exponential_matrices
-from drillcosim.plant.model import DrillstringModel, lateral_reference_frequency
-from drillcosim.plant.numpy_rhs import body_constants, rhs3d_numpy
+from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.scene import load_scene
 from drillcosim.plant.simulator import PlantSimulator
+from drillcosim.plant.uniform_pipe import lateral_reference_frequency
+from support.numpy_rhs import body_constants, rhs3d_numpy
 
 
 def _model(name: str, **ov) -> DrillstringModel:

@@ -338,15 +338,13 @@ def test_self_contained_and_cold_start(fmu_path: Path, tmp_path: Path, make, shi
     assert out["pythonfmu_file"].startswith(out["unzipdir"])  # the FMU's own copy
     assert not out["generic_pythonfmu"]  # under its unique name only
     assert not out["plant_imported"]
-    # the payload is what the FMU runs: every shipped module of the plant is imported, and the
-    # numpy reference rhs (tests, benchmarks) and the modal analysis are not shipped
+    # the payload is what the FMU runs: every shipped module of the plant is imported
     import zipfile
 
     payload = {n[len("resources/"):-len(".py")].replace("/", ".").removesuffix(".__init__")
                for n in zipfile.ZipFile(fmu_path).namelist()
                if n.startswith(f"resources/{vendored_name}/") and n.endswith(".py")}
     assert payload == set(out["plant_modules"])
-    assert not {f"{vendored_name}.numpy_rhs", f"{vendored_name}.modal"} & payload
     # after first use nothing is compiled again: every kernel comes from numba's cache (the
     # time is reported by benchmarks/bench_fmu_boundary.py, not asserted here)
     assert out["numba_compiled"] == []

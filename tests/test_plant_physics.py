@@ -8,8 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from drillcosim.analysis.modal import first_modes, static_equilibrium
 from drillcosim.plant.kernels import cardan
-from drillcosim.plant.modal import first_modes, static_equilibrium
 from drillcosim.plant.model import DrillstringModel
 from drillcosim.plant.params import (
     BitParams,
@@ -354,7 +354,7 @@ def test_axial_torsional_model_equals_full3d_on_its_scenes(scene):
 # ----------------------------------------------------------------------------- spinning
 def test_linearization_in_the_top_drive_frame_is_time_invariant():
     """If the rotating-frame transformation were wrong, A would depend on the time."""
-    from drillcosim.plant.linearize import linearize
+    from drillcosim.analysis.linearize import linearize
 
     prm = replace(quiet(gravity=9.81, pipe=PipeParams(n_segments=10)),
                   top_drive=TopDriveParams(rotary_speed=20.0))
@@ -366,7 +366,7 @@ def test_linearization_in_the_top_drive_frame_is_time_invariant():
 def test_spin_leaves_axial_torsional_modes_and_barely_moves_lateral():
     """Axisymmetric string: spin does not couple into axial/torsion; for this slender pipe
     (J_polar / J_transverse = 0.003) the gyroscopic split of the lateral mode is < 0.1 %."""
-    from drillcosim.plant.modal import operating_modes
+    from drillcosim.analysis.modal import operating_modes
 
     prm = quiet(gravity=9.81)
 
@@ -389,7 +389,7 @@ def test_spin_leaves_axial_torsional_modes_and_barely_moves_lateral():
 def test_internal_damping_destabilizes_supercritical_whirl():
     """Rotordynamics (Kimball-Newkirk): damping that rotates with the shaft (joint dampers) makes
     forward whirl unstable above the first critical speed; external drag keeps it stable."""
-    from drillcosim.plant.modal import operating_modes
+    from drillcosim.analysis.modal import operating_modes
 
     def min_lateral_damping(model: str) -> float:
         prm = quiet(damping=DampingParams(lateral_model=model))

@@ -90,7 +90,7 @@ def _fresh_rates(points: list[tuple[float, float]], step: float) -> dict:
     loop, eigenvalues; nothing cached."""
     from threadpoolctl import threadpool_limits
 
-    from drillcosim.plant.linearize import linearize
+    from drillcosim.analysis.linearize import linearize
 
     config = load_config(SCENE)
     lin = linearize(config.scene.plant, "full3d")

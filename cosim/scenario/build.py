@@ -113,7 +113,7 @@ class BuiltSystem:
         the system sets on it; ``inprocess``: the plant's scene and model kind, or the law's
         kind and its parameters (as its FMU would get them). Both: the drillcosim version
         that runs it."""
-        from drillcosim import __version__
+        from drillcosim._version import __version__
 
         out: dict[str, dict[str, Any]] = {}
         for spec in self.system.fmus:

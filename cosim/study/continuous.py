@@ -2,12 +2,12 @@
 
 The discrete prediction (:mod:`cosim.study.stability`) models what the co-simulation does:
 strains sampled every communication step H, forces held. Its continuous limit is the loop with
-the law inside the plant's right-hand side (:class:`plant.closed_loop.ClosedLoopSimulator`)::
+the law inside the plant's right-hand side (:class:`analysis.closed_loop.ClosedLoopSimulator`)::
 
     dx/dt = A x(t) + B F(t),    F(t) = g * (C x)(t - tau)              (no lag)
     T dG/dt = K C x - G,        F(t) = G(t - tau)                       (lag T > 0)
 
-about the straight string spinning with the top drive (``plant.linearize``, top-drive frame,
+about the straight string spinning with the top drive (``analysis.linearize``, top-drive frame,
 where gauges and actuators are body-fixed and the loop is time-invariant; saturation is not
 modelled: the analysis is for forces inside the limits). Characteristic equation::
 
@@ -43,10 +43,10 @@ import scipy.linalg
 import scipy.signal
 from threadpoolctl import threadpool_limits
 
+from drillcosim.analysis.closed_loop import ClosedLoopSimulator, StrainLaw
+from drillcosim.analysis.equilibrium import static_equilibrium
+from drillcosim.analysis.linearize import operating_params
 from drillcosim.cosim.scenario.config import SceneConfig, load_config
-from drillcosim.plant.closed_loop import ClosedLoopSimulator, StrainLaw
-from drillcosim.plant.equilibrium import static_equilibrium
-from drillcosim.plant.linearize import operating_params
 from drillcosim.plant.model import DrillstringModel
 
 from .stability import LoopModel, _bisect, _first_crossing
@@ -302,7 +302,7 @@ def _config(scene: str | Path | SceneConfig, overrides: Mapping[str, Any] | None
 
 def law_from_scene(scene: str | Path | SceneConfig, delay: float = 0.0,
                    gain: float | None = None) -> StrainLaw:
-    """The scene's strain controller as a :class:`plant.closed_loop.StrainLaw` [SI units].
+    """The scene's strain controller as a :class:`analysis.closed_loop.StrainLaw` [SI units].
 
     ``scene`` is a name, a file or a :class:`cosim.scenario.config.SceneConfig` (validated
     once there); ``gain`` overrides the scene's gain [N per unit strain], ``delay`` is the
@@ -320,7 +320,7 @@ def operating_point_simulator(scene: str | Path | SceneConfig, gain: float, dela
                               max_step: float | None = None) -> ClosedLoopSimulator:
     """A continuous-time closed loop started at the linearization's operating point.
 
-    The scene's plant without forcing (``plant.linearize.operating_params``), spinning at the
+    The scene's plant without forcing (``analysis.linearize.operating_params``), spinning at the
     top-drive speed from t = 0 (no ramp), in static equilibrium, with every body's lateral
     position perturbed by a seeded Gaussian of std ``perturbation`` [m]: the linear prediction's
     roots then govern the strains' growth. The law is the scene's (``gain`` [N/strain] and
@@ -328,7 +328,7 @@ def operating_point_simulator(scene: str | Path | SceneConfig, gain: float, dela
 
     Returns
     -------
-    plant.closed_loop.ClosedLoopSimulator
+    analysis.closed_loop.ClosedLoopSimulator
     """
     config = _config(scene, overrides)
     prm = operating_params(config.scene.plant)

@@ -1,7 +1,7 @@
 """Linear, discrete-time stability prediction of the sampled strain-feedback loop.
 
 The plant is linearized about the straight string spinning with the top drive
-(:func:`plant.linearize.linearize`, top-drive frame, where gauges and actuators
+(:func:`analysis.linearize.linearize`, top-drive frame, where gauges and actuators
 are body-fixed and the loop is linear time-invariant)::
 
     dx/dt = A x + B u,    s = C x        (u: actuator forces [N], s: strains [1])
@@ -56,12 +56,12 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
+from drillcosim.analysis.linearize import linearize
 from drillcosim.cosim.master.algorithms import newest_sample_tick
 from drillcosim.cosim.master.delays import DelayLine
 from drillcosim.cosim.master.system import ALGORITHMS
 from drillcosim.cosim.scenario.cache import cached_arrays, source_hash
 from drillcosim.cosim.scenario.config import ConfigError, SceneConfig, load_config
-from drillcosim.plant.linearize import linearize
 
 __all__ = [
     "LoopModel",
@@ -361,7 +361,7 @@ def coupled_plant(scene: Any, cache: bool = True
     """The scene's plant linearized (full 3D, top-drive frame) and reduced to the loop's modes.
 
     One linearization per plant and operating point: the result is a function of the plant's
-    parameters (the operating point is theirs: :func:`plant.linearize.operating_params`) and
+    parameters (the operating point is theirs: :func:`analysis.linearize.operating_params`) and
     of the code, kept on disk by content (:func:`cosim.scenario.cache.cached_arrays`, key: the
     parameters, the sources of ``plant/`` and of this module, numpy's and scipy's versions).
 
@@ -375,7 +375,7 @@ def coupled_plant(scene: Any, cache: bool = True
     Returns
     -------
     A, B, C, dropped : numpy.ndarray
-        As :func:`reduce_loop` returns them for :func:`plant.linearize.linearize`'s
+        As :func:`reduce_loop` returns them for :func:`analysis.linearize.linearize`'s
         ``A`` [1/s], ``B``, ``C``.
     stable_step : float
         The plant model's own stable RK4 step [s].

@@ -1,7 +1,7 @@
 """The linearized, sampled plant a controller is designed on and judged against.
 
 The stability module's model (:mod:`cosim.study.stability`) with two channels more: the
-plant is :func:`plant.linearize.linearize`'s (top-drive frame, where the loop is linear
+plant is :func:`analysis.linearize.linearize`'s (top-drive frame, where the loop is linear
 time-invariant) and is reduced by :func:`cosim.study.stability.reduce_loop` to the modes the
 loop and the two extra channels see; it is sampled exactly (ZOH) over the communication step
 by :func:`cosim.study.stability.discretize` and closed with the master's loop timing
@@ -90,8 +90,8 @@ class LoopPlant:
         ConfigError
             A scene without the full3d model or without actuator sites (one line).
         """
+        from drillcosim.analysis.linearize import linearize
         from drillcosim.cosim.scenario.config import ConfigError, SceneConfig, load_config
-        from drillcosim.plant.linearize import linearize
 
         if isinstance(scene, SceneConfig):
             if joints is not None or overrides:

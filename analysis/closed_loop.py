@@ -37,8 +37,8 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from .integrators import _all_finite, next_breakpoint, stable_step
-from .kernels import (
+from drillcosim.plant.integrators import _all_finite, next_breakpoint, stable_step
+from drillcosim.plant.kernels import (
     IP_NA,
     cardan,
     gauge_strains,
@@ -46,11 +46,12 @@ from .kernels import (
     rhs,
     set_load_modes,
 )
-from .layout import GAUGE_R, HALF
-from .model import DrillstringModel
-from .params import _check_range
-from .signals import site_channels, strain
-from .simulator import PlantSimulator, StepResult
+from drillcosim.plant.layout import GAUGE_R, HALF
+from drillcosim.plant.model import DrillstringModel
+from drillcosim.plant.params import _check_range
+from drillcosim.plant.signals import site_channels, strain
+from drillcosim.plant.simulator import PlantSimulator
+from drillcosim.plant.step_result import StepResult
 
 __all__ = ["INTERPOLATIONS", "StrainLaw", "ClosedLoopRun", "ClosedLoopSimulator"]
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .model import DrillstringModel
+from drillcosim.plant.model import DrillstringModel
 
 __all__ = ["static_equilibrium"]
 

@@ -22,12 +22,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from drillcosim.plant.kernels import top_drive
+from drillcosim.plant.layout import OMEGA0, T_RAMP
+from drillcosim.plant.model import DrillstringModel
+from drillcosim.plant.params import PlantParams
+from drillcosim.plant.signals import site_channels, strain
+
 from .equilibrium import static_equilibrium
-from .kernels import top_drive
-from .layout import OMEGA0, T_RAMP
-from .model import DrillstringModel
-from .params import PlantParams
-from .signals import site_channels, strain
 
 __all__ = ["LinearModel", "operating_params", "linearize", "inertial_lateral_eigenvalue"]
 
@@ -149,7 +150,7 @@ def linearize(params: PlantParams, kind: str = "full3d", spin: float | None = No
     model = DrillstringModel(prm, kind)
     if model.framed:
         raise ValueError("linearize: the spinning straight string needs a vertical hole; this "
-                         "trajectory curves it (use plant.modal.modes about a state instead)")
+                         "trajectory curves it (use analysis.modal.modes about a state instead)")
     rest = DrillstringModel(replace(prm, top_drive=replace(prm.top_drive, rotary_speed=0.0)), kind)
     x0 = static_equilibrium(rest)
     n = model.n

@@ -13,9 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drillcosim.plant.model import DrillstringModel
+
 from .equilibrium import static_equilibrium
 from .linearize import inertial_lateral_eigenvalue, linearize
-from .model import DrillstringModel
 
 __all__ = ["Mode", "static_equilibrium", "modes", "first_modes", "analytic_reference"]
 
@@ -95,7 +96,7 @@ def first_modes(model: DrillstringModel, y: np.ndarray | None = None) -> dict[st
 def operating_modes(params, kind: str = "full3d", spin: float | None = None) -> list[Mode]:
     """Modes about the operating point: the straight string spinning with the top drive.
 
-    Linearized in the top-drive frame (:mod:`plant.linearize`); lateral eigenvalues are shifted
+    Linearized in the top-drive frame (:mod:`analysis.linearize`); lateral eigenvalues are shifted
     back to the inertial frame by their whirl direction, so that frequencies are the ones an
     observer at rest sees. With zero spin this equals :func:`modes` at the unforced equilibrium.
     """

@@ -11,7 +11,7 @@ from the parameters (:func:`body_constants`: the formulas of the paper's section
 damping model, written again, not the model's packed array ``p``); it shares with the kernel
 only the layout arrays ``ip``, ``fp`` (which bodies carry stabilizers, contact, actuators and
 loads), the first lateral frequency of the pinned multi-span beam (the model's finite-element
-value, :func:`plant.model.lateral_reference_frequency`) and the bit's static rock position
+value, :func:`plant.uniform_pipe.lateral_reference_frequency`) and the bit's static rock position
 (``p[ZBIT0]``, set by the static equilibrium of :meth:`DrillstringModel.initial_state`).
 
 State layout (length 12 n, blocks of 3 n): positions of the mass centres [m], Cardan angles
@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from . import layout as lay
-from .kernels import IP_FIELD, IP_HDR, IP_N, IP_NA, IP_NC, IP_NL, IP_NS, IP_UNB
+from drillcosim.plant import layout as lay
+from drillcosim.plant.kernels import IP_FIELD, IP_HDR, IP_N, IP_NA, IP_NC, IP_NL, IP_NS, IP_UNB
 
 __all__ = ["NumpyRhs", "body_constants", "cardan_matrices", "rhs3d_numpy"]
 
@@ -359,7 +359,7 @@ class NumpyRhs:
     """
 
     def __init__(self, model) -> None:
-        from .model import lateral_reference_frequency
+        from drillcosim.plant.uniform_pipe import lateral_reference_frequency
 
         if model.kind != "full3d":
             raise ValueError("NumpyRhs implements the full 3D model only")
