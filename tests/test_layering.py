@@ -45,10 +45,6 @@ KNOWN_CYCLES = {
                "drillcosim.cosim.scenario.result", "drillcosim.cosim.scenario.simulate"}):
         "the open-loop baseline runs a simulation (lazy import of simulate) while the result "
         "and its plots read the baseline (lazy imports): to do, the baseline's run passed in",
-    frozenset({"drillcosim.cosim.master.execution", "drillcosim.cosim.master.resume"}):
-        "an execution restores a checkpoint through resume.py (lazy import), which names the "
-        "Execution it restores for typing only: to do, as plant/compiled_step.py (no typing "
-        "import of its caller)",
 }
 #: The size of a plant/ module (lines), and the modules above it with their one job.
 MAX_LINES = 400

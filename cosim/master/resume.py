@@ -14,7 +14,7 @@ taken again from the lines (a different delay reads a different past sample).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from .checkpoint import (
     Checkpoint,
@@ -29,24 +29,21 @@ from .checkpoint import (
 )
 from .errors import CosimError
 
-if TYPE_CHECKING:
-    from .execution import Execution
-
 __all__ = ["capture", "restore"]
 
 
-def _line_connections(execution: Execution) -> list:
+def _line_connections(execution: Any) -> list:
     """The connections that have a delay line, in the order of ``algorithm.lines``."""
     return [c for c in execution.system.connections
             if not (c.delay == 0.0 and c.coupling == "zoh")]
 
 
-def capture(execution: Execution, identity: Mapping[str, Any]) -> Checkpoint:
+def capture(execution: Any, identity: Mapping[str, Any]) -> Checkpoint:
     """The checkpoint of ``execution`` (initialized) at its current tick.
 
     Parameters
     ----------
-    execution : Execution
+    execution : cosim.master.execution.Execution
     identity : mapping
         The caller's identity of the run (JSON-ready), kept in the checkpoint.
     """
@@ -68,8 +65,9 @@ def capture(execution: Execution, identity: Mapping[str, Any]) -> Checkpoint:
                       alg.name, tuple(system.stepping_order), slaves, exchange, dict(identity))
 
 
-def restore(execution: Execution, checkpoint: Checkpoint) -> None:
-    """Put ``checkpoint`` into ``execution`` (just initialized at its start time).
+def restore(execution: Any, checkpoint: Checkpoint) -> None:
+    """Put ``checkpoint`` into ``execution`` (a :class:`~.execution.Execution` just initialized at
+    its start time; not imported here: the execution imports this module).
 
     Raises
     ------
